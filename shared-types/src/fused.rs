@@ -1,0 +1,230 @@
+//! The combined scan SmokeNav hands to SLAM.
+
+use crate::header::Header;
+use crate::laser::{LaserScan, MAX_BEAMS};
+use crate::sonar::MAX_SONARS;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+
+/// Which sensor a section (or beam) of the fused scan came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum SectionSource {
+    /// The laser's own readings, untouched.
+    #[default]
+    Laser = 0,
+    /// The sonar reading replaced the laser in this section.
+    Sonar = 1,
+    /// Sonar superimposed on the laser (both kept, nearer wins per beam).
+    Both = 2,
+    /// Neither is trusted: beams are marked beyond-max so SLAM treats them as no return.
+    Neither = 3,
+}
+
+impl SectionSource {
+    pub fn from_u8(v: u8) -> Self {
+        match v {
+            1 => SectionSource::Sonar,
+            2 => SectionSource::Both,
+            3 => SectionSource::Neither,
+            _ => SectionSource::Laser,
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SectionSource::Laser => "laser",
+            SectionSource::Sonar => "sonar",
+            SectionSource::Both => "both",
+            SectionSource::Neither => "neither",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "laser" => SectionSource::Laser,
+            "sonar" => SectionSource::Sonar,
+            "both" => SectionSource::Both,
+            "neither" => SectionSource::Neither,
+            _ => return None,
+        })
+    }
+}
+
+/// The fusion method that produced a scan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum FusionMethod {
+    #[default]
+    LaserOnly = 0,
+    /// Seed 000, Algorithm 2: the heuristic.
+    V1 = 1,
+    /// Seed 000, Algorithm 3: the fuzzy-logic version.
+    V2 = 2,
+}
+
+impl FusionMethod {
+    pub fn from_u8(v: u8) -> Self {
+        match v {
+            1 => FusionMethod::V1,
+            2 => FusionMethod::V2,
+            _ => FusionMethod::LaserOnly,
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FusionMethod::LaserOnly => "laser-only",
+            FusionMethod::V1 => "v1",
+            FusionMethod::V2 => "v2",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "laser-only" => FusionMethod::LaserOnly,
+            "v1" => FusionMethod::V1,
+            "v2" => FusionMethod::V2,
+            _ => return None,
+        })
+    }
+}
+
+/// Which inputs the synchroniser could pair for this output.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum SyncState {
+    /// Laser, sonar and smoke all present within the sync window.
+    #[default]
+    Complete = 0,
+    /// The sonar (or smoke) input timed out: the scan is the laser alone.
+    LaserOnly = 1,
+    /// The laser timed out: the scan is built from sonar alone.
+    SonarOnly = 2,
+}
+
+impl SyncState {
+    pub fn from_u8(v: u8) -> Self {
+        match v {
+            1 => SyncState::LaserOnly,
+            2 => SyncState::SonarOnly,
+            _ => SyncState::Complete,
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SyncState::Complete => "complete",
+            SyncState::LaserOnly => "laser-only",
+            SyncState::SonarOnly => "sonar-only",
+        }
+    }
+}
+
+/// The decision for one sonar section τ of one scan.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct SectionDecision {
+    /// First beam of the section in the scan.
+    pub first_beam: u16,
+    /// One past the last beam of the section.
+    pub end_beam: u16,
+    /// Sonar index (robot profile numbering) that defines the section.
+    pub sonar_index: u8,
+    /// A [`SectionSource`] as `u8`.
+    pub source: u8,
+    pub _reserved: [u8; 2],
+    /// Trust in the sonar, ρS ∈ [0, 1] (v2; 1/0 for v1's crisp choice).
+    pub rho_sonar: f32,
+    /// Trust in the laser, ρL ∈ [0, 1].
+    pub rho_laser: f32,
+    /// The sonar range that was used or rejected, m.
+    pub sonar_range: f32,
+}
+
+impl SectionDecision {
+    pub fn source(&self) -> SectionSource {
+        SectionSource::from_u8(self.source)
+    }
+}
+
+/// A laser-scan-shaped output any 2D SLAM can consume, plus why it looks the way it does.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("smokenav::FusedScan")]
+pub struct FusedScan {
+    /// The combined scan (header stamp = the laser scan's stamp).
+    pub scan: LaserScan,
+    /// Per-beam [`SectionSource`] as `u8` (Laser, Sonar or Neither), for
+    /// consumers that model sonar beams with a wider noise.
+    pub beam_source: [u8; MAX_BEAMS],
+    /// A [`FusionMethod`] as `u8`.
+    pub method: u8,
+    /// A [`SyncState`] as `u8`.
+    pub sync_state: u8,
+    pub _reserved: [u8; 2],
+    /// Sections in use (`<= MAX_SONARS`).
+    pub section_count: u32,
+    pub sections: [SectionDecision; MAX_SONARS],
+    /// Smoke level used for the decision (seed scale; see `SmokeReading::level`).
+    pub smoke_level: f32,
+    /// Standard deviation of the valid laser ranges of the whole scan, m.
+    pub laser_spread: f32,
+    /// Stamps of the inputs that were fused, ns (0 when absent).
+    pub sonar_stamp_ns: u64,
+    pub smoke_stamp_ns: u64,
+}
+
+impl Default for FusedScan {
+    fn default() -> Self {
+        Self {
+            scan: LaserScan::default(),
+            beam_source: [0; MAX_BEAMS],
+            method: 0,
+            sync_state: 0,
+            _reserved: [0; 2],
+            section_count: 0,
+            sections: [SectionDecision::default(); MAX_SONARS],
+            smoke_level: 0.0,
+            laser_spread: 0.0,
+            sonar_stamp_ns: 0,
+            smoke_stamp_ns: 0,
+        }
+    }
+}
+
+impl FusedScan {
+    pub fn header(&self) -> &Header {
+        &self.scan.header
+    }
+
+    pub fn sections(&self) -> &[SectionDecision] {
+        &self.sections[..(self.section_count as usize).min(MAX_SONARS)]
+    }
+
+    pub fn method(&self) -> FusionMethod {
+        FusionMethod::from_u8(self.method)
+    }
+
+    pub fn sync_state(&self) -> SyncState {
+        SyncState::from_u8(self.sync_state)
+    }
+
+    pub fn beam_source(&self, i: usize) -> SectionSource {
+        SectionSource::from_u8(self.beam_source[i])
+    }
+
+    /// Share of sections where the sonar was used (alone or superimposed):
+    /// the seed paper's "sonar usage".
+    pub fn sonar_usage(&self) -> f32 {
+        let s = self.sections();
+        if s.is_empty() {
+            return 0.0;
+        }
+        let used = s
+            .iter()
+            .filter(|d| matches!(d.source(), SectionSource::Sonar | SectionSource::Both))
+            .count();
+        used as f32 / s.len() as f32
+    }
+}
