@@ -1,0 +1,1 @@
+//! Pure ADC sample-line codec and MQ303A signal processing (no I/O).
