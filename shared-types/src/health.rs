@@ -110,7 +110,10 @@ impl Health {
     pub fn set_metric(&mut self, name: &str, value: f64, expected: Option<f64>) -> bool {
         let expected = expected.unwrap_or(f64::NAN);
         let n = (self.metric_count as usize).min(MAX_METRICS);
-        if let Some(m) = self.metrics[..n].iter_mut().find(|m| m.name.as_str() == name) {
+        if let Some(m) = self.metrics[..n]
+            .iter_mut()
+            .find(|m| m.name.as_str() == name)
+        {
             m.value = value;
             m.expected = expected;
             return true;

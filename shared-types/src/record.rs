@@ -5,6 +5,7 @@
 //! JSON has no NaN or infinity, so beams without a range are `null` in
 //! `ranges`, with the reason in `beam_error`.
 
+use crate::ConversionError;
 use crate::fused::{FusedScan, FusionMethod, SectionDecision, SectionSource, SyncState};
 use crate::header::Header;
 use crate::health::{Health, HealthState, MAX_METRICS};
@@ -14,7 +15,6 @@ use crate::slam::{MapInfo, PoseEstimate};
 use crate::smoke::{SmokeReading, SmokeSensorState, SmokeTrend};
 use crate::sonar::{MAX_SONARS, SonarReading, SonarRing, SonarStatus};
 use crate::text::FixedStr;
-use crate::ConversionError;
 use serde::{Deserialize, Serialize};
 
 /// One line of `topic echo --json`: the topic and the message.
@@ -470,12 +470,11 @@ impl FusedScanRecord {
             });
         }
         f.beam_source[..n].copy_from_slice(&self.beam_source);
-        f.method = FusionMethod::parse(&self.method).ok_or_else(|| {
-            ConversionError::UnknownValue {
+        f.method =
+            FusionMethod::parse(&self.method).ok_or_else(|| ConversionError::UnknownValue {
                 field: "method",
                 value: self.method.clone(),
-            }
-        })? as u8;
+            })? as u8;
         f.sync_state = match self.sync_state.as_str() {
             "complete" => SyncState::Complete,
             "laser-only" => SyncState::LaserOnly,

@@ -32,7 +32,10 @@ impl Validate for MountPose {
 /// Where a device is: a serial device path or `tcp://host:port`.
 pub fn validate_port(v: &mut Validator, key: &str, port: &str) {
     if port.trim().is_empty() {
-        v.fail(key, "must name a device (e.g. /dev/ttyACM0) or tcp://host:port");
+        v.fail(
+            key,
+            "must name a device (e.g. /dev/ttyACM0) or tcp://host:port",
+        );
     } else if let Some(rest) = port.strip_prefix("tcp://") {
         let ok = rest
             .rsplit_once(':')
@@ -50,6 +53,9 @@ pub const STANDARD_BAUDS: &[u32] = &[
 
 pub fn validate_baud(v: &mut Validator, key: &str, baud: u32) {
     if !STANDARD_BAUDS.contains(&baud) {
-        v.fail(key, format!("{baud} is not a standard baud rate ({STANDARD_BAUDS:?})"));
+        v.fail(
+            key,
+            format!("{baud} is not a standard baud rate ({STANDARD_BAUDS:?})"),
+        );
     }
 }

@@ -48,8 +48,16 @@ impl Validate for LaserSection {
         v.non_empty(&format!("{key}.frame_id"), &self.frame_id);
         self.mount.validate(&format!("{key}.mount"), v);
         if self.skip_scans > 9 {
-            v.fail(format!("{key}.skip_scans"), format!("must be 0–9 (SCIP limit), got {}", self.skip_scans));
+            v.fail(
+                format!("{key}.skip_scans"),
+                format!("must be 0–9 (SCIP limit), got {}", self.skip_scans),
+            );
         }
-        v.within(&format!("{key}.stall_timeout_s"), self.stall_timeout_s, 0.2, 30.0);
+        v.within(
+            &format!("{key}.stall_timeout_s"),
+            self.stall_timeout_s,
+            0.2,
+            30.0,
+        );
     }
 }

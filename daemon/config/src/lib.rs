@@ -72,9 +72,10 @@ impl Validate for RobotConfig {
             Platform::Pioneer if self.base.scout.is_some() => {
                 v.fail("base.scout", "only valid when robot.platform = \"scout\"")
             }
-            Platform::Scout if self.base.pioneer.is_some() => {
-                v.fail("base.pioneer", "only valid when robot.platform = \"pioneer\"")
-            }
+            Platform::Scout if self.base.pioneer.is_some() => v.fail(
+                "base.pioneer",
+                "only valid when robot.platform = \"pioneer\"",
+            ),
             _ => {}
         }
     }
@@ -173,8 +174,12 @@ impl RobotConfig {
 }
 
 /// Deserialises any config-like TOML strictly, reporting the key path and line.
-pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, file: &Path) -> Result<T, ConfigError> {
-    let de = toml::de::Deserializer::parse(text).map_err(|e| toml_error(text, file, String::new(), &e))?;
+pub fn parse_toml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    file: &Path,
+) -> Result<T, ConfigError> {
+    let de = toml::de::Deserializer::parse(text)
+        .map_err(|e| toml_error(text, file, String::new(), &e))?;
     serde_path_to_error::deserialize(de).map_err(|e| {
         let key = e.path().to_string();
         toml_error(text, file, key, e.inner())

@@ -101,8 +101,16 @@ impl Validate for BusSection {
         if let Some(p) = &self.root_path
             && !p.starts_with('/')
         {
-            v.fail(format!("{key}.root_path"), format!("`{p}` must be an absolute path"));
+            v.fail(
+                format!("{key}.root_path"),
+                format!("`{p}` must be an absolute path"),
+            );
         }
-        v.within(&format!("{key}.health_period_s"), self.health_period_s, 0.05, 60.0);
+        v.within(
+            &format!("{key}.health_period_s"),
+            self.health_period_s,
+            0.05,
+            60.0,
+        );
     }
 }

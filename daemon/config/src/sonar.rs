@@ -44,7 +44,10 @@ impl SonarSection {
 impl Validate for SonarSection {
     fn validate(&self, key: &str, v: &mut Validator) {
         if self.count == 0 || self.count > 32 {
-            v.fail(format!("{key}.count"), format!("must be 1–32, got {}", self.count));
+            v.fail(
+                format!("{key}.count"),
+                format!("must be 1–32, got {}", self.count),
+            );
         }
         v.within(&format!("{key}.cone_deg"), self.cone_deg, 1.0, 90.0);
         v.within(&format!("{key}.max_range_m"), self.max_range_m, 0.3, 20.0);
@@ -58,10 +61,16 @@ impl Validate for SonarSection {
         for (i, t) in self.transducers.iter().enumerate() {
             let k = format!("{key}.transducers[{i}]");
             if t.index >= self.count {
-                v.fail(format!("{k}.index"), format!("{} is not below `{key}.count` ({})", t.index, self.count));
+                v.fail(
+                    format!("{k}.index"),
+                    format!("{} is not below `{key}.count` ({})", t.index, self.count),
+                );
             }
             if self.transducers[..i].iter().any(|o| o.index == t.index) {
-                v.fail(format!("{k}.index"), format!("index {} appears twice", t.index));
+                v.fail(
+                    format!("{k}.index"),
+                    format!("index {} appears twice", t.index),
+                );
             }
             v.within(&format!("{k}.x"), t.x, -2.0, 2.0);
             v.within(&format!("{k}.y"), t.y, -2.0, 2.0);
@@ -73,7 +82,10 @@ impl Validate for SonarSection {
         if !missing.is_empty() {
             v.fail(
                 format!("{key}.transducers"),
-                format!("no pose for sonar index {missing:?} (every index 0..{} needs one)", self.count),
+                format!(
+                    "no pose for sonar index {missing:?} (every index 0..{} needs one)",
+                    self.count
+                ),
             );
         }
     }

@@ -2,7 +2,9 @@ use super::*;
 use std::path::PathBuf;
 
 fn profile(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config")
+        .join(name)
 }
 
 fn pioneer_text() -> String {
@@ -33,11 +35,17 @@ fn pioneer_sonar_poses_are_arias() {
 
 #[test]
 fn unknown_key_names_file_key_and_reason() {
-    let text = pioneer_text().replace("stall_timeout_s = 1.0", "stall_timeout_s = 1.0\nscan_hz = 10");
+    let text = pioneer_text().replace(
+        "stall_timeout_s = 1.0",
+        "stall_timeout_s = 1.0\nscan_hz = 10",
+    );
     let err = parse(&text).unwrap_err();
     let msg = err.to_string();
     assert!(msg.contains("config/test-robot.toml"), "{msg}");
-    assert!(msg.contains("laser.scan_hz") || msg.contains("`scan_hz`"), "{msg}");
+    assert!(
+        msg.contains("laser.scan_hz") || msg.contains("`scan_hz`"),
+        "{msg}"
+    );
     assert!(msg.contains("unknown field"), "{msg}");
     // and the line of the offending key
     let ConfigError::Parse { line, .. } = err else {
@@ -49,8 +57,15 @@ fn unknown_key_names_file_key_and_reason() {
 
 #[test]
 fn negative_rate_names_file_key_and_reason() {
-    let text = pioneer_text().replace("[base]\nport = \"/dev/pioneer\"", "[base]\nport = \"/dev/pioneer\"")
-        .replace("rate_hz = 10.0\n\n[base.pioneer]", "rate_hz = -10.0\n\n[base.pioneer]");
+    let text = pioneer_text()
+        .replace(
+            "[base]\nport = \"/dev/pioneer\"",
+            "[base]\nport = \"/dev/pioneer\"",
+        )
+        .replace(
+            "rate_hz = 10.0\n\n[base.pioneer]",
+            "rate_hz = -10.0\n\n[base.pioneer]",
+        );
     let err = parse(&text).unwrap_err();
     let msg = err.to_string();
     assert!(msg.contains("config/test-robot.toml"), "{msg}");
@@ -60,7 +75,10 @@ fn negative_rate_names_file_key_and_reason() {
 
 #[test]
 fn missing_sonar_pose_names_the_index() {
-    let text = pioneer_text().replace("  { index = 5, x = 0.148, y = -0.078, yaw_deg = -30.0 },\n", "");
+    let text = pioneer_text().replace(
+        "  { index = 5, x = 0.148, y = -0.078, yaw_deg = -30.0 },\n",
+        "",
+    );
     let err = parse(&text).unwrap_err();
     let msg = err.to_string();
     assert_eq!(err.keys(), vec!["sonar.transducers"], "{msg}");
@@ -91,7 +109,10 @@ fn all_issues_are_listed_at_once() {
         .replace("port = \"/dev/hokuyo\"", "port = \"tcp://nohost\"");
     let err = parse(&text).unwrap_err();
     let keys = err.keys();
-    assert!(keys.contains(&"sonar.cone_deg") && keys.contains(&"laser.port"), "{keys:?}");
+    assert!(
+        keys.contains(&"sonar.cone_deg") && keys.contains(&"laser.port"),
+        "{keys:?}"
+    );
 }
 
 #[test]
@@ -116,4 +137,3 @@ fn unreadable_file_names_the_path() {
     let err = RobotConfig::load(Path::new("/nonexistent/robot.toml")).unwrap_err();
     assert!(err.to_string().contains("/nonexistent/robot.toml"));
 }
-

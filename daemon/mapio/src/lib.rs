@@ -124,7 +124,9 @@ impl OccupancyGrid {
     pub fn to_gray_image(&self) -> image::GrayImage {
         image::GrayImage::from_fn(self.width as u32, self.height as u32, |x, y| {
             let row = self.height - 1 - y as usize;
-            image::Luma([cell_to_trinary_pixel(self.cells[row * self.width + x as usize])])
+            image::Luma([cell_to_trinary_pixel(
+                self.cells[row * self.width + x as usize],
+            )])
         })
     }
 
@@ -188,7 +190,8 @@ pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<P
     })?;
     let pgm = dir.join(format!("{name}.pgm"));
     let yaml = dir.join(format!("{name}.yaml"));
-    let mut bytes = format!("P5\n# smokenav map\n{} {}\n255\n", grid.width, grid.height).into_bytes();
+    let mut bytes =
+        format!("P5\n# smokenav map\n{} {}\n255\n", grid.width, grid.height).into_bytes();
     bytes.extend_from_slice(grid.to_gray_image().as_raw());
     fs::write(&pgm, bytes).map_err(|e| MapError::Io {
         path: pgm.clone(),
@@ -230,10 +233,16 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
         reason,
     };
     if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
-        return Err(bad("resolution", format!("must be > 0, got {}", meta.resolution)));
+        return Err(bad(
+            "resolution",
+            format!("must be > 0, got {}", meta.resolution),
+        ));
     }
     if meta.origin.len() != 3 || meta.origin.iter().any(|v| !v.is_finite()) {
-        return Err(bad("origin", "must be [x, y, yaw] with finite numbers".into()));
+        return Err(bad(
+            "origin",
+            "must be [x, y, yaw] with finite numbers".into(),
+        ));
     }
     for (key, v) in [
         ("occupied_thresh", meta.occupied_thresh),
@@ -245,7 +254,10 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
     }
     let mode = meta.mode.as_deref().unwrap_or("trinary");
     if !matches!(mode, "trinary" | "scale" | "raw") {
-        return Err(bad("mode", format!("expected trinary, scale or raw, got {mode:?}")));
+        return Err(bad(
+            "mode",
+            format!("expected trinary, scale or raw, got {mode:?}"),
+        ));
     }
     let image_path = yaml_path
         .parent()
@@ -281,7 +293,12 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
         })?
         .to_luma_alpha8();
     let (w, h) = (w as usize, h as usize);
-    let mut grid = OccupancyGrid::new(w, h, meta.resolution, [meta.origin[0], meta.origin[1], meta.origin[2]]);
+    let mut grid = OccupancyGrid::new(
+        w,
+        h,
+        meta.resolution,
+        [meta.origin[0], meta.origin[1], meta.origin[2]],
+    );
     for y in 0..h {
         for x in 0..w {
             let p = img.get_pixel(x as u32, y as u32);
@@ -351,7 +368,9 @@ mod tests {
     fn negative_resolution_is_rejected_with_key() {
         let dir = tempfile::tempdir().unwrap();
         let yaml = save_map_server(&sample(), dir.path(), "m").unwrap();
-        let text = fs::read_to_string(&yaml).unwrap().replace("resolution: 0.05", "resolution: -1");
+        let text = fs::read_to_string(&yaml)
+            .unwrap()
+            .replace("resolution: 0.05", "resolution: -1");
         fs::write(&yaml, text).unwrap();
         let err = load_map_server(&yaml).unwrap_err().to_string();
         assert!(err.contains("resolution"), "{err}");

@@ -1,0 +1,187 @@
+//! The bus handle: one iceoryx2 node per process, named services per instance.
+
+use crate::error::BusError;
+use crate::message::Message;
+use crate::publisher::Publisher;
+use crate::subscriber::Subscriber;
+use crate::topics;
+use iceoryx2::config::Config;
+use iceoryx2::prelude::*;
+use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
+
+/// How to open the bus.
+#[derive(Debug, Clone)]
+pub struct BusOptions {
+    /// Instance prefix: `<instance>/<topic>`. Two robots, or two test runs, on
+    /// one machine use different instances and never see each other's data.
+    pub instance: String,
+    /// Name of this process's node (its role), shown by iceoryx2 tools.
+    pub node_name: String,
+    /// iceoryx2 root directory (node and service files). Every process of one
+    /// instance must use the same. `None`: iceoryx2's default (`/tmp/iceoryx2/`).
+    pub root_path: Option<String>,
+}
+
+impl BusOptions {
+    pub fn new(instance: &str, node_name: &str) -> Self {
+        Self {
+            instance: instance.to_owned(),
+            node_name: node_name.to_owned(),
+            root_path: None,
+        }
+    }
+
+    pub fn with_root_path(mut self, root: Option<String>) -> Self {
+        self.root_path = root;
+        self
+    }
+}
+
+/// The iceoryx2 configuration for a root path (shared by every process of an instance).
+pub fn iceoryx2_config(root_path: Option<&str>) -> Result<Config, BusError> {
+    let mut cfg = Config::default();
+    if let Some(root) = root_path {
+        let mut root = root.to_owned();
+        if !root.ends_with('/') {
+            root.push('/');
+        }
+        let path =
+            iceoryx2::prelude::Path::new(root.as_bytes()).map_err(|e| BusError::InvalidName {
+                name: root.clone(),
+                reason: format!("not a usable iceoryx2 root path: {e:?}"),
+            })?;
+        cfg.global.set_root_path(&path);
+    }
+    Ok(cfg)
+}
+
+/// A service seen on the bus (for `smokenav topic list`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServiceInfo {
+    /// Topic without the instance prefix.
+    pub topic: String,
+    /// iceoryx2 type name of the payload (e.g. `smokenav::LaserScan`).
+    pub type_name: String,
+    /// Processes (iceoryx2 nodes) attached to the service.
+    pub nodes: usize,
+}
+
+/// One process's connection to the bus.
+pub struct Bus {
+    node: Node<ipc::Service>,
+    instance: String,
+    config: Config,
+}
+
+impl Bus {
+    /// Creates this process's node. Stale resources of crashed processes are
+    /// cleaned up here (iceoryx2 does so on node creation), which is what lets
+    /// a restarted driver reconnect.
+    pub fn open(opts: &BusOptions) -> Result<Self, BusError> {
+        validate_instance(&opts.instance)?;
+        let config = iceoryx2_config(opts.root_path.as_deref())?;
+        let node_name = NodeName::new(&opts.node_name).map_err(|e| BusError::InvalidName {
+            name: opts.node_name.clone(),
+            reason: format!("{e:?}"),
+        })?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&config)
+            // Processes handle SIGINT/SIGTERM themselves (smokenav-runtime); a
+            // signal still interrupts a blocking wait, which returns `Shutdown`
+            // or `Interrupted` for the caller to check its own flag.
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| BusError::Node {
+                node: opts.node_name.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Self {
+            node,
+            instance: opts.instance.clone(),
+            config,
+        })
+    }
+
+    pub fn instance(&self) -> &str {
+        &self.instance
+    }
+
+    /// The full iceoryx2 service name of a topic.
+    pub fn service_name(&self, topic: &str) -> String {
+        format!("{}/{}", self.instance, topic)
+    }
+
+    pub(crate) fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+
+    pub(crate) fn iox_name(&self, topic: &str) -> Result<(String, ServiceName), BusError> {
+        let full = self.service_name(topic);
+        let name = ServiceName::new(&full).map_err(|e| BusError::InvalidName {
+            name: full.clone(),
+            reason: format!("{e:?}"),
+        })?;
+        Ok((full, name))
+    }
+
+    pub fn publisher<T: Message>(&self, topic: &str) -> Result<Publisher<T>, BusError> {
+        Publisher::create(self, topic)
+    }
+
+    pub fn subscriber<T: Message>(&self, topic: &str) -> Result<Subscriber<T>, BusError> {
+        Subscriber::create(self, topic)
+    }
+
+    /// The services of this instance, as topics.
+    pub fn list(&self) -> Result<Vec<ServiceInfo>, BusError> {
+        list_services(&self.config, &self.instance)
+    }
+}
+
+/// Lists the publish–subscribe services of `instance` under `config`'s root path.
+pub fn list_services(config: &Config, instance: &str) -> Result<Vec<ServiceInfo>, BusError> {
+    let prefix = format!("{instance}/");
+    let mut out = Vec::new();
+    ipc::Service::list(config, |details| {
+        let name = details.static_details.name().as_str();
+        if let Some(topic) = name.strip_prefix(&prefix)
+            && let StaticPattern::PublishSubscribe(ps) = details.static_details.messaging_pattern()
+        {
+            let nodes = details
+                .dynamic_details
+                .as_ref()
+                .map(|d| d.nodes.len())
+                .unwrap_or(0);
+            out.push(ServiceInfo {
+                topic: topic.to_owned(),
+                type_name: ps.message_type_details().payload.type_name().to_string(),
+                nodes,
+            });
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| BusError::service(&prefix, "list services", e))?;
+    out.sort_by(|a, b| a.topic.cmp(&b.topic));
+    Ok(out)
+}
+
+fn validate_instance(instance: &str) -> Result<(), BusError> {
+    let ok = !instance.is_empty()
+        && instance.len() <= 48
+        && instance
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if ok {
+        Ok(())
+    } else {
+        Err(BusError::InvalidName {
+            name: instance.to_owned(),
+            reason: "an instance is 1–48 characters of [A-Za-z0-9_-]".into(),
+        })
+    }
+}
+
+pub(crate) fn qos(topic: &str) -> topics::Qos {
+    topics::qos(topic)
+}

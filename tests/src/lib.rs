@@ -1,0 +1,282 @@
+//! The end-to-end test kit.
+//!
+//! Tests here run the real binaries as separate OS processes over real
+//! iceoryx2 shared memory (and real PTYs, via the device emulators). This
+//! crate's library gives them:
+//!
+//! - [`bin`]: the path of a workspace binary, built on first use so a plain
+//!   `cargo test` never runs a stale one;
+//! - [`unique_instance`]: a bus instance name no other test (or robot) uses;
+//! - [`Child`]: a spawned process that is killed when the test ends, with its
+//!   output captured for the failure message;
+//! - [`profile`]: a robot profile based on a shipped one, modified and written
+//!   to a temporary file;
+//! - [`wait_for`]: receive messages of a topic until a predicate holds or a timeout passes.
+
+use anyhow::{Context, bail};
+use smokenav_bus::{Bus, BusOptions, Message, Waiter};
+use smokenav_config::RobotConfig;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::mpsc;
+use std::sync::{Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+/// The workspace root.
+pub fn workspace_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ has a parent")
+        .to_owned()
+}
+
+/// Where cargo put this test's binaries (`target/<profile>/`).
+fn target_profile_dir() -> PathBuf {
+    // The test executable lives in target/<profile>/deps/.
+    let exe = std::env::current_exe().expect("current_exe");
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("test binary in target/<profile>/deps")
+        .to_owned()
+}
+
+static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
+
+/// Path of the workspace binary `name` (e.g. `smokenav-hokuyo`). The first call
+/// in a test process runs `cargo build --bins` for the workspace, so tests
+/// always run the current code; later calls are free.
+pub fn bin(name: &str) -> PathBuf {
+    let built = BUILT.get_or_init(|| {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.current_dir(workspace_root())
+            .args(["build", "--workspace", "--bins", "--quiet"]);
+        if target_profile_dir().ends_with("release") {
+            cmd.arg("--release");
+        }
+        match cmd.status() {
+            Ok(s) if s.success() => Ok(()),
+            Ok(s) => Err(format!("cargo build --bins failed: {s}")),
+            Err(e) => Err(format!("cannot run cargo: {e}")),
+        }
+    });
+    if let Err(e) = built {
+        panic!("{e}");
+    }
+    let path = target_profile_dir().join(name);
+    assert!(path.exists(), "binary {} was not built", path.display());
+    path
+}
+
+/// A bus instance name unique to this test run and process.
+pub fn unique_instance(test: &str) -> String {
+    static COUNTER: AtomicU32 = AtomicU32::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let mut name: String = test
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .take(20)
+        .collect();
+    name.push_str(&format!("_{}_{n}", std::process::id()));
+    name
+}
+
+/// Opens the bus for `instance` in this (test) process.
+pub fn open_bus(instance: &str) -> Bus {
+    Bus::open(&BusOptions::new(instance, "test")).expect("open bus")
+}
+
+/// Receives `topic` until `done` returns true for a message, or `timeout`.
+/// Returns every message received (copied out of shared memory).
+pub fn wait_for<T: Message>(
+    bus: &Bus,
+    topic: &str,
+    timeout: Duration,
+    mut done: impl FnMut(&T) -> bool,
+) -> anyhow::Result<Vec<T>> {
+    let sub = bus.subscriber::<T>(topic)?;
+    let waiter = Waiter::new()?;
+    let _g = waiter.attach(&sub)?;
+    let end = Instant::now() + timeout;
+    let mut got = Vec::new();
+    loop {
+        while let Some(s) = sub.receive()? {
+            let msg: T = *s;
+            let finished = done(&msg);
+            got.push(msg);
+            if finished {
+                return Ok(got);
+            }
+        }
+        let now = Instant::now();
+        if now >= end {
+            bail!(
+                "timed out after {timeout:?} waiting on {topic} ({} messages received)",
+                got.len()
+            );
+        }
+        waiter.wait(Some((end - now).min(Duration::from_millis(200))))?;
+    }
+}
+
+/// A child process killed (SIGKILL) when dropped; stdout and stderr are
+/// collected in the background and shown if the test fails.
+pub struct Child {
+    pub name: String,
+    child: std::process::Child,
+    output: std::sync::Arc<Mutex<String>>,
+    lines: mpsc::Receiver<String>,
+}
+
+impl Child {
+    /// Spawns `program` with `args`, `SMOKENAV_INSTANCE=instance` and `RUST_LOG=info`.
+    pub fn spawn(program: &Path, args: &[&str], instance: &str) -> anyhow::Result<Self> {
+        Self::spawn_env(program, args, instance, &[])
+    }
+
+    pub fn spawn_env(
+        program: &Path,
+        args: &[&str],
+        instance: &str,
+        env: &[(&str, &str)],
+    ) -> anyhow::Result<Self> {
+        let mut cmd = Command::new(program);
+        cmd.args(args)
+            .env("SMOKENAV_INSTANCE", instance)
+            .env(
+                "RUST_LOG",
+                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
+            )
+            .env_remove("NOTIFY_SOCKET")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let mut child = cmd
+            .spawn()
+            .with_context(|| format!("cannot start {}", program.display()))?;
+        let output = std::sync::Arc::new(Mutex::new(String::new()));
+        let (tx, lines) = mpsc::channel();
+        let name = program
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        for stream in [
+            child
+                .stdout
+                .take()
+                .map(|s| Box::new(s) as Box<dyn Read + Send>),
+            child
+                .stderr
+                .take()
+                .map(|s| Box::new(s) as Box<dyn Read + Send>),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            let output = output.clone();
+            let tx = tx.clone();
+            std::thread::spawn(move || {
+                for line in BufReader::new(stream).lines().map_while(Result::ok) {
+                    if let Ok(mut o) = output.lock() {
+                        o.push_str(&line);
+                        o.push('\n');
+                    }
+                    let _ = tx.send(line);
+                }
+            });
+        }
+        Ok(Self {
+            name,
+            child,
+            output,
+            lines,
+        })
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Everything the process printed so far.
+    pub fn output(&self) -> String {
+        self.output.lock().map(|o| o.clone()).unwrap_or_default()
+    }
+
+    /// Waits for an output line containing `needle`; returns that line.
+    pub fn wait_for_line(&self, needle: &str, timeout: Duration) -> anyhow::Result<String> {
+        let end = Instant::now() + timeout;
+        loop {
+            let left = end.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) if line.contains(needle) => return Ok(line),
+                Ok(_) => {}
+                Err(_) => bail!(
+                    "{}: no line containing {needle:?} within {timeout:?}; output:\n{}",
+                    self.name,
+                    self.output()
+                ),
+            }
+        }
+    }
+
+    /// Sends a signal (e.g. SIGTERM for a clean stop, SIGKILL for a crash).
+    pub fn signal(&self, sig: nix::sys::signal::Signal) {
+        let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(self.child.id() as i32), sig);
+    }
+
+    /// Waits for the process to exit and returns its status.
+    pub fn wait_exit(&mut self, timeout: Duration) -> anyhow::Result<std::process::ExitStatus> {
+        let end = Instant::now() + timeout;
+        loop {
+            if let Some(status) = self.child.try_wait()? {
+                return Ok(status);
+            }
+            if Instant::now() >= end {
+                bail!(
+                    "{} did not exit within {timeout:?}; output:\n{}",
+                    self.name,
+                    self.output()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Stops the process with SIGTERM and waits for it.
+    pub fn terminate(&mut self, timeout: Duration) -> anyhow::Result<std::process::ExitStatus> {
+        self.signal(nix::sys::signal::Signal::SIGTERM);
+        self.wait_exit(timeout)
+    }
+
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+}
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        if self.is_running() {
+            self.signal(nix::sys::signal::Signal::SIGKILL);
+            let _ = self.child.wait();
+        }
+        if std::thread::panicking() {
+            eprintln!("--- output of {} ---\n{}", self.name, self.output());
+        }
+    }
+}
+
+/// Loads a shipped profile (e.g. `pioneer-3dx.toml`), lets the test change it,
+/// and writes it to a file in `dir`. Returns the file's path.
+pub fn profile(dir: &Path, shipped: &str, edit: impl FnOnce(&mut RobotConfig)) -> PathBuf {
+    let src = workspace_root().join("config").join(shipped);
+    let mut cfg = RobotConfig::load(&src).unwrap_or_else(|e| panic!("{e}"));
+    edit(&mut cfg);
+    let path = dir.join(format!("test-{shipped}"));
+    std::fs::write(&path, cfg.to_toml()).expect("write profile");
+    path
+}
