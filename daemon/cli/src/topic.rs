@@ -11,7 +11,10 @@ use smokenav_types::{
     FusedScan, Health, LaserScan, Odometry, PoseEstimate, SmokeReading, SonarRing, VelocityCommand,
 };
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+/// Where the systemd units put iceoryx2's files.
+const SYSTEMD_IOX2_ROOT: &str = "/run/smokenav/iox2/";
 use std::time::{Duration, Instant};
 
 /// Which bus to look at.
@@ -44,6 +47,11 @@ impl BusArgs {
             instance = Some(i.clone());
         }
         let instance = instance.unwrap_or_else(|| "smokenav".into());
+        // On a robot running the systemd units, the processes share this
+        // directory (systemd/smokenav-*.service); find them without extra flags.
+        if root.is_none() && Path::new(SYSTEMD_IOX2_ROOT).is_dir() {
+            root = Some(SYSTEMD_IOX2_ROOT.to_owned());
+        }
         let node = format!("{name}-{}", std::process::id());
         Bus::open(&BusOptions::new(&instance, &node).with_root_path(root))
             .with_context(|| format!("cannot open bus instance `{instance}`"))
