@@ -262,3 +262,49 @@ fn link_pulled_and_restored_resumes_within_1_s() {
     );
     assert!(h.is_ok(), "health never reported the reconnect");
 }
+
+#[test]
+fn corrupted_replies_are_counted_and_odometry_keeps_flowing() {
+    let r = rig("scout_corrupt");
+    // One reply in five fails its checksum (placed by the emulator's seed).
+    r.emu.set_corrupt_rate(0.2);
+    let mut n = 0;
+    wait_for::<Odometry>(&r.bus, topics::BASE_ODOM, Duration::from_secs(10), |_| {
+        n += 1;
+        n >= 30
+    })
+    .unwrap_or_else(|e| panic!("{e}\n{}", r.driver.output()));
+    let corrupted = r.emu.stats().corrupted;
+    assert!(corrupted > 0);
+    let h = wait_for::<Health>(
+        &r.bus,
+        &topics::health("scout"),
+        Duration::from_secs(5),
+        |h| {
+            h.metrics()
+                .iter()
+                .any(|m| m.name.as_str() == "checksum_errors" && m.value > 0.0)
+        },
+    )
+    .unwrap();
+    let h = h.last().unwrap();
+    let metric = |n: &str| {
+        h.metrics()
+            .iter()
+            .find(|m| m.name.as_str() == n)
+            .map(|m| m.value)
+    };
+    eprintln!(
+        "corrupted {corrupted}: health checksum_errors {:?}, reply_timeouts {:?}, reconnects {:?}, latency p99 {} µs",
+        metric("checksum_errors"),
+        metric("reply_timeouts"),
+        metric("reconnects"),
+        h.latency_p99_us
+    );
+    assert_eq!(metric("connected"), Some(1.0));
+    assert_eq!(
+        metric("reconnects"),
+        Some(0.0),
+        "a lost reply is not a lost link"
+    );
+}
