@@ -41,8 +41,8 @@ mod shutdown;
 mod systemd;
 
 pub use args::CommonArgs;
-pub use health::{HealthReporter, LatencyWindow, RateMeter};
+pub use health::{HealthReporter, LatencyWindow, RateId, RateMeter};
 pub use logging::init_logging;
-pub use process::{Process, main};
+pub use process::{ConfigFailure, EXIT_CONFIG, Process, main};
 pub use shutdown::Shutdown;
 pub use systemd::SystemdNotifier;

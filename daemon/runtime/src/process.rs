@@ -108,8 +108,11 @@ impl Process {
     }
 }
 
+/// An error that a configuration change must fix (bad profile, unknown robot
+/// subclass): the process exits with [`EXIT_CONFIG`], which the units exclude
+/// from automatic restarts. Return it (via `anyhow`) from the process body.
 #[derive(Debug)]
-struct ConfigFailure(String);
+pub struct ConfigFailure(pub String);
 
 impl std::fmt::Display for ConfigFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -144,7 +147,11 @@ pub fn main(
         }
         Err(e) => {
             tracing::error!("{role}: {e:#}");
-            ExitCode::FAILURE
+            if e.downcast_ref::<ConfigFailure>().is_some() {
+                ExitCode::from(EXIT_CONFIG)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }
