@@ -1,4 +1,63 @@
-//! `[fusion]`: the synchroniser and the SmokeNav methods.
+//! `[fusion]`: the synchroniser and the SmokeNav methods (seed 000, §5.2–5.4).
+//!
+//! Every threshold and membership breakpoint of both methods is a key here,
+//! with the seed paper's value as the default where the paper gives one.
+//!
+//! ## SmokeNav v1 (`[fusion.v1]`, Algorithm 2)
+//!
+//! | paper              | key here                  | default |
+//! |--------------------|---------------------------|---------|
+//! | SMOKE_MIN          | `smoke_min`               | 130     |
+//! | SMOKE_MAX_UP       | `smoke_max_up`            | 200     |
+//! | SMOKE_MAX_DOWN     | `smoke_max_down`          | 240     |
+//! | (Ns−1)/3 crossings | `zero_crossing_fraction`  | 1/3     |
+//! | MAX_DIFF = α_step·r̄ | (computed per section)   |         |
+//!
+//! Choices where the paper gives no number: `disagreement_m` (a "high
+//! difference" between the laser and the sonar of one section, 0.3 m) and
+//! `noise_floor_m` (differences smaller than this carry no sign in the
+//! zero-crossing test; 0 = the paper, every non-zero difference counts).
+//!
+//! ## SmokeNav v2 (`[fusion.v2]`, Algorithm 3, Fig. 14)
+//!
+//! The breakpoints of Fig. 14 are not in the text. The paper's rationale is:
+//! "the LRF readings can only be trusted when alcohol readings are below 20
+//! or the standard deviation of the laser readings is above 0.8. If not, only
+//! trust the sonar readings whenever it presents readings inferior to 2.5
+//! meters". Each membership function therefore crosses 0.5 at the number the
+//! rationale names:
+//!
+//! | set          | input             | Π breakpoints a, b, c, d        | μ = 0.5 at |
+//! |--------------|-------------------|---------------------------------|------------|
+//! | Confident    | sonar range s, m  | 0.05, 0.15, 2.0, 3.0            | 2.5 m      |
+//! | Alcoholized  | smoke level a     | 10, 30, inf, inf (rising shoulder) | 20      |
+//! | Dense        | laser σ, m        | 0, 0, 0.6, 1.0 (falling shoulder)  | 0.8 m   |
+//!
+//! A Π function is 0 below `a`, rises along an S-curve to 1 at `b`, stays 1
+//! up to `c` and falls along a Z-curve to 0 at `d`; `a = b` or `c = d` makes
+//! that side a step, `inf` leaves it open.
+//!
+//! Where the paper is ambiguous, and what this implementation does:
+//! - **The rule text contradicts the rationale.** Algorithm 3 reads "IF a is
+//!   Alcoholized OR σ is Dense THEN ρL is Laser-driven", which would raise
+//!   the trust in the laser when there is smoke. We follow the rationale
+//!   (and the required behaviour: dense smoke ⇒ sonar, clean air ⇒ laser):
+//!   the laser rule fires with `w_L = max(1 − μ_Alcoholized, 1 − μ_Dense)`
+//!   (laser trusted when the air is clean OR the scan is not uniform), and the
+//!   ELSE-IF sonar rule with `w_S = min(1 − w_L, μ_Confident)`.
+//! - **One bell per output cannot express low trust.** With a single
+//!   consequent term, the centroid of the clipped term stays near the middle
+//!   of [0, 1] however weakly the rule fires. Each output therefore has the
+//!   same generalised bell twice ("the same bell-shaped membership relation
+//!   for softening both outputs"): a *high* term centred at 1 fired with `w`
+//!   and a *low* term centred at 0 fired with `1 − w`, Mamdani min
+//!   implication, max aggregation, centroid over `defuzz_samples` points of
+//!   [0, 1]. ρ > 0.5 exactly when `w` > 0.5.
+//! - **Decision.** Sonar when ρS > ρL and ρS > ρT; laser when ρL ≥ ρS and
+//!   ρL > ρT; otherwise neither (beams marked beyond max range). The paper's
+//!   formula uses a strict `>` against ρT = 1/2; its prose says "equal or
+//!   greater"; we use the formula.
+//! - **Uncovered laser sections** (between sonar cones) follow ρL.
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
@@ -21,8 +80,16 @@ pub struct FusionSection {
     /// Sonar readings beyond this are treated as saturated (the paper limited sonar to 2.5 m).
     #[serde(default = "default_cap")]
     pub sonar_cap_m: f64,
+    /// Range at which a sonar's cone defines its laser section τ (the beams
+    /// whose angle lies within the cone seen from the laser). Unset: `sonar_cap_m`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub section_range_m: Option<f64>,
     #[serde(default)]
     pub sync: SyncParams,
+    #[serde(default)]
+    pub v1: V1Params,
+    #[serde(default)]
+    pub v2: V2Params,
 }
 
 fn default_method() -> Method {
@@ -37,8 +104,18 @@ impl Default for FusionSection {
         Self {
             method: default_method(),
             sonar_cap_m: default_cap(),
+            section_range_m: None,
             sync: SyncParams::default(),
+            v1: V1Params::default(),
+            v2: V2Params::default(),
         }
+    }
+}
+
+impl FusionSection {
+    /// The range that defines the sections.
+    pub fn section_range(&self) -> f64 {
+        self.section_range_m.unwrap_or(self.sonar_cap_m)
     }
 }
 
@@ -52,6 +129,17 @@ pub struct SyncParams {
     pub max_interval_s: f64,
     /// An input silent for this long no longer holds up the output, s.
     pub timeout_s: f64,
+    /// ROS's age penalty: how much a later set must improve on the span of an
+    /// earlier one to replace it (message_filters' code uses 0.1).
+    pub age_penalty: f64,
+    /// Inter-message lower bounds (ROS `setInterMessageLowerBound`), s: the
+    /// shortest time between two messages of one topic. They let a set go out
+    /// as soon as its last member arrives instead of one period later; a bound
+    /// larger than the true period can pair suboptimally. 0 disables.
+    /// Defaults: half the 10 Hz period of all three sensors in the paper.
+    pub laser_min_period_s: f64,
+    pub sonar_min_period_s: f64,
+    pub smoke_min_period_s: f64,
 }
 
 impl Default for SyncParams {
@@ -60,6 +148,128 @@ impl Default for SyncParams {
             queue_size: 8,
             max_interval_s: 0.15,
             timeout_s: 0.5,
+            age_penalty: 0.1,
+            laser_min_period_s: 0.05,
+            sonar_min_period_s: 0.05,
+            smoke_min_period_s: 0.05,
+        }
+    }
+}
+
+/// SmokeNav v1: the heuristic of Algorithm 2.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct V1Params {
+    /// Below this smoke level only the laser is used (SMOKE_MIN, 130 mV).
+    pub smoke_min: f64,
+    /// While the smoke rises, at or above this only the sonar is used (SMOKE_MAX_UP, 200 mV).
+    pub smoke_max_up: f64,
+    /// While it falls, at or above this only the sonar is used (SMOKE_MAX_DOWN,
+    /// 240 mV: the MQ303A recovers slowly, so a falling reading overstates the smoke).
+    pub smoke_max_down: f64,
+    /// A laser section is noisy when at least this share of its Ns−1 successive
+    /// differences change sign (the paper: a third).
+    pub zero_crossing_fraction: f64,
+    /// Differences of at most this magnitude carry no sign in the test, m (0 = the paper).
+    pub noise_floor_m: f64,
+    /// Laser and sonar of one section disagree when the nearest laser range
+    /// and the sonar range differ by more than this, m; the sonar then replaces the laser.
+    pub disagreement_m: f64,
+}
+
+impl Default for V1Params {
+    fn default() -> Self {
+        Self {
+            smoke_min: 130.0,
+            smoke_max_up: 200.0,
+            smoke_max_down: 240.0,
+            zero_crossing_fraction: 1.0 / 3.0,
+            noise_floor_m: 0.0,
+            disagreement_m: 0.3,
+        }
+    }
+}
+
+/// A Π-shaped membership function: 0 below `a`, S-curve up to 1 at `b`, 1 up
+/// to `c`, Z-curve down to 0 at `d`. `c` and `d` may be `inf`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PiShape {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+    pub d: f64,
+}
+
+impl PiShape {
+    pub const fn new(a: f64, b: f64, c: f64, d: f64) -> Self {
+        Self { a, b, c, d }
+    }
+
+    fn validate(&self, key: &str, v: &mut Validator) {
+        v.finite(&format!("{key}.a"), self.a);
+        v.finite(&format!("{key}.b"), self.b);
+        for (k, x) in [("c", self.c), ("d", self.d)] {
+            if x.is_nan() || x == f64::NEG_INFINITY {
+                v.fail(
+                    format!("{key}.{k}"),
+                    format!("must be a number or inf, got {x}"),
+                );
+            }
+        }
+        let ok = self.a <= self.b && self.b <= self.c && self.c <= self.d;
+        if !ok {
+            v.fail(
+                key.to_owned(),
+                format!(
+                    "breakpoints must satisfy a <= b <= c <= d, got a={} b={} c={} d={}",
+                    self.a, self.b, self.c, self.d
+                ),
+            );
+        }
+    }
+}
+
+/// A generalised bell `1 / (1 + |(x − centre) / width|^(2·slope))`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BellShape {
+    /// Half-width at μ = 0.5.
+    pub width: f64,
+    /// Steepness of the flanks.
+    pub slope: f64,
+}
+
+/// SmokeNav v2: the fuzzy model of Algorithm 3 and Fig. 14.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct V2Params {
+    /// ρT: a source is chosen only if its trust exceeds this (the paper: 1/2).
+    pub rho_threshold: f64,
+    /// μ Confident over the section's sonar range, m.
+    pub confident: PiShape,
+    /// μ Alcoholized over the smoke level (seed scale, see `SmokeReading::level`).
+    pub alcoholized: PiShape,
+    /// μ Dense over the standard deviation of the scan's valid ranges, m.
+    pub dense: PiShape,
+    /// The consequent bell, used centred at 1 (trust) and at 0 (distrust) for both outputs.
+    pub output_bell: BellShape,
+    /// Points of [0, 1] the centroid is taken over.
+    pub defuzz_samples: usize,
+}
+
+impl Default for V2Params {
+    fn default() -> Self {
+        Self {
+            rho_threshold: 0.5,
+            confident: PiShape::new(0.05, 0.15, 2.0, 3.0),
+            alcoholized: PiShape::new(10.0, 30.0, f64::INFINITY, f64::INFINITY),
+            dense: PiShape::new(0.0, 0.0, 0.6, 1.0),
+            output_bell: BellShape {
+                width: 0.2,
+                slope: 2.0,
+            },
+            defuzz_samples: 101,
         }
     }
 }
@@ -67,10 +277,185 @@ impl Default for SyncParams {
 impl Validate for FusionSection {
     fn validate(&self, key: &str, v: &mut Validator) {
         v.within(&format!("{key}.sonar_cap_m"), self.sonar_cap_m, 0.2, 20.0);
-        if !(2..=1000).contains(&self.sync.queue_size) {
-            v.fail(format!("{key}.sync.queue_size"), format!("must be 2–1000, got {}", self.sync.queue_size));
+        if let Some(r) = self.section_range_m {
+            v.within(&format!("{key}.section_range_m"), r, 0.2, 20.0);
         }
-        v.within(&format!("{key}.sync.max_interval_s"), self.sync.max_interval_s, 0.001, 5.0);
-        v.within(&format!("{key}.sync.timeout_s"), self.sync.timeout_s, 0.01, 10.0);
+        self.sync.validate(&format!("{key}.sync"), v);
+        self.v1.validate(&format!("{key}.v1"), v);
+        self.v2.validate(&format!("{key}.v2"), v);
+    }
+}
+
+impl Validate for SyncParams {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        if !(2..=1000).contains(&self.queue_size) {
+            v.fail(
+                format!("{key}.queue_size"),
+                format!("must be 2–1000, got {}", self.queue_size),
+            );
+        }
+        v.within(
+            &format!("{key}.max_interval_s"),
+            self.max_interval_s,
+            0.001,
+            5.0,
+        );
+        v.within(&format!("{key}.timeout_s"), self.timeout_s, 0.01, 10.0);
+        v.within(&format!("{key}.age_penalty"), self.age_penalty, 0.0, 10.0);
+        for (k, p) in [
+            ("laser_min_period_s", self.laser_min_period_s),
+            ("sonar_min_period_s", self.sonar_min_period_s),
+            ("smoke_min_period_s", self.smoke_min_period_s),
+        ] {
+            v.within(&format!("{key}.{k}"), p, 0.0, 10.0);
+            v.ordered(
+                &format!("{key}.{k}"),
+                p,
+                &format!("{key}.timeout_s"),
+                self.timeout_s,
+            );
+        }
+    }
+}
+
+impl Validate for V1Params {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        v.non_negative(&format!("{key}.smoke_min"), self.smoke_min);
+        v.finite(&format!("{key}.smoke_max_up"), self.smoke_max_up);
+        v.finite(&format!("{key}.smoke_max_down"), self.smoke_max_down);
+        v.ordered(
+            &format!("{key}.smoke_min"),
+            self.smoke_min,
+            &format!("{key}.smoke_max_up"),
+            self.smoke_max_up,
+        );
+        v.ordered(
+            &format!("{key}.smoke_min"),
+            self.smoke_min,
+            &format!("{key}.smoke_max_down"),
+            self.smoke_max_down,
+        );
+        v.within(
+            &format!("{key}.zero_crossing_fraction"),
+            self.zero_crossing_fraction,
+            0.0,
+            1.0,
+        );
+        v.within(
+            &format!("{key}.noise_floor_m"),
+            self.noise_floor_m,
+            0.0,
+            1.0,
+        );
+        v.within(
+            &format!("{key}.disagreement_m"),
+            self.disagreement_m,
+            0.0,
+            20.0,
+        );
+    }
+}
+
+impl Validate for V2Params {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        v.within(
+            &format!("{key}.rho_threshold"),
+            self.rho_threshold,
+            0.0,
+            1.0,
+        );
+        self.confident.validate(&format!("{key}.confident"), v);
+        self.alcoholized.validate(&format!("{key}.alcoholized"), v);
+        self.dense.validate(&format!("{key}.dense"), v);
+        v.within(
+            &format!("{key}.output_bell.width"),
+            self.output_bell.width,
+            0.01,
+            1.0,
+        );
+        v.within(
+            &format!("{key}.output_bell.slope"),
+            self.output_bell.slope,
+            0.1,
+            20.0,
+        );
+        if !(11..=10_001).contains(&self.defuzz_samples) {
+            v.fail(
+                format!("{key}.defuzz_samples"),
+                format!("must be 11–10001, got {}", self.defuzz_samples),
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::parse_toml;
+    use std::path::Path;
+
+    fn parse(text: &str) -> Result<FusionSection, String> {
+        let s: FusionSection =
+            parse_toml(text, Path::new("fusion.toml")).map_err(|e| e.to_string())?;
+        let mut v = Validator::default();
+        s.validate("fusion", &mut v);
+        if v.issues.is_empty() {
+            Ok(s)
+        } else {
+            Err(v
+                .issues
+                .iter()
+                .map(|i| i.to_string())
+                .collect::<Vec<_>>()
+                .join("\n"))
+        }
+    }
+
+    #[test]
+    fn empty_section_has_the_papers_values() {
+        let s = parse("").unwrap();
+        assert_eq!(s.method, Method::V2);
+        assert_eq!(s.sonar_cap_m, 2.5);
+        assert_eq!(s.section_range(), 2.5);
+        assert_eq!(
+            (s.v1.smoke_min, s.v1.smoke_max_up, s.v1.smoke_max_down),
+            (130.0, 200.0, 240.0)
+        );
+        assert_eq!(s.v2.rho_threshold, 0.5);
+        assert_eq!(s.sync.age_penalty, 0.1);
+    }
+
+    #[test]
+    fn open_shoulder_round_trips_as_inf() {
+        let s = FusionSection::default();
+        let text = toml::to_string(&s).unwrap();
+        assert!(text.contains("inf"), "{text}");
+        let back = parse(&text).unwrap();
+        assert_eq!(back, s);
+    }
+
+    #[test]
+    fn breakpoints_out_of_order_are_rejected_with_key() {
+        let err = parse("[v2]\nconfident = { a = 0.1, b = 0.05, c = 2.0, d = 3.0 }\n").unwrap_err();
+        assert!(err.contains("fusion.v2.confident"), "{err}");
+        assert!(err.contains("a <= b"), "{err}");
+    }
+
+    #[test]
+    fn smoke_thresholds_must_exceed_smoke_min() {
+        let err = parse("[v1]\nsmoke_min = 250.0\n").unwrap_err();
+        assert!(err.contains("fusion.v1.smoke_min"), "{err}");
+    }
+
+    #[test]
+    fn unknown_v2_key_is_rejected() {
+        let err = parse("[v2]\nrho_t = 0.4\n").unwrap_err();
+        assert!(err.contains("rho_t"), "{err}");
+    }
+
+    #[test]
+    fn lower_bound_must_be_below_timeout() {
+        let err = parse("[sync]\ntimeout_s = 0.04\n").unwrap_err();
+        assert!(err.contains("fusion.sync.laser_min_period_s"), "{err}");
     }
 }

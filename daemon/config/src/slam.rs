@@ -1,35 +1,386 @@
-//! `[slam]`: the particle-filter SLAM.
+//! `[slam]`: the Rao-Blackwellised particle-filter SLAM (GMapping class).
+//!
+//! Every parameter has a default tuned for a laser scanner. `preset = "seed-table3"`
+//! starts from the values of the seed paper's Table 3 instead (GMapping as the
+//! SmokeNav authors ran it on sonar-only data in the 4.57 × 4.04 m MRL arena):
+//!
+//! | Table 3          | key here             | value |
+//! |------------------|----------------------|-------|
+//! | maxUrange        | `max_urange_m`       | 16.0  |
+//! | sigma            | `sigma_m`            | 0.05  |
+//! | kernelSize       | `kernel_size`        | 1     |
+//! | iterations       | `iterations`         | 5     |
+//! | linearUpdate     | `linear_update_m`    | 0.5   |
+//! | angularUpdate    | `angular_update_rad` | 0.8   |
+//! | temporalUpdate   | `temporal_update_s`  | 3.0   |
+//! | resampleThreshold| `resample_threshold` | 0.5   |
+//! | particles        | `particles`          | 30    |
+//! | delta            | `resolution_m`       | 0.01  |
+//!
+//! Keys given explicitly in the file override the preset. Parameters Table 3
+//! does not list keep GMapping's own defaults (srr 0.1, srt 0.2, str 0.1,
+//! stt 0.2, lsigma 0.075, ogain 3, lstep/astep 0.05) in both presets.
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SlamSection {
-    /// Number of particles.
-    pub particles: usize,
-    /// Map cell size, m.
-    pub resolution_m: f64,
-    /// How often the map is published, Hz.
-    pub map_rate_hz: f64,
+/// Which parameter set unspecified keys come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum SlamPreset {
+    /// Tuned for a laser scanner on a moving robot: every scan is processed.
+    #[default]
+    #[serde(rename = "default")]
+    Default,
+    /// The seed paper's Table 3 (GMapping fed by sonar in the MRL arena).
+    #[serde(rename = "seed-table3")]
+    SeedTable3,
+}
+
+/// The scan topic the SLAM process consumes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum SlamInput {
+    /// `fusion/scan`: the SmokeNav fused scan (per-beam sources, smoke level).
+    #[default]
+    #[serde(rename = "fused")]
+    Fused,
+    /// `laser/scan`: the raw laser scan.
+    #[serde(rename = "laser")]
+    Laser,
+}
+
+/// Declares the section once: each field with its doc, type, default value and
+/// seed-Table-3 value. Generates the public struct, the all-optional raw form
+/// serde reads, and the preset resolution.
+macro_rules! slam_section {
+    ($( $(#[doc = $doc:literal])* $name:ident : $ty:ty = ($default:expr, $table3:expr) ),* $(,)?) => {
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[serde(try_from = "RawSlamSection")]
+        pub struct SlamSection {
+            /// The parameter set keys not given in the file come from.
+            pub preset: SlamPreset,
+            $( $(#[doc = $doc])* pub $name: $ty, )*
+        }
+
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct RawSlamSection {
+            #[serde(default)]
+            preset: SlamPreset,
+            $( #[serde(default)] $name: Option<$ty>, )*
+        }
+
+        impl SlamSection {
+            /// All values of `preset`.
+            pub fn from_preset(preset: SlamPreset) -> Self {
+                match preset {
+                    SlamPreset::Default => Self { preset, $( $name: $default, )* },
+                    SlamPreset::SeedTable3 => Self { preset, $( $name: $table3, )* },
+                }
+            }
+        }
+
+        impl From<RawSlamSection> for SlamSection {
+            fn from(raw: RawSlamSection) -> Self {
+                let base = Self::from_preset(raw.preset);
+                Self {
+                    preset: raw.preset,
+                    $( $name: raw.$name.unwrap_or(base.$name), )*
+                }
+            }
+        }
+    };
+}
+
+slam_section! {
+    /// Number of particles (Table 3: particles).
+    particles: usize = (30, 30),
+    /// Map cell size, m (Table 3: delta).
+    resolution_m: f64 = (0.05, 0.01),
+    /// How often the SLAM process publishes the best particle's map, Hz.
+    map_rate_hz: f64 = (1.0, 1.0),
+    /// Scan topic the SLAM process consumes.
+    input: SlamInput = (SlamInput::Fused, SlamInput::Fused),
+    /// Seed of the filter's random numbers: the same input and seed give the same output.
+    seed: u64 = (42, 42),
+    /// Readings at or beyond this are "no return" and are ignored, m (GMapping maxRange).
+    max_range_m: f64 = (80.0, 80.0),
+    /// Readings are used up to this range; longer ones only clear free space up to it,
+    /// m (Table 3: maxUrange).
+    max_urange_m: f64 = (16.0, 16.0),
+    /// Standard deviation of a laser endpoint in clear air for scan matching and
+    /// the scan likelihood, m (Table 3: sigma).
+    sigma_m: f64 = (0.05, 0.05),
+    /// Cells searched around each endpoint for the nearest obstacle (Table 3: kernelSize).
+    kernel_size: u32 = (1, 1),
+    /// Scan-matcher step-halving refinements (Table 3: iterations).
+    iterations: u32 = (3, 5),
+    /// Initial translational step of the scan matcher, m (GMapping lstep).
+    lstep_m: f64 = (0.05, 0.05),
+    /// Initial rotational step of the scan matcher, rad (GMapping astep).
+    astep_rad: f64 = (0.05, 0.05),
+    /// Use every (lskip+1)-th beam for scan matching and the likelihood (GMapping lskip).
+    lskip: u32 = (0, 0),
+    /// Standard deviation of an endpoint in the likelihood that weights particles, m
+    /// (GMapping lsigma).
+    lsigma_m: f64 = (0.075, 0.075),
+    /// Smoothing of the likelihood: log-weights are divided by `ogain × particles`
+    /// (GMapping ogain).
+    ogain: f64 = (3.0, 3.0),
+    /// Log-likelihood of a beam whose endpoint matches no obstacle, in units of
+    /// `(d/lsigma)²/2` (caps the penalty of one outlier beam).
+    null_likelihood: f64 = (2.0, 2.0),
+    /// Odometry error in translation as a function of translation (GMapping srr).
+    srr: f64 = (0.1, 0.1),
+    /// Odometry error in translation as a function of rotation (GMapping srt).
+    srt: f64 = (0.2, 0.2),
+    /// Odometry error in rotation as a function of translation (GMapping str).
+    str: f64 = (0.1, 0.1),
+    /// Odometry error in rotation as a function of rotation (GMapping stt).
+    stt: f64 = (0.2, 0.2),
+    /// Run a filter update once the robot travelled this far, m; 0 = every scan
+    /// (Table 3: linearUpdate).
+    linear_update_m: f64 = (0.0, 0.5),
+    /// … or turned this far, rad; 0 = every scan (Table 3: angularUpdate).
+    angular_update_rad: f64 = (0.0, 0.8),
+    /// … or this much time passed, s; -1 = never by time alone (Table 3: temporalUpdate).
+    temporal_update_s: f64 = (-1.0, 3.0),
+    /// Resample when the effective sample size falls below this share of the
+    /// particles (Table 3: resampleThreshold).
+    resample_threshold: f64 = (0.5, 0.5),
+    /// Log-odds added to a cell a beam ends in.
+    hit_logodds: f64 = (0.9, 0.9),
+    /// Log-odds removed from a cell a beam passes through.
+    miss_logodds: f64 = (0.4, 0.4),
+    /// Log-odds saturate at ± this value, so the map can still change.
+    max_logodds: f64 = (4.0, 4.0),
+    /// Endpoint standard deviation of beams that came from sonar (per `FusedScan::beam_source`), m.
+    sonar_sigma_m: f64 = (0.2, 0.2),
+    /// Laser range variance in clear air (seed 001: B_o = 5, mm²).
+    laser_variance_clear: f64 = (5.0, 5.0),
+    /// Laser range variance in light obscurant (seed 001: rain, B_rain = 8.39).
+    laser_variance_light: f64 = (8.39, 8.39),
+    /// Laser range variance in dense obscurant (seed 001: fog at ~8 m visibility, B_fog = 13.75).
+    laser_variance_dense: f64 = (13.75, 13.75),
+    /// Smoke level (seed scale) at which the light-obscurant variance applies (SmokeNav v1's first threshold).
+    smoke_level_light: f64 = (130.0, 130.0),
+    /// Smoke level at and above which the dense-obscurant variance applies (SmokeNav v1's last threshold).
+    smoke_level_dense: f64 = (240.0, 240.0),
+    /// Track motion by matching each scan against the last scans before the
+    /// particles' own scan matching (needed when odometry arrives late or stalls).
+    frontend: bool = (true, true),
+    /// Scans kept in the front end's local map.
+    frontend_scans: u32 = (12, 12),
+    /// Translational search window of the front end around its prediction, ± m.
+    frontend_window_m: f64 = (1.0, 1.0),
+    /// Rotational search window of the front end around its prediction, ± rad.
+    frontend_window_rad: f64 = (0.4, 0.4),
 }
 
 impl Default for SlamSection {
     fn default() -> Self {
-        Self {
-            particles: 30,
-            resolution_m: 0.05,
-            map_rate_hz: 1.0,
-        }
+        Self::from_preset(SlamPreset::Default)
     }
 }
 
 impl Validate for SlamSection {
     fn validate(&self, key: &str, v: &mut Validator) {
+        let k = |name: &str| format!("{key}.{name}");
         if !(1..=1000).contains(&self.particles) {
-            v.fail(format!("{key}.particles"), format!("must be 1–1000, got {}", self.particles));
+            v.fail(
+                k("particles"),
+                format!("must be 1–1000, got {}", self.particles),
+            );
         }
-        v.within(&format!("{key}.resolution_m"), self.resolution_m, 0.005, 1.0);
-        v.within(&format!("{key}.map_rate_hz"), self.map_rate_hz, 0.01, 20.0);
+        v.within(&k("resolution_m"), self.resolution_m, 0.005, 1.0);
+        v.within(&k("map_rate_hz"), self.map_rate_hz, 0.01, 20.0);
+        v.within(&k("max_range_m"), self.max_range_m, 0.1, 1000.0);
+        v.within(&k("max_urange_m"), self.max_urange_m, 0.1, 1000.0);
+        v.ordered(
+            &k("max_urange_m"),
+            self.max_urange_m - 1e-9,
+            "max_range_m",
+            self.max_range_m,
+        );
+        v.within(&k("sigma_m"), self.sigma_m, 0.001, 5.0);
+        if self.kernel_size > 5 {
+            v.fail(
+                k("kernel_size"),
+                format!("must be 0–5, got {}", self.kernel_size),
+            );
+        }
+        if self.iterations > 12 {
+            v.fail(
+                k("iterations"),
+                format!("must be 0–12, got {}", self.iterations),
+            );
+        }
+        v.within(&k("lstep_m"), self.lstep_m, 0.0001, 2.0);
+        v.within(&k("astep_rad"), self.astep_rad, 0.0001, 1.0);
+        if self.lskip > 16 {
+            v.fail(k("lskip"), format!("must be 0–16, got {}", self.lskip));
+        }
+        v.within(&k("lsigma_m"), self.lsigma_m, 0.001, 5.0);
+        v.within(&k("ogain"), self.ogain, 0.01, 1000.0);
+        v.within(&k("null_likelihood"), self.null_likelihood, 0.0, 100.0);
+        for (name, val) in [
+            ("srr", self.srr),
+            ("srt", self.srt),
+            ("str", self.str),
+            ("stt", self.stt),
+        ] {
+            v.within(&k(name), val, 0.0, 10.0);
+        }
+        v.within(&k("linear_update_m"), self.linear_update_m, 0.0, 100.0);
+        v.within(&k("angular_update_rad"), self.angular_update_rad, 0.0, 10.0);
+        if !(self.temporal_update_s == -1.0
+            || (self.temporal_update_s >= 0.0 && self.temporal_update_s <= 3600.0))
+        {
+            v.fail(
+                k("temporal_update_s"),
+                format!(
+                    "must be -1 (off) or within [0, 3600], got {}",
+                    self.temporal_update_s
+                ),
+            );
+        }
+        v.within(&k("resample_threshold"), self.resample_threshold, 0.0, 1.0);
+        v.within(&k("hit_logodds"), self.hit_logodds, 0.01, 20.0);
+        v.within(&k("miss_logodds"), self.miss_logodds, 0.01, 20.0);
+        v.within(&k("max_logodds"), self.max_logodds, 0.1, 50.0);
+        v.within(&k("sonar_sigma_m"), self.sonar_sigma_m, 0.001, 5.0);
+        v.positive(&k("laser_variance_clear"), self.laser_variance_clear);
+        v.positive(&k("laser_variance_light"), self.laser_variance_light);
+        v.positive(&k("laser_variance_dense"), self.laser_variance_dense);
+        v.non_negative(&k("smoke_level_light"), self.smoke_level_light);
+        v.ordered(
+            &k("smoke_level_light"),
+            self.smoke_level_light,
+            "smoke_level_dense",
+            self.smoke_level_dense,
+        );
+        if !(1..=200).contains(&self.frontend_scans) {
+            v.fail(
+                k("frontend_scans"),
+                format!("must be 1–200, got {}", self.frontend_scans),
+            );
+        }
+        v.within(&k("frontend_window_m"), self.frontend_window_m, 0.0, 5.0);
+        v.within(
+            &k("frontend_window_rad"),
+            self.frontend_window_rad,
+            0.0,
+            1.6,
+        );
+    }
+}
+
+impl SlamSection {
+    /// Standard-deviation multiplier of laser beams at `smoke_level` (seed scale): the
+    /// square root of the variance ratio seed 001 measured (clear → rain → fog),
+    /// interpolated linearly in variance between the configured smoke levels.
+    pub fn laser_noise_factor(&self, smoke_level: f64) -> f64 {
+        let clear = self.laser_variance_clear;
+        let variance = if !smoke_level.is_finite() || smoke_level <= 0.0 {
+            clear
+        } else if smoke_level < self.smoke_level_light {
+            let t = smoke_level / self.smoke_level_light.max(f64::MIN_POSITIVE);
+            clear + t * (self.laser_variance_light - clear)
+        } else if smoke_level < self.smoke_level_dense {
+            let t = (smoke_level - self.smoke_level_light)
+                / (self.smoke_level_dense - self.smoke_level_light);
+            self.laser_variance_light + t * (self.laser_variance_dense - self.laser_variance_light)
+        } else {
+            self.laser_variance_dense
+        };
+        (variance / clear).sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::parse_toml;
+    use std::path::Path;
+
+    fn section(text: &str) -> SlamSection {
+        parse_toml::<SlamSection>(text, Path::new("slam.toml")).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn seed_table3_preset_has_the_paper_values() {
+        let s = section("preset = \"seed-table3\"\n");
+        assert_eq!(s.max_urange_m, 16.0);
+        assert_eq!(s.sigma_m, 0.05);
+        assert_eq!(s.kernel_size, 1);
+        assert_eq!(s.iterations, 5);
+        assert_eq!(
+            (s.linear_update_m, s.angular_update_rad, s.temporal_update_s),
+            (0.5, 0.8, 3.0)
+        );
+        assert_eq!(s.resample_threshold, 0.5);
+        assert_eq!(s.particles, 30);
+        assert_eq!(s.resolution_m, 0.01);
+        let mut v = Validator::default();
+        s.validate("slam", &mut v);
+        assert!(v.issues.is_empty(), "{:?}", v.issues);
+    }
+
+    #[test]
+    fn explicit_key_overrides_the_preset() {
+        let s = section("preset = \"seed-table3\"\nresolution_m = 0.05\nparticles = 10\n");
+        assert_eq!((s.resolution_m, s.particles), (0.05, 10));
+        assert_eq!(s.iterations, 5, "untouched keys keep the preset value");
+    }
+
+    #[test]
+    fn empty_section_is_the_default_preset_and_valid() {
+        let s = section("");
+        assert_eq!(s, SlamSection::default());
+        assert_eq!(s.linear_update_m, 0.0, "the default processes every scan");
+        let mut v = Validator::default();
+        s.validate("slam", &mut v);
+        assert!(v.issues.is_empty(), "{:?}", v.issues);
+    }
+
+    #[test]
+    fn unknown_slam_key_is_rejected_with_its_name() {
+        let err =
+            parse_toml::<SlamSection>("particels = 30\n", Path::new("slam.toml")).unwrap_err();
+        assert!(err.to_string().contains("particels"), "{err}");
+    }
+
+    #[test]
+    fn serialised_section_parses_back_to_itself() {
+        let s = SlamSection::from_preset(SlamPreset::SeedTable3);
+        let text = toml::to_string(&s).unwrap();
+        assert_eq!(section(&text), s);
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let s = SlamSection {
+            srr: -1.0,
+            temporal_update_s: -2.0,
+            max_urange_m: 90.0,
+            ..SlamSection::default()
+        };
+        let mut v = Validator::default();
+        s.validate("slam", &mut v);
+        let keys: Vec<_> = v.issues.iter().map(|i| i.key.as_str()).collect();
+        assert!(keys.contains(&"slam.srr"), "{keys:?}");
+        assert!(keys.contains(&"slam.temporal_update_s"), "{keys:?}");
+        assert!(keys.contains(&"slam.max_urange_m"), "{keys:?}");
+    }
+
+    #[test]
+    fn laser_noise_widens_from_clear_to_fog_as_seed_001_measured() {
+        let s = SlamSection::default();
+        assert_eq!(s.laser_noise_factor(0.0), 1.0);
+        // Rain-like variance 8.39 vs 5 at the light threshold: σ × 1.295.
+        assert!((s.laser_noise_factor(130.0) - (8.39f64 / 5.0).sqrt()).abs() < 1e-9);
+        // Fog 13.75 vs 5 at and beyond the dense threshold: σ × 1.658.
+        assert!((s.laser_noise_factor(300.0) - (13.75f64 / 5.0).sqrt()).abs() < 1e-9);
+        assert!(s.laser_noise_factor(185.0) > s.laser_noise_factor(130.0));
+        assert_eq!(s.laser_noise_factor(f64::NAN), 1.0);
     }
 }

@@ -1,7 +1,7 @@
 //! The emulated cable: a PTY pair plus a stable symlink to its slave side.
 
 use crate::EmulatorError;
-use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use nix::fcntl::{FcntlArg, FdFlag, OFlag, fcntl};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 use std::os::fd::{AsFd, OwnedFd};
@@ -18,6 +18,12 @@ pub(crate) struct Link {
 impl Link {
     pub fn open(link_path: &Path) -> Result<Link, EmulatorError> {
         let pty = nix::pty::openpty(None, None).map_err(EmulatorError::Pty)?;
+        // openpty(3) cannot set close-on-exec; without it every process the
+        // test (or simulator) spawns inherits the master, and an unplug never
+        // hangs up the driver's end.
+        for fd in [&pty.master, &pty.slave] {
+            fcntl(fd, FcntlArg::F_SETFD(FdFlag::FD_CLOEXEC)).map_err(EmulatorError::Pty)?;
+        }
         // Raw from the start so nothing is echoed or translated before the
         // driver sets its own termios.
         let mut t = tcgetattr(&pty.slave).map_err(EmulatorError::Pty)?;

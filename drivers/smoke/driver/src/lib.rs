@@ -1,0 +1,13 @@
+//! The `smokenav-smoke` driver: thin wiring around [`smokenav_adc`].
+//!
+//! * [`settings`]: the `[smoke]` section plus `--port` / `--warmup` turned
+//!   into codec configuration, and the choice of back-end;
+//! * [`link`]: the two ADC back-ends, a serial port and an IIO directory,
+//!   each reopened after a loss, reporting samples and errors as
+//!   [`link::LinkEvent`]s;
+//! * [`core`]: samples to `SmokeReading`s at the publishing rate, with the
+//!   counters health reports; no bus, no clock of its own.
+
+pub mod core;
+pub mod link;
+pub mod settings;

@@ -1,0 +1,396 @@
+//! The two ADC back-ends. Each `step` blocks for at most `max_wait` (on the
+//! port's read timeout or a sleep until the next IIO conversion, never a
+//! busy loop), and appends what happened to a reusable event list.
+
+use crate::settings::Settings;
+use smokenav_adc::iio::{
+    IioCalibration, SHARED_OFFSET_ATTR, SHARED_SCALE_ATTR, offset_attr, parse_offset, parse_raw,
+    parse_scale, raw_attr, scale_attr,
+};
+use smokenav_adc::{
+    AdcScale, ChecksumPolicy, IioError, Measurement, RangeError, SerialDecoder, StreamError,
+};
+use smokenav_types::Clock;
+use std::fmt;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// How long to wait before reopening a device that failed to open.
+pub const REOPEN_PERIOD: Duration = Duration::from_millis(250);
+
+/// Input that did not decode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Malformed {
+    Serial(StreamError),
+    Iio(IioError),
+}
+
+impl fmt::Display for Malformed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Malformed::Serial(e) => write!(f, "malformed line: {e}"),
+            Malformed::Iio(e) => write!(f, "malformed IIO value: {e}"),
+        }
+    }
+}
+
+impl Malformed {
+    pub fn is_checksum(&self) -> bool {
+        matches!(self, Malformed::Serial(StreamError::Line(e)) if e.is_checksum())
+    }
+
+    pub fn is_overlong(&self) -> bool {
+        matches!(self, Malformed::Serial(StreamError::Overlong { .. }))
+    }
+}
+
+/// What a link step observed, stamped with the host monotonic clock.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LinkEvent {
+    /// The device opened (first time, or again after a loss).
+    Connected {
+        stamp_ns: u64,
+        device: String,
+    },
+    Sample {
+        stamp_ns: u64,
+        measurement: Measurement,
+    },
+    Malformed {
+        stamp_ns: u64,
+        error: Malformed,
+    },
+    OutOfRange {
+        stamp_ns: u64,
+        error: RangeError,
+    },
+    /// An open device failed (unplugged, removed).
+    Lost {
+        stamp_ns: u64,
+        reason: String,
+    },
+    /// Opening failed; reported once per outage, retried every
+    /// [`REOPEN_PERIOD`].
+    OpenFailed {
+        stamp_ns: u64,
+        reason: String,
+    },
+}
+
+/// Either back-end.
+pub enum Link {
+    /// Boxed: it carries its read buffer and line decoder inline.
+    Serial(Box<SerialLink>),
+    Iio(IioLink),
+}
+
+impl Link {
+    pub fn new(settings: &Settings) -> Self {
+        match settings.backend {
+            smokenav_config::AdcBackend::Serial => {
+                Link::Serial(Box::new(SerialLink::new(settings)))
+            }
+            smokenav_config::AdcBackend::Iio => Link::Iio(IioLink::new(settings)),
+        }
+    }
+
+    pub fn step(&mut self, max_wait: Duration, clock: &dyn Clock, out: &mut Vec<LinkEvent>) {
+        match self {
+            Link::Serial(l) => l.step(max_wait, clock, out),
+            Link::Iio(l) => l.step(max_wait, clock, out),
+        }
+    }
+
+    pub fn is_open(&self) -> bool {
+        match self {
+            Link::Serial(l) => l.port.is_some(),
+            Link::Iio(l) => l.calibration.is_some(),
+        }
+    }
+
+    pub fn describe(&self) -> String {
+        match self {
+            Link::Serial(l) => format!("serial {} at {} baud", l.path, l.baud),
+            Link::Iio(l) => format!("IIO {} channel {}", l.dir.display(), l.channel),
+        }
+    }
+}
+
+/// An Arduino-class board printing sample lines.
+pub struct SerialLink {
+    path: String,
+    baud: u32,
+    adc: AdcScale,
+    port: Option<serialport::TTYPort>,
+    decoder: SerialDecoder,
+    retry_at: Option<Instant>,
+    failing: bool,
+    buf: [u8; 512],
+}
+
+impl SerialLink {
+    pub fn new(s: &Settings) -> Self {
+        Self {
+            path: s.port.clone(),
+            baud: s.baud,
+            adc: s.adc,
+            port: None,
+            decoder: SerialDecoder::new(s.channel, s.checksum),
+            retry_at: None,
+            failing: false,
+            buf: [0; 512],
+        }
+    }
+
+    /// Counters of the line decoder (lines, comments, skipped bytes, …).
+    pub fn decoder_stats(&self) -> smokenav_adc::DecoderStats {
+        *self.decoder.stats()
+    }
+
+    fn open(&mut self, clock: &dyn Clock, out: &mut Vec<LinkEvent>) {
+        let opened = serialport::new(&self.path, self.baud)
+            .timeout(Duration::from_millis(100))
+            .open_native();
+        match opened {
+            Ok(port) => {
+                self.decoder.reset();
+                self.port = Some(port);
+                self.failing = false;
+                out.push(LinkEvent::Connected {
+                    stamp_ns: clock.now_ns(),
+                    device: self.path.clone(),
+                });
+            }
+            Err(e) => {
+                self.retry_at = Some(Instant::now() + REOPEN_PERIOD);
+                if !self.failing {
+                    self.failing = true;
+                    out.push(LinkEvent::OpenFailed {
+                        stamp_ns: clock.now_ns(),
+                        reason: format!("cannot open {}: {e}", self.path),
+                    });
+                }
+            }
+        }
+    }
+
+    pub fn step(&mut self, max_wait: Duration, clock: &dyn Clock, out: &mut Vec<LinkEvent>) {
+        if self.port.is_none() {
+            let now = Instant::now();
+            match self.retry_at {
+                Some(at) if at > now => {
+                    std::thread::sleep((at - now).min(max_wait));
+                    return;
+                }
+                _ => self.open(clock, out),
+            }
+        }
+        let Some(port) = self.port.as_mut() else {
+            return;
+        };
+        if let Err(e) =
+            serialport::SerialPort::set_timeout(port, max_wait.max(Duration::from_millis(1)))
+        {
+            tracing::debug!(error = %e, "set_timeout");
+        }
+        let lost = match port.read(&mut self.buf) {
+            Ok(0) => Some("end of file".to_owned()),
+            Ok(n) => {
+                // One stamp per read: at 115200 baud a line takes ~1 ms on
+                // the wire, far below the 100 ms sample period.
+                let stamp_ns = clock.now_ns();
+                let adc = self.adc;
+                let chunk = self.buf.get(..n).unwrap_or(&[]);
+                self.decoder.feed(chunk, |item| {
+                    out.push(match item {
+                        Ok(sample) => match adc.measure(sample.value) {
+                            Ok(measurement) => LinkEvent::Sample {
+                                stamp_ns,
+                                measurement,
+                            },
+                            Err(error) => LinkEvent::OutOfRange { stamp_ns, error },
+                        },
+                        Err(e) => LinkEvent::Malformed {
+                            stamp_ns,
+                            error: Malformed::Serial(e),
+                        },
+                    })
+                });
+                None
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => None,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => None,
+            Err(e) => Some(e.to_string()),
+        };
+        if let Some(reason) = lost {
+            self.port = None;
+            self.retry_at = Some(Instant::now() + REOPEN_PERIOD);
+            out.push(LinkEvent::Lost {
+                stamp_ns: clock.now_ns(),
+                reason: format!("{} lost: {reason}", self.path),
+            });
+        }
+    }
+}
+
+/// A Linux IIO ADC channel, read at the publishing rate.
+pub struct IioLink {
+    dir: PathBuf,
+    channel: u8,
+    max_counts: u32,
+    period: Duration,
+    next_read: Option<Instant>,
+    calibration: Option<IioCalibration>,
+    raw_path: PathBuf,
+    failing: bool,
+}
+
+/// Bytes read from an attribute: more than the parser accepts, so an
+/// oversized file is reported as such.
+const ATTR_BUF: usize = smokenav_adc::iio::MAX_ATTR_LEN + 16;
+
+/// Reads a whole attribute into `buf` (open, read, close: a sysfs file
+/// converts on each read, and a removed device fails the open).
+fn read_attr<'b>(path: &Path, buf: &'b mut [u8; ATTR_BUF]) -> std::io::Result<&'b [u8]> {
+    let mut f = std::fs::File::open(path)?;
+    let mut n = 0;
+    while n < buf.len() {
+        let Some(rest) = buf.get_mut(n..) else { break };
+        match f.read(rest) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(buf.get(..n).unwrap_or(&[]))
+}
+
+/// The first of `names` in `dir` that exists.
+fn first_existing(dir: &Path, names: &[&str]) -> Option<PathBuf> {
+    names.iter().map(|n| dir.join(n)).find(|p| p.exists())
+}
+
+impl IioLink {
+    pub fn new(s: &Settings) -> Self {
+        let dir = PathBuf::from(&s.port);
+        Self {
+            raw_path: dir.join(raw_attr(s.channel)),
+            dir,
+            channel: s.channel,
+            max_counts: s.adc.max_counts(),
+            period: Duration::from_secs_f64(1.0 / s.rate_hz),
+            next_read: None,
+            calibration: None,
+            failing: false,
+        }
+    }
+
+    /// Scale (per channel, else shared) and offset (likewise, else 0).
+    fn read_calibration(&self) -> Result<IioCalibration, String> {
+        let mut buf = [0u8; ATTR_BUF];
+        let scale_name = scale_attr(self.channel);
+        let scale_path =
+            first_existing(&self.dir, &[&scale_name, SHARED_SCALE_ATTR]).ok_or_else(|| {
+                format!(
+                    "{}: neither {scale_name} nor {SHARED_SCALE_ATTR} exists",
+                    self.dir.display()
+                )
+            })?;
+        let text = read_attr(&scale_path, &mut buf)
+            .map_err(|e| format!("{}: {e}", scale_path.display()))?;
+        let scale_mv = parse_scale(text).map_err(|e| format!("{}: {e}", scale_path.display()))?;
+        let offset_name = offset_attr(self.channel);
+        let offset = match first_existing(&self.dir, &[&offset_name, SHARED_OFFSET_ATTR]) {
+            None => 0.0,
+            Some(p) => {
+                let text = read_attr(&p, &mut buf).map_err(|e| format!("{}: {e}", p.display()))?;
+                parse_offset(text).map_err(|e| format!("{}: {e}", p.display()))?
+            }
+        };
+        if !self.raw_path.exists() {
+            return Err(format!("{} does not exist", self.raw_path.display()));
+        }
+        Ok(IioCalibration { scale_mv, offset })
+    }
+
+    pub fn step(&mut self, max_wait: Duration, clock: &dyn Clock, out: &mut Vec<LinkEvent>) {
+        let now = Instant::now();
+        let due = self.next_read.unwrap_or(now);
+        if due > now {
+            std::thread::sleep((due - now).min(max_wait));
+            if Instant::now() < due {
+                return;
+            }
+        }
+        // Keep the schedule; after a stall, restart it instead of bursting.
+        let next = due + self.period;
+        self.next_read = Some(if next < Instant::now() {
+            Instant::now() + self.period
+        } else {
+            next
+        });
+
+        let calibration = match self.calibration {
+            Some(c) => c,
+            None => match self.read_calibration() {
+                Ok(c) => {
+                    self.calibration = Some(c);
+                    self.failing = false;
+                    tracing::info!(scale_mv = c.scale_mv, offset = c.offset, "IIO calibration");
+                    out.push(LinkEvent::Connected {
+                        stamp_ns: clock.now_ns(),
+                        device: self.dir.display().to_string(),
+                    });
+                    c
+                }
+                Err(reason) => {
+                    if !self.failing {
+                        self.failing = true;
+                        out.push(LinkEvent::OpenFailed {
+                            stamp_ns: clock.now_ns(),
+                            reason,
+                        });
+                    }
+                    return;
+                }
+            },
+        };
+
+        let mut buf = [0u8; ATTR_BUF];
+        let read = read_attr(&self.raw_path, &mut buf);
+        // The conversion happens during the read.
+        let stamp_ns = clock.now_ns();
+        match read {
+            Err(e) => {
+                self.calibration = None;
+                out.push(LinkEvent::Lost {
+                    stamp_ns,
+                    reason: format!("{} vanished: {e}", self.raw_path.display()),
+                });
+            }
+            Ok(text) => out.push(match parse_raw(text) {
+                Err(e) => LinkEvent::Malformed {
+                    stamp_ns,
+                    error: Malformed::Iio(e),
+                },
+                Ok(raw) => match calibration.measure(raw, self.max_counts) {
+                    Ok(measurement) => LinkEvent::Sample {
+                        stamp_ns,
+                        measurement,
+                    },
+                    Err(error) => LinkEvent::OutOfRange { stamp_ns, error },
+                },
+            }),
+        }
+    }
+}
+
+/// The checksum policy's name for logs.
+pub fn policy_name(p: ChecksumPolicy) -> &'static str {
+    match p {
+        ChecksumPolicy::Optional => "optional",
+        ChecksumPolicy::Required => "required",
+    }
+}
