@@ -185,3 +185,23 @@ fn validate_instance(instance: &str) -> Result<(), BusError> {
 pub(crate) fn qos(topic: &str) -> topics::Qos {
     topics::qos(topic)
 }
+
+/// Applies a topic's QoS to a publish–subscribe service builder, so every
+/// port kind opens the service with identical settings.
+pub(crate) fn with_qos<P, H>(
+    builder: iceoryx2::service::builder::publish_subscribe::Builder<P, H, ipc::Service>,
+    topic: &str,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<P, H, ipc::Service>
+where
+    P: core::fmt::Debug + iceoryx2::prelude::IceoryxSend + ?Sized,
+    H: core::fmt::Debug + ZeroCopySend,
+{
+    let q = qos(topic);
+    builder
+        .history_size(q.history)
+        .subscriber_max_buffer_size(q.buffer)
+        .max_publishers(q.max_publishers)
+        .max_subscribers(q.max_subscribers)
+        .max_nodes(32)
+        .enable_safe_overflow(true)
+}

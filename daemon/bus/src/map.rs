@@ -1,6 +1,6 @@
 //! The occupancy-grid topic: a variable-length `i8` slice with a `MapInfo` user header.
 
-use crate::bus::{Bus, qos};
+use crate::bus::{Bus, with_qos};
 use crate::error::BusError;
 use crate::subscriber::open_event;
 use iceoryx2::port::listener::Listener;
@@ -26,18 +26,12 @@ fn open_map_service(
     topic: &str,
 ) -> Result<(String, MapService, EventService), BusError> {
     let (full, name) = bus.iox_name(topic)?;
-    let q = qos(topic);
-    let pubsub = bus
+    let builder = bus
         .node()
         .service_builder(&name)
         .publish_subscribe::<[i8]>()
-        .user_header::<MapInfo>()
-        .history_size(q.history)
-        .subscriber_max_buffer_size(q.buffer)
-        .max_publishers(q.max_publishers)
-        .max_subscribers(q.max_subscribers)
-        .max_nodes(32)
-        .enable_safe_overflow(true)
+        .user_header::<MapInfo>();
+    let pubsub = with_qos(builder, topic)
         .open_or_create()
         .map_err(|e| BusError::service(&full, "open map service", e))?;
     let event = open_event(bus, &full, &name, topic)?;

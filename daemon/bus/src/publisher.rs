@@ -1,6 +1,6 @@
 //! Typed publisher paired with a notifier.
 
-use crate::bus::{Bus, qos};
+use crate::bus::{Bus, with_qos};
 use crate::error::BusError;
 use crate::message::Message;
 use iceoryx2::port::notifier::Notifier;
@@ -22,19 +22,12 @@ pub struct Publisher<T: Message> {
 impl<T: Message> Publisher<T> {
     pub(crate) fn create(bus: &Bus, topic: &str) -> Result<Self, BusError> {
         let (full, name) = bus.iox_name(topic)?;
-        let q = qos(topic);
-        let pubsub = bus
-            .node()
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .history_size(q.history)
-            .subscriber_max_buffer_size(q.buffer)
-            .max_publishers(q.max_publishers)
-            .max_subscribers(q.max_subscribers)
-            .max_nodes(32)
-            .enable_safe_overflow(true)
-            .open_or_create()
-            .map_err(|e| BusError::service(&full, "open publish-subscribe service", e))?;
+        let pubsub = with_qos(
+            bus.node().service_builder(&name).publish_subscribe::<T>(),
+            topic,
+        )
+        .open_or_create()
+        .map_err(|e| BusError::service(&full, "open publish-subscribe service", e))?;
         let event = crate::subscriber::open_event(bus, &full, &name, topic)?;
         let publisher = pubsub
             .publisher_builder()

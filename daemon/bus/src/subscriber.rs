@@ -1,6 +1,6 @@
 //! Typed subscriber paired with a listener, with loss accounting.
 
-use crate::bus::{Bus, qos};
+use crate::bus::{Bus, qos, with_qos};
 use crate::error::BusError;
 use crate::message::Message;
 use iceoryx2::port::listener::Listener;
@@ -60,18 +60,12 @@ impl<T: Message> Subscriber<T> {
     pub(crate) fn create(bus: &Bus, topic: &str) -> Result<Self, BusError> {
         let (full, name) = bus.iox_name(topic)?;
         let q = qos(topic);
-        let pubsub = bus
-            .node()
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .history_size(q.history)
-            .subscriber_max_buffer_size(q.buffer)
-            .max_publishers(q.max_publishers)
-            .max_subscribers(q.max_subscribers)
-            .max_nodes(32)
-            .enable_safe_overflow(true)
-            .open_or_create()
-            .map_err(|e| BusError::service(&full, "open publish-subscribe service", e))?;
+        let pubsub = with_qos(
+            bus.node().service_builder(&name).publish_subscribe::<T>(),
+            topic,
+        )
+        .open_or_create()
+        .map_err(|e| BusError::service(&full, "open publish-subscribe service", e))?;
         let event = open_event(bus, &full, &name, topic)?;
         let subscriber = pubsub
             .subscriber_builder()
@@ -106,13 +100,15 @@ impl<T: Message> Subscriber<T> {
     /// Takes the next queued message, if any. Never blocks: wait with a
     /// [`crate::Waiter`] first.
     pub fn receive(&self) -> Result<Option<Sample<T>>, BusError> {
-        // Consume pending wake-ups so the waitset does not fire again for
-        // samples we are about to read.
-        let _ = self.listener.try_wait(|_| {});
-        let sample = self
-            .subscriber
-            .receive()
-            .map_err(|e| BusError::service(&self.service, "receive", e))?;
+        let mut sample = self.take()?;
+        if sample.is_none() {
+            // Queue empty: consume the pending wake-ups (one syscall per batch,
+            // not per sample) so the waiter does not fire again for samples
+            // already read, then look once more — a publisher sends before it
+            // notifies, so a sample whose notification we just consumed is queued.
+            let _ = self.listener.try_wait(|_| {});
+            sample = self.take()?;
+        }
         if let Some(s) = &sample {
             let origin = s.header().publisher_id().value();
             self.account(origin, s.payload().header().seq);
@@ -127,6 +123,12 @@ impl<T: Message> Subscriber<T> {
             latest = Some(s);
         }
         Ok(latest)
+    }
+
+    fn take(&self) -> Result<Option<Sample<T>>, BusError> {
+        self.subscriber
+            .receive()
+            .map_err(|e| BusError::service(&self.service, "receive", e))
     }
 
     fn account(&self, origin: u128, seq: u64) {
