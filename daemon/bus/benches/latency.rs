@@ -28,9 +28,8 @@ fn subscriber(instance: &str) {
     println!("ready");
     let mut seen = 0u64;
     while seen < SAMPLES + WARMUP {
-        match waiter.wait(Some(Duration::from_secs(10))).expect("wait") {
-            WaitOutcome::TimedOut => break,
-            _ => {}
+        if waiter.wait(Some(Duration::from_secs(10))).expect("wait") == WaitOutcome::TimedOut {
+            break;
         }
         while let Some(s) = sub.receive().expect("receive") {
             let now = monotonic_now_ns();

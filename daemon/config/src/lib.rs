@@ -83,10 +83,10 @@ impl Validate for RobotConfig {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    #[error("{file}: cannot read: {source}")]
+    #[error("{file}: cannot read: {error}")]
     Io {
         file: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The TOML is malformed, a key is unknown or a value has the wrong type.
     #[error("{file}:{line}: key `{key}`: {reason}")]
@@ -131,7 +131,7 @@ impl RobotConfig {
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io {
             file: path.to_owned(),
-            source: e,
+            error: e,
         })?;
         let mut cfg = Self::parse(&text, path)?;
         cfg.apply_env();

@@ -21,10 +21,10 @@ pub const OCCUPIED: i8 = 100;
 
 #[derive(Debug, thiserror::Error)]
 pub enum MapError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: invalid map YAML: {reason}")]
     Yaml { path: PathBuf, reason: String },
@@ -186,7 +186,7 @@ pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<P
     grid.check_shape()?;
     fs::create_dir_all(dir).map_err(|e| MapError::Io {
         path: dir.to_owned(),
-        source: e,
+        error: e,
     })?;
     let pgm = dir.join(format!("{name}.pgm"));
     let yaml = dir.join(format!("{name}.yaml"));
@@ -195,7 +195,7 @@ pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<P
     bytes.extend_from_slice(grid.to_gray_image().as_raw());
     fs::write(&pgm, bytes).map_err(|e| MapError::Io {
         path: pgm.clone(),
-        source: e,
+        error: e,
     })?;
     let meta = MapYaml {
         image: format!("{name}.pgm"),
@@ -212,7 +212,7 @@ pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<P
     })?;
     fs::write(&yaml, text).map_err(|e| MapError::Io {
         path: yaml.clone(),
-        source: e,
+        error: e,
     })?;
     Ok(yaml)
 }
@@ -221,7 +221,7 @@ pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<P
 pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
     let text = fs::read_to_string(yaml_path).map_err(|e| MapError::Io {
         path: yaml_path.to_owned(),
-        source: e,
+        error: e,
     })?;
     let meta: MapYaml = serde_yaml_ng::from_str(&text).map_err(|e| MapError::Yaml {
         path: yaml_path.to_owned(),
@@ -267,7 +267,7 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
         .and_then(|r| r.with_guessed_format())
         .map_err(|e| MapError::Io {
             path: image_path.clone(),
-            source: e,
+            error: e,
         })?;
     let (w, h) = reader.into_dimensions().map_err(|e| MapError::Image {
         path: image_path.clone(),
@@ -284,7 +284,7 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
         .and_then(|r| r.with_guessed_format())
         .map_err(|e| MapError::Io {
             path: image_path.clone(),
-            source: e,
+            error: e,
         })?
         .decode()
         .map_err(|e| MapError::Image {

@@ -1,0 +1,471 @@
+//! Trajectory accuracy: absolute trajectory error (ATE) after the best rigid
+//! alignment, and relative pose error (RPE) over a fixed time step, as Sturm
+//! et al. define them for the TUM RGB-D benchmark (IROS 2012), in 2D.
+//!
+//! Files hold one pose per line, `timestamp x y theta` (s, m, m, rad),
+//! separated by spaces or tabs; blank lines and lines starting with `#` are
+//! skipped; timestamps must increase. Estimated poses are paired with the
+//! ground truth interpolated at their timestamps.
+
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Longest trajectory file read, bytes (a day at 100 Hz is ~150 MB; crafted files must not exhaust memory).
+pub const MAX_FILE_BYTES: u64 = 512 * 1024 * 1024;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StampedPose {
+    pub t: f64,
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrajectoryError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {len} bytes exceed the limit of {MAX_FILE_BYTES}", path.display())]
+    TooLarge { path: PathBuf, len: u64 },
+    #[error("{}:{line}: {reason}", path.display())]
+    Parse {
+        path: PathBuf,
+        line: usize,
+        reason: String,
+    },
+    #[error("{}: no poses (expected lines `timestamp x y theta`)", path.display())]
+    Empty { path: PathBuf },
+}
+
+/// Parses trajectory text; `path` is only used in messages.
+pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, TrajectoryError> {
+    let mut out: Vec<StampedPose> = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let err = |reason: String| TrajectoryError::Parse {
+            path: path.to_owned(),
+            line: i + 1,
+            reason,
+        };
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        if fields.len() != 4 {
+            return Err(err(format!(
+                "expected 4 numbers `timestamp x y theta`, got {} field(s)",
+                fields.len()
+            )));
+        }
+        let mut v = [0.0f64; 4];
+        for (k, (f, name)) in fields
+            .iter()
+            .zip(["timestamp", "x", "y", "theta"])
+            .enumerate()
+        {
+            v[k] = f
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| err(format!("{name}: expected a finite number, got {f:?}")))?;
+        }
+        if let Some(prev) = out.last()
+            && v[0] <= prev.t
+        {
+            return Err(err(format!(
+                "timestamp {} does not increase (previous {})",
+                v[0], prev.t
+            )));
+        }
+        out.push(StampedPose {
+            t: v[0],
+            x: v[1],
+            y: v[2],
+            theta: v[3],
+        });
+    }
+    if out.is_empty() {
+        return Err(TrajectoryError::Empty {
+            path: path.to_owned(),
+        });
+    }
+    Ok(out)
+}
+
+/// Reads a trajectory file.
+pub fn load_trajectory(path: &Path) -> Result<Vec<StampedPose>, TrajectoryError> {
+    let io = |e| TrajectoryError::Io {
+        path: path.to_owned(),
+        source: e,
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > MAX_FILE_BYTES {
+        return Err(TrajectoryError::TooLarge {
+            path: path.to_owned(),
+            len,
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(io)?;
+    parse_trajectory(&text, path)
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectoryOptions {
+    /// Align the estimate to the truth with the best rigid transform before ATE.
+    pub align: bool,
+    /// Truth samples further apart than this are not interpolated across, s.
+    pub max_gap_s: f64,
+    /// Time step of the relative pose error, s.
+    pub rpe_delta_s: f64,
+}
+
+impl Default for TrajectoryOptions {
+    fn default() -> Self {
+        Self {
+            align: true,
+            max_gap_s: 0.5,
+            rpe_delta_s: 1.0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct ErrorStats {
+    pub rmse: f64,
+    pub mean: f64,
+    pub median: f64,
+    pub max: f64,
+}
+
+impl ErrorStats {
+    fn from(mut v: Vec<f64>) -> Self {
+        if v.is_empty() {
+            return Self::default();
+        }
+        let n = v.len() as f64;
+        let rmse = (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+        let mean = v.iter().sum::<f64>() / n;
+        v.sort_by(f64::total_cmp);
+        let median = if v.len() % 2 == 1 {
+            v[v.len() / 2]
+        } else {
+            (v[v.len() / 2 - 1] + v[v.len() / 2]) / 2.0
+        };
+        Self {
+            rmse,
+            mean,
+            median,
+            max: v[v.len() - 1],
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrajectoryReport {
+    /// Estimated poses paired with the truth.
+    pub pairs: usize,
+    /// Transform applied to the estimate (estimate → truth frame).
+    pub align_dx_m: f64,
+    pub align_dy_m: f64,
+    pub align_dtheta_deg: f64,
+    /// Absolute position error after alignment, m.
+    pub ate_m: ErrorStats,
+    /// Absolute heading error after alignment, degrees.
+    pub ate_heading_deg: ErrorStats,
+    pub rpe_delta_s: f64,
+    /// Pose pairs the RPE was computed over.
+    pub rpe_pairs: usize,
+    /// Relative translation error per `rpe_delta_s`, m.
+    pub rpe_translation_m: ErrorStats,
+    /// Relative rotation error per `rpe_delta_s`, degrees.
+    pub rpe_rotation_deg: ErrorStats,
+}
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum TrajectoryMetricError {
+    #[error(
+        "only {pairs} estimated pose(s) fall within the ground truth's time span (need at least 2)"
+    )]
+    TooFewPairs { pairs: usize },
+}
+
+fn wrap(a: f64) -> f64 {
+    let a = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if a <= -std::f64::consts::PI {
+        a + std::f64::consts::TAU
+    } else {
+        a
+    }
+}
+
+/// Truth at time `t`, interpolated between the samples around it.
+fn truth_at(truth: &[StampedPose], t: f64, max_gap: f64) -> Option<StampedPose> {
+    let i = truth.partition_point(|p| p.t < t);
+    if i < truth.len() && truth[i].t == t {
+        return Some(truth[i]);
+    }
+    if i == 0 || i >= truth.len() {
+        return None;
+    }
+    let (a, b) = (truth[i - 1], truth[i]);
+    if b.t - a.t > max_gap {
+        return None;
+    }
+    let s = (t - a.t) / (b.t - a.t);
+    Some(StampedPose {
+        t,
+        x: a.x + (b.x - a.x) * s,
+        y: a.y + (b.y - a.y) * s,
+        theta: wrap(a.theta + wrap(b.theta - a.theta) * s),
+    })
+}
+
+/// Relative motion from `a` to `b` in `a`'s frame: (dx, dy, dθ).
+fn relative(a: &StampedPose, b: &StampedPose) -> (f64, f64, f64) {
+    let (s, c) = a.theta.sin_cos();
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    (c * dx + s * dy, -s * dx + c * dy, wrap(b.theta - a.theta))
+}
+
+/// Compares an estimated trajectory with the ground truth.
+pub fn evaluate_trajectories(
+    truth: &[StampedPose],
+    est: &[StampedPose],
+    opts: &TrajectoryOptions,
+) -> Result<TrajectoryReport, TrajectoryMetricError> {
+    let pairs: Vec<(StampedPose, StampedPose)> = est
+        .iter()
+        .filter_map(|e| truth_at(truth, e.t, opts.max_gap_s).map(|g| (*e, g)))
+        .collect();
+    if pairs.len() < 2 {
+        return Err(TrajectoryMetricError::TooFewPairs { pairs: pairs.len() });
+    }
+    // Closed-form least-squares rigid alignment (Horn/Umeyama, no scale).
+    let (mut dth, mut tx, mut ty) = (0.0, 0.0, 0.0);
+    if opts.align {
+        let n = pairs.len() as f64;
+        let (ex, ey) = pairs
+            .iter()
+            .fold((0.0, 0.0), |a, (e, _)| (a.0 + e.x / n, a.1 + e.y / n));
+        let (gx, gy) = pairs
+            .iter()
+            .fold((0.0, 0.0), |a, (_, g)| (a.0 + g.x / n, a.1 + g.y / n));
+        let (mut sc, mut ss) = (0.0, 0.0);
+        for (e, g) in &pairs {
+            let (ax, ay, bx, by) = (e.x - ex, e.y - ey, g.x - gx, g.y - gy);
+            sc += ax * bx + ay * by;
+            ss += ax * by - ay * bx;
+        }
+        dth = if sc == 0.0 && ss == 0.0 {
+            0.0
+        } else {
+            ss.atan2(sc)
+        };
+        let (s, c) = dth.sin_cos();
+        tx = gx - (c * ex - s * ey);
+        ty = gy - (s * ex + c * ey);
+    }
+    let (s, c) = f64::sin_cos(dth);
+    let mut pos = Vec::with_capacity(pairs.len());
+    let mut head = Vec::with_capacity(pairs.len());
+    for (e, g) in &pairs {
+        let (x, y) = (c * e.x - s * e.y + tx, s * e.x + c * e.y + ty);
+        pos.push(((x - g.x).powi(2) + (y - g.y).powi(2)).sqrt());
+        head.push(wrap(e.theta + dth - g.theta).abs().to_degrees());
+    }
+    // RPE: each pose against the first one at least `rpe_delta_s` later.
+    let mut rpe_t = Vec::new();
+    let mut rpe_r = Vec::new();
+    let mut j = 0;
+    for i in 0..pairs.len() {
+        j = j.max(i + 1);
+        // 1 µs of slack so stamps like 0.1·k that round below Δ still pair at Δ.
+        while j < pairs.len() && pairs[j].0.t - pairs[i].0.t < opts.rpe_delta_s - 1e-6 {
+            j += 1;
+        }
+        if j >= pairs.len() {
+            break;
+        }
+        let (ei, gi) = (&pairs[i].0, &pairs[i].1);
+        let (ej, gj) = (&pairs[j].0, &pairs[j].1);
+        let (qx, qy, qth) = relative(gi, gj);
+        let (px, py, pth) = relative(ei, ej);
+        // E = Q⁻¹·P for the relative motions: translation of P expressed in Q's end frame.
+        let (s, c) = qth.sin_cos();
+        let (dx, dy) = (px - qx, py - qy);
+        let ex = c * dx + s * dy;
+        let ey = -s * dx + c * dy;
+        rpe_t.push((ex * ex + ey * ey).sqrt());
+        rpe_r.push(wrap(pth - qth).abs().to_degrees());
+    }
+    Ok(TrajectoryReport {
+        pairs: pairs.len(),
+        align_dx_m: tx,
+        align_dy_m: ty,
+        align_dtheta_deg: dth.to_degrees(),
+        ate_m: ErrorStats::from(pos),
+        ate_heading_deg: ErrorStats::from(head),
+        rpe_delta_s: opts.rpe_delta_s,
+        rpe_pairs: rpe_t.len(),
+        rpe_translation_m: ErrorStats::from(rpe_t),
+        rpe_rotation_deg: ErrorStats::from(rpe_r),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A loop: 0.3 m/s around a 4 m circle, sampled at `hz`.
+    fn circle(hz: f64, secs: f64) -> Vec<StampedPose> {
+        let n = (hz * secs) as usize;
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / hz;
+                let a = 0.3 * t / 2.0;
+                StampedPose {
+                    t,
+                    x: 2.0 * a.cos(),
+                    y: 2.0 * a.sin(),
+                    theta: wrap(a + std::f64::consts::FRAC_PI_2),
+                }
+            })
+            .collect()
+    }
+
+    fn transform(p: &[StampedPose], dx: f64, dy: f64, dth: f64) -> Vec<StampedPose> {
+        let (s, c) = dth.sin_cos();
+        p.iter()
+            .map(|q| StampedPose {
+                t: q.t,
+                x: c * q.x - s * q.y + dx,
+                y: s * q.x + c * q.y + dy,
+                theta: wrap(q.theta + dth),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn identical_trajectories_score_zero() {
+        let t = circle(10.0, 60.0);
+        let r = evaluate_trajectories(&t, &t, &TrajectoryOptions::default()).unwrap();
+        assert_eq!(r.pairs, 600);
+        assert!(
+            r.ate_m.max < 1e-12 && r.rpe_translation_m.max < 1e-12 && r.rpe_rotation_deg.max < 1e-9
+        );
+    }
+
+    #[test]
+    fn rigidly_moved_estimate_aligns_back_to_zero() {
+        let truth = circle(50.0, 60.0);
+        let est = transform(&circle(10.0, 60.0), 1.5, -0.7, 0.4);
+        let r = evaluate_trajectories(&truth, &est, &TrajectoryOptions::default()).unwrap();
+        assert!(r.ate_m.rmse < 1e-3, "{r:?}"); // interpolation between 50 Hz samples on a curve
+        assert!((r.align_dtheta_deg + 0.4f64.to_degrees()).abs() < 0.01);
+        assert!(
+            r.rpe_translation_m.rmse < 1e-3,
+            "RPE ignores the global transform"
+        );
+        let unaligned = evaluate_trajectories(
+            &truth,
+            &est,
+            &TrajectoryOptions {
+                align: false,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(unaligned.ate_m.rmse > 1.0);
+    }
+
+    #[test]
+    fn constant_offset_in_one_half_gives_known_ate() {
+        let truth = circle(10.0, 20.0);
+        let mut est = truth.clone();
+        // Without alignment: every pose 0.1 m off in x ⇒ ATE 0.1 m exactly.
+        for p in &mut est {
+            p.x += 0.1;
+        }
+        let opts = TrajectoryOptions {
+            align: false,
+            ..Default::default()
+        };
+        let r = evaluate_trajectories(&truth, &est, &opts).unwrap();
+        assert!((r.ate_m.rmse - 0.1).abs() < 1e-12 && (r.ate_m.max - 0.1).abs() < 1e-12);
+        assert!(
+            r.rpe_translation_m.max < 1e-12,
+            "a constant offset has no relative error"
+        );
+    }
+
+    #[test]
+    fn heading_drift_shows_in_rpe_rotation() {
+        let truth = circle(10.0, 30.0);
+        let mut est = truth.clone();
+        // 1°/s of extra turning accumulated in heading only.
+        for p in &mut est {
+            p.theta = wrap(p.theta + (1.0f64).to_radians() * p.t);
+        }
+        let r = evaluate_trajectories(&truth, &est, &TrajectoryOptions::default()).unwrap();
+        assert!(
+            (r.rpe_rotation_deg.mean - 1.0).abs() < 1e-6,
+            "{:?}",
+            r.rpe_rotation_deg
+        );
+    }
+
+    #[test]
+    fn disjoint_time_spans_are_an_error() {
+        let truth = circle(10.0, 10.0);
+        let mut est = circle(10.0, 10.0);
+        for p in &mut est {
+            p.t += 100.0;
+        }
+        assert_eq!(
+            evaluate_trajectories(&truth, &est, &TrajectoryOptions::default()),
+            Err(TrajectoryMetricError::TooFewPairs { pairs: 0 })
+        );
+    }
+
+    #[test]
+    fn parse_errors_name_file_and_line() {
+        let p = Path::new("est.txt");
+        let e = parse_trajectory("# t x y th\n0 0 0 0\n0.1 0 0\n", p)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("est.txt:3:") && e.contains("4 numbers"),
+            "{e}"
+        );
+        let e = parse_trajectory("0 0 0 0\n0.1 1 nan 0\n", p)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("est.txt:2:") && e.contains('y'), "{e}");
+        let e = parse_trajectory("1 0 0 0\n0.5 0 0 0\n", p)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("est.txt:2:") && e.contains("increase"), "{e}");
+        let e = parse_trajectory("# nothing\n\n", p)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("est.txt") && e.contains("no poses"), "{e}");
+        assert_eq!(parse_trajectory("0\t1 2 0.5\n", p).unwrap()[0].y, 2.0);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn arbitrary_text_never_panics(text in "\\PC{0,400}") {
+            let _ = parse_trajectory(&text, Path::new("fuzz.txt"));
+        }
+
+        #[test]
+        fn arbitrary_numbers_never_panic(v in proptest::collection::vec((-1e6f64..1e6, -1e3f64..1e3, -1e3f64..1e3, -10.0f64..10.0), 0..50)) {
+            let mut t = 0.0;
+            let poses: Vec<StampedPose> = v.iter().map(|&(dt, x, y, th)| { t += dt.abs() + 1e-3; StampedPose { t, x, y, theta: th } }).collect();
+            let _ = evaluate_trajectories(&poses, &poses, &TrajectoryOptions::default());
+        }
+    }
+}

@@ -1,0 +1,308 @@
+//! SmokeNav fusion end to end: this test process publishes constructed laser
+//! scans, sonar rings and smoke readings on the bus at 10 Hz; the real
+//! `smokenav-fusion` binary (its own process) fuses them; the fused scans and
+//! the health reports are checked here, and the fused scans are compared with
+//! an offline replay of exactly the published inputs (`smokenav fuse`'s library).
+
+use smokenav_bus::{Bus, Publisher, Subscriber, Waiter, topics};
+use smokenav_config::{Method, RobotConfig};
+use smokenav_fusion::offline::fuse_jsonl;
+use smokenav_fusion::pipeline::FusionPipeline;
+use smokenav_fusion::testkit::{Room, smoke_reading, smoky_scan};
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
+use smokenav_types::clock::monotonic_now_ns;
+use smokenav_types::record::{FusedScanRecord, Message, TopicRecord};
+use smokenav_types::{
+    FusedScan, Health, HealthState, LaserScan, SmokeReading, SmokeTrend, SonarRing, SyncState,
+};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+const CYCLE: Duration = Duration::from_millis(100);
+const MS: u64 = 1_000_000;
+
+struct Rig {
+    _dir: tempfile::TempDir,
+    cfg_path: PathBuf,
+    cfg: RobotConfig,
+    fusion: Child,
+    bus: Bus,
+    laser: Publisher<LaserScan>,
+    sonar: Publisher<SonarRing>,
+    smoke: Publisher<SmokeReading>,
+    fused: Subscriber<FusedScan>,
+    /// Every input as published (with the seq the bus gave it), as `topic echo --json` prints it.
+    recording: Vec<String>,
+}
+
+fn record(topic: &str, message: Message) -> String {
+    serde_json::to_string(&TopicRecord {
+        topic: topic.into(),
+        message,
+    })
+    .unwrap()
+}
+
+impl Rig {
+    fn start(test: &str, method: Method) -> Rig {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
+            c.fusion.method = method;
+            c.bus.health_period_s = 0.2;
+        });
+        let cfg = RobotConfig::load(&cfg_path).unwrap();
+        let instance = unique_instance(test);
+        let fusion = Child::spawn(
+            &bin("smokenav-fusion"),
+            &["--config", cfg_path.to_str().unwrap()],
+            &instance,
+        )
+        .unwrap();
+        fusion
+            .wait_for_line("fusing", Duration::from_secs(30))
+            .unwrap();
+        let bus = open_bus(&instance);
+        let fused = bus.subscriber::<FusedScan>(topics::FUSION_SCAN).unwrap();
+        let laser = bus.publisher::<LaserScan>(topics::LASER_SCAN).unwrap();
+        let sonar = bus.publisher::<SonarRing>(topics::BASE_SONAR).unwrap();
+        let smoke = bus.publisher::<SmokeReading>(topics::SMOKE_LEVEL).unwrap();
+        for c in [
+            laser.update_connections(),
+            sonar.update_connections(),
+            smoke.update_connections(),
+        ] {
+            c.unwrap();
+        }
+        Rig {
+            _dir: dir,
+            cfg_path,
+            cfg,
+            fusion,
+            bus,
+            laser,
+            sonar,
+            smoke,
+            fused,
+            recording: Vec::new(),
+        }
+    }
+
+    /// One 10 Hz cycle: laser stamped 2 ms ago, sonar 1 ms ago, smoke now.
+    /// `dense`: smoke in front of the laser (0.5 m, uniform) and level 250.
+    /// Returns the laser scan as published.
+    fn publish_cycle(&mut self, k: u64, dense: bool, with_sonar: bool) -> LaserScan {
+        let t = monotonic_now_ns();
+        let room = Room::default();
+        let mut scan = if dense {
+            smoky_scan(t - 2 * MS, k)
+        } else {
+            room.scan(t - 2 * MS, k)
+        };
+        scan.header.seq = self.laser.publish(&scan).unwrap();
+        self.recording
+            .push(record("laser/scan", Message::LaserScan((&scan).into())));
+        if with_sonar {
+            let pipeline = FusionPipeline::from_config(&self.cfg, None).unwrap();
+            let mut ring = room.ring(
+                pipeline.engine().geometry(),
+                self.cfg.sonar.cone_deg / 2.0,
+                t - MS,
+                k,
+            );
+            ring.header.seq = self.sonar.publish(&ring).unwrap();
+            self.recording
+                .push(record("base/sonar", Message::SonarRing((&ring).into())));
+        }
+        let mut reading = smoke_reading(t, k, if dense { 250.0 } else { 0.0 }, SmokeTrend::Rising);
+        reading.header.seq = self.smoke.publish(&reading).unwrap();
+        self.recording.push(record(
+            "smoke/level",
+            Message::SmokeReading((&reading).into()),
+        ));
+        scan
+    }
+
+    /// Receives fused scans for `d`.
+    fn collect(&self, d: Duration, into: &mut Vec<FusedScan>) {
+        let waiter = Waiter::new().unwrap();
+        let _g = waiter.attach(&self.fused).unwrap();
+        let end = Instant::now() + d;
+        loop {
+            while let Some(s) = self.fused.receive().unwrap() {
+                into.push(*s);
+            }
+            let now = Instant::now();
+            if now >= end {
+                return;
+            }
+            waiter.wait(Some(end - now)).unwrap();
+        }
+    }
+
+    /// Publishes `n` cycles at 10 Hz and returns (published scans, fused scans).
+    fn run(
+        &mut self,
+        n: u64,
+        dense: impl Fn(u64) -> bool,
+        with_sonar: bool,
+    ) -> (Vec<LaserScan>, Vec<FusedScan>) {
+        let (mut sent, mut got) = (Vec::new(), Vec::new());
+        for k in 0..n {
+            let next = Instant::now() + CYCLE;
+            sent.push(self.publish_cycle(k, dense(k), with_sonar));
+            self.collect(next.saturating_duration_since(Instant::now()), &mut got);
+        }
+        let end = Instant::now() + Duration::from_secs(5);
+        while got.len() < sent.len() && Instant::now() < end {
+            self.collect(Duration::from_millis(100), &mut got);
+        }
+        (sent, got)
+    }
+}
+
+/// The fused scan without the sequence number the fusion publisher assigned.
+fn comparable(f: &FusedScan) -> FusedScanRecord {
+    let mut r = FusedScanRecord::from(f);
+    r.scan.header.seq = 0;
+    r
+}
+
+fn bits(s: &LaserScan) -> (Vec<u32>, Vec<u16>) {
+    let n = s.len();
+    (
+        s.ranges[..n].iter().map(|r| r.to_bits()).collect(),
+        s.beam_error[..n].to_vec(),
+    )
+}
+
+#[test]
+fn dense_smoke_sections_use_the_sonar_and_a_replay_gives_the_same_scans() {
+    let mut rig = Rig::start("fusion_e2e_v2", Method::V2);
+    let smoky = |k: u64| (10..20).contains(&k);
+    let (sent, got) = rig.run(30, smoky, true);
+    assert_eq!(got.len(), sent.len(), "one fused scan per laser scan");
+    for (k, (f, s)) in got.iter().zip(&sent).enumerate() {
+        let k = k as u64;
+        assert_eq!(
+            f.scan.header.stamp_ns, s.header.stamp_ns,
+            "scan {k}: in order, none lost"
+        );
+        assert_eq!(f.sync_state(), SyncState::Complete, "scan {k}");
+        assert_eq!(f.sections().len(), 8, "the P3-DX's 8 front sonars");
+        if smoky(k) {
+            // The laser sees a phantom wall at 0.5 m; every section takes the
+            // sonar's arc (the room's walls are 1.3–2.3 m away) and the
+            // uncovered beams are dropped, so nothing of the phantom remains.
+            assert!(
+                f.sections()
+                    .iter()
+                    .all(|d| d.source() == smokenav_types::SectionSource::Sonar),
+                "scan {k}"
+            );
+            assert_eq!(f.sonar_usage(), 1.0);
+            let ranges: Vec<f32> = (0..f.scan.len())
+                .filter_map(|i| f.scan.beam(i).range())
+                .collect();
+            assert!(
+                ranges.len() > 8 * 30,
+                "sonar arcs painted: {}",
+                ranges.len()
+            );
+            assert!(
+                ranges.iter().all(|&r| r > 1.0),
+                "no phantom wall left in scan {k}"
+            );
+        } else {
+            assert_eq!(
+                bits(&f.scan),
+                bits(s),
+                "clean scan {k} must be the laser, bit for bit"
+            );
+            assert_eq!(f.sonar_usage(), 0.0);
+        }
+    }
+
+    // Replay: the same inputs through the offline pipeline give the same fused scans.
+    let cfg = RobotConfig::load(&rig.cfg_path).unwrap();
+    let mut pipeline = FusionPipeline::from_config(&cfg, None).unwrap();
+    let mut out = Vec::new();
+    let input = rig.recording.join("\n");
+    let report = fuse_jsonl(&mut pipeline, input.as_bytes(), &mut out, |b| {
+        panic!("bad line {}: {}", b.line, b.error)
+    })
+    .unwrap();
+    assert_eq!(report.written, 30);
+    let replayed: Vec<FusedScanRecord> = String::from_utf8(out)
+        .unwrap()
+        .lines()
+        .map(
+            |l| match serde_json::from_str::<TopicRecord>(l).unwrap().message {
+                Message::FusedScan(mut f) => {
+                    f.scan.header.seq = 0;
+                    f
+                }
+                other => panic!("{other:?}"),
+            },
+        )
+        .collect();
+    let live: Vec<FusedScanRecord> = got.iter().map(comparable).collect();
+    assert_eq!(
+        live, replayed,
+        "the process and the offline replay must agree exactly"
+    );
+
+    // Health: method v2, a third of the sections used the sonar, nothing dropped.
+    let h = wait_for::<Health>(
+        &rig.bus,
+        &topics::health("fusion"),
+        Duration::from_secs(5),
+        |h: &Health| h.metric("fused_total") == Some(30.0),
+    )
+    .unwrap();
+    let h = h.last().unwrap();
+    assert_eq!(h.metric("method"), Some(2.0));
+    assert!((h.metric("sonar_usage").unwrap() - 1.0 / 3.0).abs() < 1e-9);
+    assert_eq!(h.metric("sync_drops"), Some(0.0));
+    assert_eq!(h.state(), HealthState::Ok);
+    rig.fusion.terminate(Duration::from_secs(5)).unwrap();
+}
+
+#[test]
+fn silent_sonar_degrades_to_the_laser_alone_and_health_says_so() {
+    let mut rig = Rig::start("fusion_e2e_silent", Method::V1);
+    let (sent, got) = rig.run(15, |_| true, false);
+    // Held until the sonar has been silent for the 0.5 s timeout, then every
+    // scan goes out as the laser alone, untouched despite the dense smoke.
+    assert_eq!(got.len(), sent.len());
+    for (f, s) in got.iter().zip(&sent) {
+        assert_eq!(f.sync_state(), SyncState::LaserOnly);
+        assert_eq!(bits(&f.scan), bits(s));
+        assert_eq!(f.sonar_usage(), 0.0);
+    }
+    let h = wait_for::<Health>(
+        &rig.bus,
+        &topics::health("fusion"),
+        Duration::from_secs(5),
+        |h: &Health| h.state() == HealthState::Degraded,
+    )
+    .unwrap();
+    let h = h.last().unwrap();
+    assert_eq!(
+        h.metric("sync_state"),
+        Some(f64::from(SyncState::LaserOnly as u8))
+    );
+    assert!(
+        h.last_error.as_str().contains("sonar silent"),
+        "{}",
+        h.last_error.as_str()
+    );
+    // The sonar comes back: complete sets again.
+    let (_, got) = rig.run(5, |_| false, true);
+    assert!(
+        got.last()
+            .is_some_and(|f| f.sync_state() == SyncState::Complete),
+        "{:?}",
+        got.iter().map(|f| f.sync_state()).collect::<Vec<_>>()
+    );
+    rig.fusion.terminate(Duration::from_secs(5)).unwrap();
+}
