@@ -466,13 +466,20 @@ fn hz(
     let mut last_print = start;
     macro_rules! run_typed {
         ($t:ty) => {{
+            let subscribed_ns = smokenav_types::clock::monotonic_now_ns();
             let sub: Subscriber<$t> = bus.subscriber(topic)?;
             let waiter = Waiter::new()?;
             let _g = waiter.attach(&sub)?;
             let stop = smokenav_runtime::Shutdown::install()?;
             loop {
                 while let Some(s) = sub.receive()? {
-                    stats.arrive(Instant::now(), BusMessage::header(s.payload()).seq);
+                    let header = BusMessage::header(s.payload());
+                    // The topic's history sample was published before we
+                    // subscribed; counting it would fake a near-zero interval.
+                    if header.stamp_ns != 0 && header.stamp_ns < subscribed_ns {
+                        continue;
+                    }
+                    stats.arrive(Instant::now(), header.seq);
                 }
                 let now = Instant::now();
                 if !json && now.duration_since(last_print) >= Duration::from_secs(1) {
