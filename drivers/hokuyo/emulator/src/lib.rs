@@ -119,8 +119,9 @@ impl Emulator {
             Endpoint::Tcp { .. } => None,
         };
         let transport = Transport::open(&cfg.endpoint, None)?;
-        let (wake_rx, wake_tx) = nix::unistd::pipe().map_err(io::Error::from)?;
-        transport::set_nonblocking(&wake_rx)?;
+        let (wake_rx, wake_tx) =
+            nix::unistd::pipe2(nix::fcntl::OFlag::O_NONBLOCK | nix::fcntl::OFlag::O_CLOEXEC)
+                .map_err(io::Error::from)?;
         let shared = Shared {
             device,
             faults: Faults::default(),

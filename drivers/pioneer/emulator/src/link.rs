@@ -2,16 +2,13 @@
 //! listener, and the thread that moves bytes between it and the robot core.
 
 use crate::{Shared, State};
-use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
-use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
-use nix::sys::stat::Mode;
-use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 use smokenav_arcos::{Framer, PacketBuf};
+use smokenav_pty::{PtyOptions, PtyPair, PtyPort};
 use smokenav_types::Clock;
 use std::io::{self, Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
+use std::os::fd::{AsFd, BorrowedFd};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -23,61 +20,8 @@ const TX_CAP: usize = 16 * 1024;
 /// Longest wait without looking at the handle's requests.
 const MAX_WAIT_MS: u64 = 100;
 
-fn set_nonblocking(fd: BorrowedFd<'_>) -> io::Result<()> {
-    let flags = OFlag::from_bits_truncate(fcntl(fd, FcntlArg::F_GETFL)?);
-    fcntl(fd, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
-    Ok(())
-}
-
-/// One pseudo-terminal. The emulator keeps the slave open too, so the master
-/// never sees a hang-up when the driver closes and reopens its side.
-pub(crate) struct PtyDev {
-    master: PtyMaster,
-    _slave: OwnedFd,
-}
-
-impl PtyDev {
-    fn open(link: &Path) -> io::Result<(Self, PathBuf)> {
-        // Both ends close-on-exec: a process we spawn (the driver under test)
-        // must not inherit the master, or closing ours would not hang up the
-        // slave and an unplug would go unnoticed. openpty(3) cannot do that
-        // atomically, posix_openpt can.
-        let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC)?;
-        grantpt(&master)?;
-        unlockpt(&master)?;
-        let path = PathBuf::from(ptsname_r(&master)?);
-        let slave = nix::fcntl::open(
-            &path,
-            OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC,
-            Mode::empty(),
-        )?;
-        // Raw from the start: with the default line discipline the slave
-        // would echo our SIPs back to us and mangle 0x0D bytes.
-        let mut t = tcgetattr(&slave)?;
-        cfmakeraw(&mut t);
-        tcsetattr(&slave, SetArg::TCSANOW, &t)?;
-        set_nonblocking(master.as_fd())?;
-        // Replace the link atomically so a driver never sees it missing
-        // while we re-point it.
-        let tmp = link.with_extension("tmp-link");
-        let _ = std::fs::remove_file(&tmp);
-        std::os::unix::fs::symlink(&path, &tmp)?;
-        std::fs::rename(&tmp, link)?;
-        Ok((
-            Self {
-                master,
-                _slave: slave,
-            },
-            path,
-        ))
-    }
-}
-
 pub(crate) enum Port {
-    Pty {
-        link: PathBuf,
-        dev: Option<PtyDev>,
-    },
+    Pty(PtyPort),
     Tcp {
         listener: TcpListener,
         client: Option<TcpStream>,
@@ -86,14 +30,9 @@ pub(crate) enum Port {
 
 impl Port {
     pub(crate) fn pty(link: &Path) -> io::Result<(Self, PathBuf)> {
-        let (dev, path) = PtyDev::open(link)?;
-        Ok((
-            Port::Pty {
-                link: link.to_owned(),
-                dev: Some(dev),
-            },
-            path,
-        ))
+        let port = PtyPort::open(PtyOptions::with_link(link))?;
+        let path = port.slave_path().map(Path::to_path_buf).unwrap_or_default();
+        Ok((Port::Pty(port), path))
     }
 
     pub(crate) fn tcp(listener: TcpListener) -> io::Result<Self> {
@@ -106,14 +45,14 @@ impl Port {
 
     fn data_fd(&self) -> Option<BorrowedFd<'_>> {
         match self {
-            Port::Pty { dev, .. } => dev.as_ref().map(|d| d.master.as_fd()),
+            Port::Pty(p) => p.pair().map(PtyPair::master),
             Port::Tcp { client, .. } => client.as_ref().map(|c| c.as_fd()),
         }
     }
 
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         match self {
-            Port::Pty { dev: Some(d), .. } => d.master.read(buf),
+            Port::Pty(p) => p.pair().ok_or(io::ErrorKind::NotConnected)?.read(buf),
             Port::Tcp {
                 client: Some(c), ..
             } => c.read(buf),
@@ -123,7 +62,7 @@ impl Port {
 
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
         match self {
-            Port::Pty { dev: Some(d), .. } => d.master.write(buf),
+            Port::Pty(p) => p.pair().ok_or(io::ErrorKind::NotConnected)?.write(buf),
             Port::Tcp {
                 client: Some(c), ..
             } => c.write(buf),
@@ -138,20 +77,9 @@ impl Port {
     /// Pulls the cable: the device (and its link) or the client goes away.
     fn unplug(&mut self) {
         match self {
-            Port::Pty { link, dev } => {
-                // Link first: a driver woken by the hang-up must not find it.
-                let _ = std::fs::remove_file(link);
-                *dev = None;
-            }
+            // The link goes first: a driver woken by the hang-up must not find it.
+            Port::Pty(p) => p.unplug(),
             Port::Tcp { client, .. } => *client = None,
-        }
-    }
-}
-
-impl Drop for Port {
-    fn drop(&mut self) {
-        if let Port::Pty { link, .. } = self {
-            let _ = std::fs::remove_file(link);
         }
     }
 }
@@ -229,12 +157,11 @@ impl Io {
         }
         if self.replug_at_ns.is_some_and(|t| now >= t) {
             self.replug_at_ns = None;
-            if let Port::Pty { link, dev } = &mut self.port {
-                match PtyDev::open(link) {
-                    Ok((d, path)) => {
+            if let Port::Pty(p) = &mut self.port {
+                match p.replug() {
+                    Ok(path) => {
                         tracing::info!("emulator: plugged back in at {}", path.display());
-                        *dev = Some(d);
-                        st.link.device = Some(path);
+                        st.link.device = Some(path.to_owned());
                     }
                     Err(e) => tracing::warn!("emulator: cannot recreate the PTY: {e}"),
                 }
@@ -254,7 +181,7 @@ impl Io {
         let data = self.port.data_fd();
         let listener = match &self.port {
             Port::Tcp { listener, .. } => Some(listener.as_fd()),
-            Port::Pty { .. } => None,
+            Port::Pty(_) => None,
         };
         let mut fds = vec![PollFd::new(self.wake.as_fd(), PollFlags::POLLIN)];
         let data_at = data.map(|fd| {

@@ -11,20 +11,20 @@
 //! injects faults: corrupted checksums, truncated replies, garbage bytes,
 //! NAKs, silence/stalls, disconnect and reconnect.
 
-mod link;
 pub mod model;
 
 pub use model::{Kinematics, Pose, RobotModel};
 pub use smokenav_nomadic::{Battery, DiffDrive, SonarOrder, WheelOrder, WheelSpeeds};
 
-use link::Link;
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use smokenav_nomadic::frame::MAX_FRAME;
 use smokenav_nomadic::reply::SONARS;
 use smokenav_nomadic::units::sonar_byte;
 use smokenav_nomadic::{Command, Direction, FrameError, Reply, Splitter};
+use smokenav_pty::{PtyError, PtyOptions, PtyPort};
 use smokenav_types::clock::{Clock, MonotonicClock};
 use std::collections::VecDeque;
+use std::io::ErrorKind;
 use std::os::fd::{AsFd, OwnedFd};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -203,7 +203,7 @@ pub struct ScoutEmulator {
 
 impl ScoutEmulator {
     pub fn start(cfg: EmulatorConfig) -> Result<Self, EmulatorError> {
-        let link = Link::open(&cfg.link_path)?;
+        let port = PtyPort::open(PtyOptions::with_link(&cfg.link_path)).map_err(pty_error)?;
         let (wake_rx, wake_tx) =
             nix::unistd::pipe2(nix::fcntl::OFlag::O_NONBLOCK | nix::fcntl::OFlag::O_CLOEXEC)
                 .map_err(EmulatorError::Pipe)?;
@@ -216,7 +216,7 @@ impl ScoutEmulator {
                 stats: EmulatorStats::default(),
                 controls: VecDeque::new(),
                 connected: true,
-                device: Some(link.device.clone()),
+                device: port.slave_path().map(Path::to_path_buf),
                 link_generation: 0,
                 rng: seed,
             }),
@@ -229,7 +229,7 @@ impl ScoutEmulator {
         let thread_inner = inner.clone();
         let thread = std::thread::Builder::new()
             .name("scout-emulator".into())
-            .spawn(move || serve(thread_inner, wake_rx, Some(link)))
+            .spawn(move || serve(thread_inner, wake_rx, port))
             .map_err(EmulatorError::Thread)?;
         Ok(Self {
             handle: EmulatorHandle { inner },
@@ -257,10 +257,10 @@ impl std::ops::Deref for ScoutEmulator {
 impl Drop for ScoutEmulator {
     fn drop(&mut self) {
         self.handle.control(Control::Shutdown);
+        // The thread's port removes the link as it goes.
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
-        let _ = std::fs::remove_file(&self.handle.inner.link_path);
     }
 }
 
@@ -459,8 +459,20 @@ fn snapshot_of(sh: &Shared) -> Snapshot {
     }
 }
 
+/// Longest a reply may wait for the host to make room on the line before the
+/// rest of it is dropped (and counted).
+const WRITE_TIMEOUT: Duration = Duration::from_millis(100);
+
+/// Maps the cable's errors onto this crate's (public) error type.
+fn pty_error(e: PtyError) -> EmulatorError {
+    match e {
+        PtyError::Create { source, .. } => EmulatorError::Pty(source),
+        PtyError::Link { link, source, .. } => EmulatorError::Link { link, source },
+    }
+}
+
 /// The emulator thread: waits on the PTY and the wake pipe, never on a timer.
-fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut link: Option<Link>) {
+fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut port: PtyPort) {
     let mut splitter = Splitter::new(Direction::Commands);
     let mut buf = [0u8; 512];
     loop {
@@ -473,8 +485,7 @@ fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut link: Option<Link>) {
             match c {
                 Control::Shutdown => return,
                 Control::Disconnect => {
-                    link = None;
-                    let _ = std::fs::remove_file(&inner.link_path);
+                    port.unplug();
                     splitter.clear();
                     let mut sh = inner.lock();
                     sh.connected = false;
@@ -484,23 +495,22 @@ fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut link: Option<Link>) {
                     tracing::info!("scout emulator unplugged");
                 }
                 Control::Reconnect => {
-                    let opened = if link.is_none() {
-                        match Link::open(&inner.link_path) {
-                            Ok(l) => Some(l),
+                    let opened = if port.is_plugged() {
+                        None
+                    } else {
+                        match port.replug() {
+                            Ok(device) => Some(device.to_owned()),
                             Err(e) => {
                                 tracing::warn!("scout emulator cannot replug: {e}");
                                 None
                             }
                         }
-                    } else {
-                        None
                     };
                     let mut sh = inner.lock();
-                    if let Some(l) = opened {
-                        sh.device = Some(l.device.clone());
+                    if let Some(device) = opened {
+                        sh.device = Some(device);
                         sh.connected = true;
                         sh.stats.reconnects += 1;
-                        link = Some(l);
                         tracing::info!("scout emulator plugged in again");
                     }
                     sh.link_generation += 1;
@@ -508,18 +518,18 @@ fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut link: Option<Link>) {
                 }
             }
         }
-        if let Some(l) = &link
+        if let Some(pair) = port.pair()
             && !garbage.is_empty()
         {
-            let dropped = l.write_all(&garbage);
+            let dropped = pair.write_all(&garbage, WRITE_TIMEOUT).dropped;
             let mut sh = inner.lock();
             sh.stats.garbage_sent += garbage.len() as u64;
             sh.stats.write_drops += dropped as u64;
         }
 
         let mut fds = vec![PollFd::new(wake_rx.as_fd(), PollFlags::POLLIN)];
-        if let Some(l) = &link {
-            fds.push(PollFd::new(l.master.as_fd(), PollFlags::POLLIN));
+        if let Some(pair) = port.pair() {
+            fds.push(PollFd::new(pair.master(), PollFlags::POLLIN));
         }
         match poll(&mut fds, PollTimeout::NONE) {
             Ok(_) | Err(nix::errno::Errno::EINTR) => {}
@@ -538,13 +548,15 @@ fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut link: Option<Link>) {
         }
         let master_ready = fds.get(1).is_some_and(readable);
         drop(fds);
-        let Some(l) = &link else { continue };
+        let Some(pair) = port.pair() else { continue };
         if !master_ready {
             continue;
         }
-        let n = match nix::unistd::read(&l.master, &mut buf) {
+        let n = match pair.read(&mut buf) {
             Ok(n) => n,
-            Err(nix::errno::Errno::EAGAIN) | Err(nix::errno::Errno::EINTR) => continue,
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) => {
+                continue;
+            }
             Err(e) => {
                 // EIO: no slave open; cannot happen while we hold the slave.
                 tracing::warn!("scout emulator read failed: {e}");
@@ -572,7 +584,7 @@ fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut link: Option<Link>) {
                     let bits = (request_len + len) as u64 * 10;
                     std::thread::sleep(Duration::from_micros(bits * 1_000_000 / baud as u64));
                 }
-                let dropped = l.write_all(&out[..len]);
+                let dropped = pair.write_all(&out[..len], WRITE_TIMEOUT).dropped;
                 let mut sh = inner.lock();
                 sh.stats.write_drops += dropped as u64;
                 inner.changed.notify_all();

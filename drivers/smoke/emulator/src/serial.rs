@@ -10,16 +10,11 @@
 
 use crate::board::{Board, BoardConfig, BoardStats, Command, Fault, Output};
 use crate::model::Profile;
-use nix::errno::Errno;
-use nix::fcntl::{FcntlArg, OFlag, fcntl};
-use nix::pty::{PtyMaster, grantpt, posix_openpt, ptsname_r, unlockpt};
-use nix::sys::stat::Mode;
-use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 use smokenav_adc::line::xor_checksum;
 use smokenav_adc::{Eol, Sample, SampleValue, encode_sample};
+use smokenav_pty::{PtyOptions, PtyPair, PtyPort};
 use std::collections::VecDeque;
 use std::io;
-use std::os::fd::OwnedFd;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -153,69 +148,20 @@ pub struct SerialEmulator {
 /// queue either.
 const PENDING_CAP: usize = 4096;
 
-struct Pty {
-    master: PtyMaster,
-    // Held so the slave stays configured and the master never sees EIO
-    // between driver opens.
-    _slave: OwnedFd,
-    device: PathBuf,
-    link: PathBuf,
-}
-
-impl Pty {
-    /// Both ends are opened close-on-exec: a process the test (or anything
-    /// embedding the emulator) spawns must not inherit the master, or
-    /// closing it here would no longer hang up the driver's end.
-    fn open(link: &Path) -> io::Result<Self> {
-        let master = posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC)?;
-        grantpt(&master)?;
-        unlockpt(&master)?;
-        let device = PathBuf::from(ptsname_r(&master)?);
-        let slave = nix::fcntl::open(
-            &device,
-            OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC,
-            Mode::empty(),
-        )?;
-        let mut t = tcgetattr(&slave)?;
-        cfmakeraw(&mut t);
-        tcsetattr(&slave, SetArg::TCSANOW, &t)?;
-        fcntl(&master, FcntlArg::F_SETFL(OFlag::O_NONBLOCK))?;
-        // Replace the link atomically: a driver never sees it half-made.
-        let tmp = link.with_extension("link-tmp");
-        let _ = std::fs::remove_file(&tmp);
-        std::os::unix::fs::symlink(&device, &tmp)?;
-        std::fs::rename(&tmp, link)?;
-        Ok(Self {
-            master,
-            _slave: slave,
-            device,
-            link: link.to_owned(),
-        })
-    }
-
-    /// Writes as much of `pending` as the PTY takes.
-    fn flush(&self, pending: &mut Vec<u8>) -> io::Result<()> {
-        while !pending.is_empty() {
-            match nix::unistd::write(&self.master, pending) {
-                Ok(n) => {
-                    pending.drain(..n);
-                }
-                Err(Errno::EAGAIN) => return Ok(()),
-                Err(Errno::EINTR) => continue,
-                Err(e) => return Err(e.into()),
+/// Writes as much of `pending` as the PTY takes; the rest waits for the
+/// next tick.
+fn flush(pty: &PtyPair, pending: &mut Vec<u8>) -> io::Result<()> {
+    while !pending.is_empty() {
+        match pty.write(pending) {
+            Ok(n) => {
+                pending.drain(..n);
             }
-        }
-        Ok(())
-    }
-}
-
-impl Drop for Pty {
-    fn drop(&mut self) {
-        // Only remove the link if it still points at this PTY.
-        if std::fs::read_link(&self.link).is_ok_and(|target| target == self.device) {
-            let _ = std::fs::remove_file(&self.link);
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(()),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
         }
     }
+    Ok(())
 }
 
 impl SerialEmulator {
@@ -228,20 +174,20 @@ impl SerialEmulator {
                 format!("rate must be within (0, 10000] Hz, got {}", cfg.rate_hz),
             ));
         }
-        let pty = Pty::open(&link)?;
+        let port = PtyPort::open(PtyOptions::with_link(&link))?;
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
             commands: Mutex::new(VecDeque::new()),
             stats: Mutex::new(SerialStats {
                 connects: 1,
-                device: Some(pty.device.clone()),
+                device: port.slave_path().map(Path::to_path_buf),
                 ..SerialStats::default()
             }),
         });
         let thread_shared = Arc::clone(&shared);
         let thread = std::thread::Builder::new()
             .name("smoke-serial-emu".into())
-            .spawn(move || run(pty, cfg, &thread_shared))?;
+            .spawn(move || run(port, cfg, &thread_shared))?;
         Ok(Self {
             link,
             shared,
@@ -298,9 +244,8 @@ impl Drop for SerialEmulator {
     }
 }
 
-fn run(first: Pty, cfg: SerialConfig, shared: &Shared) {
-    let link = first.link.clone();
-    let mut pty = Some(first);
+/// The board's thread; dropping `port` at the end removes the link.
+fn run(mut port: PtyPort, cfg: SerialConfig, shared: &Shared) {
     let mut board = Board::new(cfg.board.clone());
     let mut schedule = cfg.schedule.clone();
     schedule.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -343,23 +288,23 @@ fn run(first: Pty, cfg: SerialConfig, shared: &Shared) {
         let mut written = 0;
         let mut dropped = 0;
         if out == Output::Offline {
-            if pty.take().is_some() {
+            if port.is_plugged() {
+                port.unplug();
                 tracing::info!("board unplugged: PTY closed, link removed");
                 pending.clear();
             }
         } else {
-            if pty.is_none() {
-                match Pty::open(&link) {
-                    Ok(p) => {
-                        tracing::info!(device = %p.device.display(), "board replugged");
+            if !port.is_plugged() {
+                match port.replug() {
+                    Ok(device) => {
+                        tracing::info!(device = %device.display(), "board replugged");
                         if let Ok(mut st) = shared.stats.lock() {
                             st.connects += 1;
-                            st.device = Some(p.device.clone());
+                            st.device = Some(device.to_owned());
                         }
                         if cfg.banner {
                             pending.extend_from_slice(banner.as_bytes());
                         }
-                        pty = Some(p);
                     }
                     Err(e) => tracing::warn!(error = %e, "could not reopen the PTY"),
                 }
@@ -371,8 +316,8 @@ fn run(first: Pty, cfg: SerialConfig, shared: &Shared) {
             } else {
                 dropped = 1;
             }
-            if let Some(p) = &pty
-                && let Err(e) = p.flush(&mut pending)
+            if let Some(p) = port.pair()
+                && let Err(e) = flush(p, &mut pending)
             {
                 tracing::warn!(error = %e, "PTY write failed");
             }
@@ -381,7 +326,7 @@ fn run(first: Pty, cfg: SerialConfig, shared: &Shared) {
             st.board = board.stats();
             st.lines_written += written;
             st.lines_dropped += dropped;
-            if pty.is_none() {
+            if !port.is_plugged() {
                 st.device = None;
             }
         }
