@@ -156,7 +156,11 @@ fn published_scans_match_every_fed_beam_and_stamps_follow_the_sensor_clock() {
     assert_eq!(h.metric("clock_calibrated"), Some(1.0));
     assert_eq!(h.metric("checksum_errors"), Some(0.0));
     assert_eq!(h.metric("scan_hz_nominal"), Some(10.0));
-    assert_eq!(h.metric("sensor_stat_ok"), Some(1.0), "II STAT: Sensor works well.");
+    assert_eq!(
+        h.metric("sensor_stat_ok"),
+        Some(1.0),
+        "II STAT: Sensor works well."
+    );
     rig.driver
         .as_ref()
         .unwrap()

@@ -29,19 +29,33 @@ fn start_driver(config: &Path, device: &Path, instance: &str) -> Child {
 /// Runs `smokenav status --json` for the smoke role; returns (exit ok, status of `smoke`).
 fn status(instance: &str) -> (bool, String, serde_json::Value) {
     let out = Command::new(bin("smokenav"))
-        .args(["status", "--json", "--roles", "smoke", "--stale-after", "1.5"])
+        .args([
+            "status",
+            "--json",
+            "--roles",
+            "smoke",
+            "--stale-after",
+            "1.5",
+        ])
         .env("SMOKENAV_INSTANCE", instance)
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     let v: serde_json::Value = serde_json::from_str(text.trim())
         .unwrap_or_else(|e| panic!("{e}: {text} {}", String::from_utf8_lossy(&out.stderr)));
-    let smoke = v["processes"][0]["status"].as_str().unwrap_or("").to_owned();
+    let smoke = v["processes"][0]["status"]
+        .as_str()
+        .unwrap_or("")
+        .to_owned();
     (out.status.success(), smoke, v)
 }
 
 /// Polls status until `want` (up to `timeout`), returning the last answer.
-fn status_until(instance: &str, want: &str, timeout: Duration) -> (bool, String, serde_json::Value) {
+fn status_until(
+    instance: &str,
+    want: &str,
+    timeout: Duration,
+) -> (bool, String, serde_json::Value) {
     let end = Instant::now() + timeout;
     loop {
         let s = status(instance);
@@ -80,11 +94,17 @@ fn status_reports_a_killed_process_down_and_a_restarted_one_up() {
     drop(driver);
     let (ok, smoke, v) = status_until(&instance, "down", Duration::from_secs(10));
     assert_eq!(smoke, "down", "{v}");
-    assert!(!ok, "exit status must be non-zero when a process is down: {v}");
+    assert!(
+        !ok,
+        "exit status must be non-zero when a process is down: {v}"
+    );
 
     let restarted = start_driver(&config, &device, &instance);
     let (ok, smoke, v) = status_until(&instance, "up", Duration::from_secs(20));
     assert_eq!(smoke, "up", "{v}\n{}", restarted.output());
     assert!(ok, "{v}");
-    assert_eq!(v["processes"][0]["pid"].as_u64(), Some(restarted.pid() as u64));
+    assert_eq!(
+        v["processes"][0]["pid"].as_u64(),
+        Some(restarted.pid() as u64)
+    );
 }

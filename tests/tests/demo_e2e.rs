@@ -1,0 +1,158 @@
+//! `smokenav demo --fast` end to end (the real binary): a recording straight
+//! from the simulator, fusion + SLAM three ways, scored against the ground
+//! truth, and every promised output file. Kept short (`--duration`,
+//! `--particles`) so a debug build on two cores finishes well within CI's
+//! two minutes.
+
+use smokenav_recording::Playback;
+use smokenav_tests::bin;
+use std::path::Path;
+use std::process::Command;
+
+/// Width and height from a PNG's IHDR chunk (the file must be a PNG).
+fn png_size(path: &Path) -> (u32, u32) {
+    let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(
+        &b[..8],
+        b"\x89PNG\r\n\x1a\n",
+        "{} is not a PNG",
+        path.display()
+    );
+    assert_eq!(&b[12..16], b"IHDR");
+    let be = |i: usize| u32::from_be_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+    (be(16), be(20))
+}
+
+fn demo(args: &[&str]) -> serde_json::Value {
+    let out = Command::new(bin("smokenav"))
+        .arg("demo")
+        .args(args)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "smokenav demo failed: {}\n{stderr}",
+        out.status
+    );
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("stdout is not one JSON object ({e}):\n{stdout}\n{stderr}"))
+}
+
+#[test]
+fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let out_s = out.to_string_lossy().into_owned();
+    // The first 30 s of the dense-smoke trial: the robot maps the left bay in clean air.
+    let v = demo(&[
+        "--fast",
+        "--duration",
+        "30",
+        "--particles",
+        "10",
+        "--json",
+        "--out",
+        &out_s,
+    ]);
+
+    assert_eq!(v["scenario"], "r32-dense-crossing");
+    assert_eq!(v["duration_s"], 30.0);
+    let scans = v["scans"].as_u64().unwrap();
+    assert!((295..=300).contains(&scans), "10 Hz for 30 s: {scans}");
+    for section in [&v["methods"], &v["clean_reference"]["methods"]] {
+        for m in ["laser-only", "v1", "v2"] {
+            let r = &section[m];
+            for k in ["map_error_m", "ate_m", "sonar_usage"] {
+                assert!(r[k].is_f64(), "{m}.{k} missing in {r}");
+            }
+            // Clean air so far: every method localises within centimetres, no sonar needed.
+            assert!(r["ate_m"].as_f64().unwrap() < 0.3, "{m}: {r}");
+            assert_eq!(r["sonar_usage"].as_f64().unwrap(), 0.0, "{m}: {r}");
+        }
+    }
+    assert_eq!(
+        v["clean_reference"]["scenario"],
+        "r32-dense-crossing (no smoke)"
+    );
+    // The file holds what stdout printed.
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("comparison.json")).unwrap())
+            .unwrap();
+    assert_eq!(file, v);
+
+    // Ground truth and one map_server map and trajectory per method.
+    let truth = smokenav_mapio::load_map_server(&out.join("truth.yaml")).unwrap();
+    assert!((truth.resolution - 0.05).abs() < 1e-9);
+    for m in ["laser-only", "v1", "v2"] {
+        let map =
+            smokenav_mapio::load_map_server(&out.join("maps").join(format!("{m}.yaml"))).unwrap();
+        assert!(!map.occupied_points(65).is_empty(), "{m}: a map with walls");
+        let traj =
+            std::fs::read_to_string(out.join("trajectories").join(format!("{m}.txt"))).unwrap();
+        let poses = traj.lines().filter(|l| !l.starts_with('#')).count();
+        assert!(poses >= 250, "{m}: {poses} poses");
+    }
+    let truth_poses = std::fs::read_to_string(out.join("truth.txt")).unwrap();
+    assert!(truth_poses.lines().filter(|l| !l.starts_with('#')).count() >= 295);
+
+    // Four panels side by side; three stacked plots.
+    let (w, h) = png_size(&out.join("maps.png"));
+    assert!(w > 3 * h, "maps.png is a row of four panels: {w}×{h}");
+    let (w, h) = png_size(&out.join("smoke.png"));
+    assert!(w >= 1000 && h >= 700, "smoke.png {w}×{h}");
+
+    // The recording replays: every sensor topic at 10 Hz.
+    let mut play = Playback::open(&out.join("recording.mcap")).unwrap();
+    let mut counts = std::collections::BTreeMap::<String, u64>::new();
+    while let Some(p) = play.read_next().unwrap() {
+        *counts.entry(p.topic).or_default() += 1;
+    }
+    for t in ["laser/scan", "base/odom", "base/sonar", "smoke/level"] {
+        let n = counts.get(t).copied().unwrap_or(0);
+        assert!(
+            (290..=301).contains(&n),
+            "{t}: {n} messages in 30 s ({counts:?})"
+        );
+    }
+    assert_eq!(play.stats().decode_errors, 0);
+}
+
+#[test]
+fn a_scenario_without_smoke_has_no_clean_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out").to_string_lossy().into_owned();
+    let v = demo(&[
+        "--fast",
+        "--scenario",
+        "mrl-clean",
+        "--duration",
+        "12",
+        "--particles",
+        "5",
+        "--json",
+        "--out",
+        &out,
+    ]);
+    assert_eq!(v["scenario"], "mrl-clean");
+    assert!(v.get("clean_reference").is_none(), "{v}");
+    assert!(v["methods"]["v2"]["map_error_m"].is_f64());
+}
+
+#[test]
+fn bad_arguments_are_refused_with_a_reason() {
+    let out = Command::new(bin("smokenav"))
+        .args(["demo", "--fast", "--scenario", "no-such-scenario"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no-such-scenario"), "{err}");
+    let out = Command::new(bin("smokenav"))
+        .args(["demo", "--fast", "--duration=-3"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--duration"));
+}

@@ -1,0 +1,224 @@
+//! The SLAM process end to end: a prefix of the MIT CSAIL CARMEN log is
+//! replayed through the bus (`base/odom` + `laser/scan`) into the real
+//! `smokenav-slam` binary; the poses it publishes on `slam/pose` are compared
+//! with GMapping's corrected poses for the same scans, the map on `slam/map`
+//! is saved with `smokenav map save` and with SIGUSR1, and a burst of scans
+//! shows the process skipping to the newest instead of queueing.
+
+use smokenav_bus::{MapSubscriber, Publisher, Waiter, topics};
+use smokenav_config::MountPose;
+use smokenav_config::slam::SlamInput;
+use smokenav_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_slam::eval::{absolute_trajectory_error, parse_pose_file};
+use smokenav_slam::{Pose2, StampedPose};
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
+use smokenav_types::{
+    BeamReading, Clock, Header, LaserScan, MonotonicClock, Odometry, PoseEstimate,
+};
+use std::io::BufReader;
+use std::time::{Duration, Instant};
+
+/// CARMEN max-range readings are 81.91: beyond the scan's range_max, i.e. no return.
+const RANGE_MAX: f32 = 81.9;
+
+fn log_records() -> Vec<LaserRecord> {
+    let path = workspace_root().join("daemon/slam/tests/data/csail-prefix-200.clf");
+    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
+        .filter_map(|r| match r {
+            Ok(Record::Laser(l)) => Some(l),
+            _ => None,
+        })
+        .collect()
+}
+
+fn publish(
+    odom: &mut Publisher<Odometry>,
+    scans: &mut Publisher<LaserScan>,
+    rec: &LaserRecord,
+    stamp_ns: u64,
+) -> anyhow::Result<()> {
+    odom.publish_with(|o: &mut Odometry| {
+        *o = Odometry {
+            header: Header::new(stamp_ns, 0, "odom"),
+            x: rec.robot_pose.x,
+            y: rec.robot_pose.y,
+            theta: rec.robot_pose.theta,
+            ..Default::default()
+        };
+    })?;
+    scans.publish_with(|s: &mut LaserScan| {
+        s.header = Header::new(stamp_ns, 0, "laser");
+        s.angle_min = rec.start_angle as f32;
+        s.angle_increment = rec.angular_resolution as f32;
+        s.range_min = 0.02;
+        s.range_max = RANGE_MAX;
+        s.count = rec.ranges.len() as u32;
+        s.has_intensities = 0;
+        for (i, &r) in rec.ranges.iter().enumerate() {
+            let beam = if r > 0.0 && r < RANGE_MAX {
+                BeamReading::Range(r)
+            } else {
+                BeamReading::BeyondMax
+            };
+            s.set_beam(i, beam);
+        }
+    })?;
+    Ok(())
+}
+
+/// Waits for the pose of the scan stamped `stamp_ns`.
+fn pose_for(
+    poses: &smokenav_bus::Subscriber<PoseEstimate>,
+    waiter: &Waiter,
+    stamp_ns: u64,
+    timeout: Duration,
+) -> anyhow::Result<(PoseEstimate, usize)> {
+    let end = Instant::now() + timeout;
+    let mut received = 0;
+    loop {
+        while let Some(p) = poses.receive()? {
+            received += 1;
+            if p.header.stamp_ns == stamp_ns {
+                return Ok((*p, received));
+            }
+        }
+        let now = Instant::now();
+        anyhow::ensure!(
+            now < end,
+            "no slam/pose for the scan stamped {stamp_ns} within {timeout:?}"
+        );
+        waiter.wait(Some((end - now).min(Duration::from_millis(200))))?;
+    }
+}
+
+#[test]
+fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Result<()> {
+    let instance = unique_instance("slam_e2e");
+    let dir = tempfile::tempdir()?;
+    let cfg = profile(dir.path(), "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Laser;
+        // Few particles keep a debug build in step with the replay.
+        c.slam.particles = 10;
+        c.slam.map_rate_hz = 2.0;
+        // The CARMEN laser pose is the robot pose.
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
+    let sig_dir = dir.path().join("sigusr1");
+    let mut slam = Child::spawn(
+        &bin("smokenav-slam"),
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--map-dir",
+            sig_dir.to_str().unwrap(),
+        ],
+        &instance,
+    )?;
+    slam.wait_for_line("particles on laser/scan", Duration::from_secs(30))?;
+
+    let bus = open_bus(&instance);
+    let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
+    let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
+    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
+    let waiter = Waiter::new()?;
+    let _g = waiter.attach(&poses)?;
+
+    // Replay in lock step: each scan's pose comes back before the next scan goes out.
+    let records = log_records();
+    assert_eq!(records.len(), 200);
+    let base_ns = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    let mut estimate = Vec::new();
+    for rec in &records {
+        let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
+        publish(&mut odom, &mut scans, rec, stamp)?;
+        let (p, _) = pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
+        assert_eq!(p.particles, 10);
+        assert!(p.n_eff > 0.0 && p.n_eff <= 10.0);
+        assert_eq!(p.header.frame_id.as_str(), "map");
+        estimate.push(StampedPose {
+            stamp_ns: rec.ipc_timestamp_ns,
+            pose: Pose2::new(p.x, p.y, p.theta),
+        });
+    }
+    let reference = parse_pose_file(&std::fs::read_to_string(
+        workspace_root().join("daemon/slam/tests/data/csail-reference-poses.txt"),
+    )?)?;
+    let ate = absolute_trajectory_error(&estimate, &reference, 1_000_000).expect("common poses");
+    eprintln!("slam_e2e: ATE of the online poses over the first 200 CSAIL scans: {ate:?}");
+    // The first 200 scans hold 30 reference poses; the raw odometry is metres off.
+    assert_eq!(ate.matched, 30);
+    assert!(ate.rms_m < 0.15, "{ate:?}");
+
+    // The map published on slam/map, saved by the CLI from the bus.
+    let saved = dir.path().join("saved");
+    let out = std::process::Command::new(bin("smokenav"))
+        .args([
+            "map",
+            "save",
+            saved.to_str().unwrap(),
+            "--instance",
+            &instance,
+            "--timeout-s",
+            "10",
+        ])
+        .output()?;
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let map = smokenav_mapio::load_map_server(&saved.join("map.yaml"))?;
+    assert_eq!(map.resolution, 0.05);
+    let occupied = map
+        .cells
+        .iter()
+        .filter(|&&c| c == smokenav_mapio::OCCUPIED)
+        .count();
+    let free = map
+        .cells
+        .iter()
+        .filter(|&&c| c == smokenav_mapio::FREE)
+        .count();
+    assert!(
+        occupied > 500 && free > 10 * occupied,
+        "{occupied} occupied, {free} free cells"
+    );
+    assert!(saved.join("map.png").exists());
+    let sub = MapSubscriber::create(&bus, topics::SLAM_MAP)?;
+    let _m = waiter.attach(&sub)?;
+
+    // SIGUSR1 makes the process write its own map.
+    slam.signal(nix::sys::signal::Signal::SIGUSR1);
+    slam.wait_for_line("map saved", Duration::from_secs(10))?;
+    let own = smokenav_mapio::load_map_server(&sig_dir.join("map.yaml"))?;
+    assert!(
+        own.cells
+            .iter()
+            .filter(|&&c| c == smokenav_mapio::OCCUPIED)
+            .count()
+            >= occupied / 2
+    );
+    assert!(sig_dir.join("map.pgm").exists() && sig_dir.join("map.png").exists());
+
+    // A burst of 30 scans at once: the process takes the newest and counts the rest as skipped.
+    let last = records.last().unwrap();
+    let burst_base = MonotonicClock.now_ns();
+    let mut last_stamp = 0;
+    for k in 0..30u64 {
+        last_stamp = burst_base + k * 1_000_000;
+        publish(&mut odom, &mut scans, last, last_stamp)?;
+    }
+    let (p, received) = pose_for(&poses, &waiter, last_stamp, Duration::from_secs(30))?;
+    assert!(p.scans_skipped > 0, "{p:?}");
+    assert!(received < 30, "{received} poses for 30 scans sent at once");
+    assert!(p.processing_us > 0);
+
+    let status = slam.terminate(Duration::from_secs(10))?;
+    assert!(status.success(), "{status:?}");
+    Ok(())
+}
