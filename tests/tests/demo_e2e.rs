@@ -102,6 +102,11 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
     assert!(w > 3 * h, "maps.png is a row of four panels: {w}×{h}");
     let (w, h) = png_size(&out.join("smoke.png"));
     assert!(w >= 1000 && h >= 700, "smoke.png {w}×{h}");
+    // With a smoke-free twin the plot has a fourth panel: the laser beams the smoke changed.
+    let (_, h_twin) = png_size(&out.join("clean-reference").join("smoke.png"));
+    assert!(h > h_twin, "{h} vs {h_twin}");
+    let (w, _) = png_size(&out.join("clean-reference").join("maps.png"));
+    assert!(w > 1000);
 
     // The recording replays: every sensor topic at 10 Hz.
     let mut play = Playback::open(&out.join("recording.mcap")).unwrap();

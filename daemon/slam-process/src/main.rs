@@ -206,6 +206,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             if o.flags & OdometryFlags::RESET != 0 {
                 // The odometry frame jumped: poses before and after must not be mixed.
                 odom.clear();
+                slam.odometry_reset();
                 counters.odom_resets += 1;
             }
             odom.push(o.header.stamp_ns, Pose2::new(o.x, o.y, o.theta));

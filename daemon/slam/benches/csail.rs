@@ -1,11 +1,13 @@
 //! Runs the filter over the MIT CSAIL CARMEN log and prints accuracy against
-//! the GMapping reference poses and per-scan timing.
+//! the GMapping reference poses and per-scan timing (thread CPU time).
 //!
 //! `cargo bench -p smokenav-slam --bench csail` (full log, 30 particles).
 //! Environment: `CSAIL_DIR` (default ../../../shared/reference/slam from this
 //! crate), `CSAIL_SCANS` (stop after N scans), `CSAIL_PARTICLES`,
-//! `CSAIL_PARAMS` (extra `[slam]` TOML keys), `CSAIL_OUT` (folder for map.png
-//! and trajectory.txt).
+//! `CSAIL_PARAMS` (extra `[slam]` TOML keys, `;`-separated), `CSAIL_THETA0`
+//! (heading of the first pose in the map frame), `CSAIL_OUT` (folder for
+//! map.png/.pgm/.yaml, trajectory.txt, trajectory_online.txt,
+//! trajectory_frontend.txt, trajectory_odometry.txt and spread.txt).
 
 use smokenav_config::{SlamSection, parse_toml};
 use smokenav_slam::eval::{absolute_trajectory_error, format_pose_file, parse_pose_file};

@@ -101,6 +101,8 @@ pub struct Rbpf {
     since_map_rot: f64,
     best: usize,
     initial_pose: Pose2,
+    /// Without a front end: ignore the odometry difference at the next scan.
+    odometry_jumped: bool,
     last_n_eff: f64,
     stats: FilterStats,
     // Reused buffers.
@@ -139,11 +141,21 @@ impl Rbpf {
             since_map_rot: 0.0,
             best: 0,
             initial_pose: Pose2::default(),
+            odometry_jumped: false,
             last_n_eff: cfg.particles as f64,
             stats: FilterStats::default(),
             world_beams: Vec::new(),
             weights: Vec::new(),
             cfg: cfg.clone(),
+        }
+    }
+
+    /// The odometry frame jumped (base reset or reconnected): the next scan's
+    /// odometry is not compared with the previous one.
+    pub fn odometry_reset(&mut self) {
+        match &mut self.frontend {
+            Some(fe) => fe.odometry_reset(),
+            None => self.odometry_jumped = true,
         }
     }
 
@@ -364,7 +376,11 @@ impl SlamBackend for Rbpf {
             return self.output(stamp_ns, true, false);
         };
 
-        let delta = corrected.relative_to(&last);
+        let delta = if std::mem::take(&mut self.odometry_jumped) {
+            Pose2::default()
+        } else {
+            corrected.relative_to(&last)
+        };
         self.last_odom = Some(corrected);
         for i in 0..self.particles.len() {
             let pose = self.particles[i].pose;

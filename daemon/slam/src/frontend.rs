@@ -147,6 +147,15 @@ impl FrontEnd {
         }
     }
 
+    /// The odometry frame jumped (the base was reset or reconnected): forget the
+    /// odometry readings so the next scan is matched from the last pose with a
+    /// wide prior instead of applying the jump as motion. The local map stays.
+    pub fn odometry_reset(&mut self) {
+        self.last_odom = None;
+        self.fresh = None;
+        self.fresh_before = None;
+    }
+
     /// Tracks one scan. `endpoints` are the scan's obstacle endpoints in the
     /// robot frame; `odom` the odometry pose at the scan's stamp.
     pub fn track(
@@ -170,7 +179,8 @@ impl FrontEnd {
         // The prior follows the predicted motion: wider for larger steps and
         // while the odometry repeats (the prediction is then extrapolated).
         let step = prediction.relative_to(&last_pose);
-        let (st, sr) = if stale {
+        // Without a fresh odometry reference (after a reset) the prediction is a guess too.
+        let (st, sr) = if stale || self.fresh.is_none() {
             (STALE_SIGMA_T, STALE_SIGMA_R)
         } else {
             (PRIOR_SIGMA_T, PRIOR_SIGMA_R)
@@ -629,6 +639,32 @@ mod tests {
         let t = fe.track(scene_from(&p4).into_iter(), &p4, 800_000_000);
         assert!(!t.stale_odometry);
         assert!((t.pose.x - 0.8).abs() < 0.06, "{:?}", t.pose);
+    }
+
+    #[test]
+    fn odometry_reset_is_not_taken_as_motion() {
+        let mut fe = FrontEnd::new(params());
+        let p0 = Pose2::default();
+        fe.track(scene_from(&p0).into_iter(), &p0, 0);
+        let p1 = Pose2::new(0.2, 0.0, 0.0);
+        fe.track(scene_from(&p1).into_iter(), &p1, 200_000_000);
+        // The base restarts its odometry at (0, 0, 0) while the robot moved on to x = 0.3.
+        fe.odometry_reset();
+        let p2 = Pose2::new(0.3, 0.0, 0.0);
+        let t = fe.track(scene_from(&p2).into_iter(), &Pose2::default(), 400_000_000);
+        assert!(
+            (t.pose.x - 0.3).abs() < 0.03 && t.pose.y.abs() < 0.03,
+            "{:?}",
+            t.pose
+        );
+        // Later readings in the new frame are motion as usual.
+        let p3 = Pose2::new(0.5, 0.0, 0.0);
+        let t = fe.track(
+            scene_from(&p3).into_iter(),
+            &Pose2::new(0.2, 0.0, 0.0),
+            600_000_000,
+        );
+        assert!((t.pose.x - 0.5).abs() < 0.03, "{:?}", t.pose);
     }
 
     #[test]

@@ -326,4 +326,31 @@ mod tests {
         assert_eq!(odometry_at(&o, 900).unwrap().x, 1.0);
         assert!(odometry_at(&[], 5).is_none());
     }
+
+    #[test]
+    fn slam_results_are_shared_only_for_identical_scans() {
+        let profile = smokenav_sim::Scenario::builtin("mrl-clean")
+            .unwrap()
+            .profile;
+        let mut a = FusedScan::default();
+        a.scan.count = 3;
+        a.scan.range_max = 5.6;
+        for i in 0..3 {
+            a.scan
+                .set_beam(i, smokenav_types::BeamReading::Range(1.0 + i as f32));
+        }
+        let b = a;
+        assert!(same_slam_input(&a, &b, &profile));
+        // A beam that came from the sonar has another noise model in SLAM.
+        let mut c = a;
+        c.beam_source[1] = smokenav_types::SectionSource::Sonar as u8;
+        assert!(!same_slam_input(&a, &c, &profile));
+        // A smoke level that changes the laser noise factor changes the input.
+        let mut d = a;
+        d.smoke_level = 300.0;
+        assert!(!same_slam_input(&a, &d, &profile));
+        let mut e = a;
+        e.scan.set_beam(2, smokenav_types::BeamReading::NoReturn);
+        assert!(!same_slam_input(&a, &e, &profile));
+    }
 }
