@@ -57,7 +57,24 @@
 //!   ρL > ρT; otherwise neither (beams marked beyond max range). The paper's
 //!   formula uses a strict `>` against ρT = 1/2; its prose says "equal or
 //!   greater"; we use the formula.
-//! - **Uncovered laser sections** (between sonar cones) follow ρL.
+//! - **Uncovered laser sections** (between sonar cones) follow ρL, and are
+//!   dropped when a neighbouring section's laser was found contradicted.
+//!
+//! Beyond the paper: **the sonar as a witness.** The smoke sensor sits on the
+//! robot, but the laser sees a smoke cloud metres before the robot enters
+//! it: for seconds the scan is a phantom wall while the smoke reading has
+//! barely risen, and a scan that is part phantom and part real walls keeps
+//! a high spread, so the Dense test does not fire either. Ultrasound is not
+//! scattered by smoke, and a sonar echoes from the nearest surface in its
+//! cone, so laser ranges clearly nearer than the sonar's arc (or than its
+//! cap, when it heard nothing) in that cone are something the sonar cannot
+//! see. Each section's laser rule is therefore
+//! `w_L(τ) = min(w_L, max(1 − μ_Alcoholized, 1 − μ_Contradicted(τ)))`: in
+//! clean air nothing changes (bit-identical output); in alcoholized air a
+//! contradicted section goes to a confident sonar, or to neither when the
+//! sonar heard nothing — conflicting sensors give "unknown", as seed 003
+//! requires of a fusion rule. `contradicted = { a = 2.0, b = 2.0, c = inf, d = inf }` (a share never
+//! reached) turns it off.
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
@@ -252,6 +269,14 @@ pub struct V2Params {
     pub alcoholized: PiShape,
     /// μ Dense over the standard deviation of the scan's valid ranges, m.
     pub dense: PiShape,
+    /// Beyond the paper: μ Contradicted over the share of a section's laser
+    /// ranges that lie nearer than the section's sonar says anything is
+    /// (its echo arc, or its cap when it heard nothing) by more than
+    /// `contradiction_margin_m`. Ultrasound passes through smoke, so in
+    /// alcoholized air such a section is a phantom wall (see the module docs).
+    pub contradicted: PiShape,
+    /// How much nearer than the sonar's arc a laser range must be to count as contradicting it, m.
+    pub contradiction_margin_m: f64,
     /// The consequent bell, used centred at 1 (trust) and at 0 (distrust) for both outputs.
     pub output_bell: BellShape,
     /// Points of [0, 1] the centroid is taken over.
@@ -265,6 +290,8 @@ impl Default for V2Params {
             confident: PiShape::new(0.05, 0.15, 2.0, 3.0),
             alcoholized: PiShape::new(10.0, 30.0, f64::INFINITY, f64::INFINITY),
             dense: PiShape::new(0.0, 0.0, 0.6, 1.0),
+            contradicted: PiShape::new(0.1, 0.3, f64::INFINITY, f64::INFINITY),
+            contradiction_margin_m: 0.3,
             output_bell: BellShape {
                 width: 0.2,
                 slope: 2.0,
@@ -367,6 +394,14 @@ impl Validate for V2Params {
         self.confident.validate(&format!("{key}.confident"), v);
         self.alcoholized.validate(&format!("{key}.alcoholized"), v);
         self.dense.validate(&format!("{key}.dense"), v);
+        self.contradicted
+            .validate(&format!("{key}.contradicted"), v);
+        v.within(
+            &format!("{key}.contradiction_margin_m"),
+            self.contradiction_margin_m,
+            0.0,
+            5.0,
+        );
         v.within(
             &format!("{key}.output_bell.width"),
             self.output_bell.width,

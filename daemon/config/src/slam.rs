@@ -168,6 +168,13 @@ slam_section! {
     miss_logodds: f64 = (0.4, 0.4),
     /// Log-odds saturate at ± this value, so the map can still change.
     max_logodds: f64 = (4.0, 4.0),
+    /// Scan-match a particle's pose only when the scan has at least this many
+    /// laser endpoints (after decimation); with fewer — the laser lost to
+    /// smoke and only sonar arcs left — the particles follow the odometry and
+    /// the sonar only weighs them. Wide sonar cones pull a matcher along a
+    /// wall rather than fix the pose; wheel odometry over the seconds a smoke
+    /// cloud lasts is the better guess (GMapping's minimumScore, by evidence).
+    min_match_laser_points: u32 = (40, 40),
     /// Endpoint standard deviation of beams that came from sonar (per `FusedScan::beam_source`), m.
     sonar_sigma_m: f64 = (0.2, 0.2),
     /// Laser range variance in clear air (seed 001: B_o = 5, mm²).
@@ -231,6 +238,12 @@ impl Validate for SlamSection {
         }
         v.within(&k("lstep_m"), self.lstep_m, 0.0001, 2.0);
         v.within(&k("astep_rad"), self.astep_rad, 0.0001, 1.0);
+        if self.min_match_laser_points > 100_000 {
+            v.fail(
+                k("min_match_laser_points"),
+                format!("must be 0–100000, got {}", self.min_match_laser_points),
+            );
+        }
         if self.lskip > 16 {
             v.fail(k("lskip"), format!("must be 0–16, got {}", self.lskip));
         }

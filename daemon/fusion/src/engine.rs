@@ -1,7 +1,7 @@
 //! One fusion cycle: a synchronised (laser, sonar, smoke) set in, a
 //! [`FusedScan`] out, written into a caller-provided buffer without allocating.
 
-use crate::geometry::{GeometryError, ScanShape, Sections, SonarEcho, SonarGeometry};
+use crate::geometry::{GeometryError, ScanShape, Section, Sections, SonarEcho, SonarGeometry};
 use crate::v1::{self, LaserSectionStats, SmokeClassifier, SmokeState};
 use crate::v2::{FuzzyModel, LaserTrust};
 use smokenav_config::fusion::{V1Params, V2Params};
@@ -73,6 +73,8 @@ pub struct FusionEngine {
     ring_max_range: f32,
     paint: Box<[f32; MAX_BEAMS]>,
     decisions: [SectionSource; MAX_SONARS],
+    /// v2: whether each section's own laser rule trusts its laser (ρL(τ) > ρT).
+    section_laser_ok: [bool; MAX_SONARS],
 }
 
 impl FusionEngine {
@@ -89,6 +91,7 @@ impl FusionEngine {
             ring_max_range: 0.0,
             paint: Box::new([f32::INFINITY; MAX_BEAMS]),
             decisions: [SectionSource::Laser; MAX_SONARS],
+            section_laser_ok: [true; MAX_SONARS],
         }
     }
 
@@ -252,7 +255,7 @@ impl FusionEngine {
         }
         match self.method {
             FusionMethod::V1 => self.decide_v1(l, smoke_state, out),
-            _ => report.rho_laser = self.decide_v2(smoke, spread, out) as f32,
+            _ => report.rho_laser = self.decide_v2(l, &shape, smoke, spread, out) as f32,
         }
         out.section_count = n_sections as u32;
         self.apply_sections(l, &shape, out);
@@ -307,7 +310,14 @@ impl FusionEngine {
         }
     }
 
-    fn decide_v2(&mut self, smoke: Option<&SmokeReading>, spread: f64, out: &mut FusedScan) -> f64 {
+    fn decide_v2(
+        &mut self,
+        l: &LaserScan,
+        shape: &ScanShape,
+        smoke: Option<&SmokeReading>,
+        spread: f64,
+        out: &mut FusedScan,
+    ) -> f64 {
         let level = smoke
             .filter(|s| s.is_ready() && s.level.is_finite())
             .map(|s| f64::from(s.level));
@@ -316,20 +326,113 @@ impl FusionEngine {
         for k in 0..n {
             let s = self.sections.as_slice()[k];
             let (echo, raw) = self.echo(s.sonar_index);
-            let rho_s = self.fuzzy.sonar_trust(&trust, echo, f64::from(raw));
-            let d = self.fuzzy.decide(rho_s, trust.rho);
+            // The witness is only consulted when there is smoke to explain a contradiction.
+            let share = if trust.mu_alcoholized > 0.0 {
+                self.contradicted_share(l, shape, &s, echo, f64::from(raw))
+            } else {
+                None
+            };
+            let section = self.fuzzy.section_laser_trust(&trust, share);
+            self.section_laser_ok[k] = self.fuzzy.decide_gap(&section) == SectionSource::Laser;
+            let rho_s = self.fuzzy.sonar_trust(&section, echo, f64::from(raw));
+            let d = self.fuzzy.decide(rho_s, section.rho);
             self.decisions[k] = d;
-            self.record_section(k, rho_s as f32, trust.rho as f32, out);
+            self.record_section(k, rho_s as f32, section.rho as f32, out);
+            // A kept laser section in smoky air still loses the single beams
+            // its sonar contradicts (patchy smoke catches every few beams).
+            if d == SectionSource::Laser && share.is_some() && trust.mu_alcoholized >= 0.5 {
+                self.blank_contradicted(l, &s, out);
+            }
         }
-        if self.fuzzy.decide_gap(&trust) == SectionSource::Neither {
-            let count = out.scan.len();
-            for i in 0..count {
-                if self.sections.owner(i).is_none() {
-                    blank(out, i, i + 1);
-                }
+        let scan_gap = self.fuzzy.decide_gap(&trust);
+        let count = out.scan.len();
+        let mut i = 0;
+        while i < count {
+            if self.sections.owner(i).is_some() {
+                i += 1;
+                continue;
+            }
+            let first = i;
+            while i < count && self.sections.owner(i).is_none() {
+                i += 1;
+            }
+            // A gap between sections whose laser the sonar contradicted is the same smoke.
+            let (left, right) = self.sections.neighbours(first, i);
+            let neighbours_ok = [left, right]
+                .into_iter()
+                .flatten()
+                .all(|k| self.section_laser_ok[k]);
+            if scan_gap == SectionSource::Neither || !neighbours_ok {
+                blank(out, first, i);
             }
         }
         trust.rho
+    }
+
+    /// The share of the section's laser ranges that lie nearer than the
+    /// sonar's arc by more than the margin: the echo's arc or, when the sonar
+    /// heard nothing within its cap, the arc of its raw reading (as a witness
+    /// a long first echo still says the cone was empty up to there; the cap
+    /// exists because the range of such echoes is unreliable, not their
+    /// absence nearer). `None` without a sonar reading or without a beam
+    /// both sensors cover.
+    fn contradicted_share(
+        &mut self,
+        l: &LaserScan,
+        shape: &ScanShape,
+        section: &Section,
+        echo: SonarEcho,
+        raw_range: f64,
+    ) -> Option<f64> {
+        let cap = self.geometry.cap_m();
+        let radius = match echo {
+            SonarEcho::Echo(r) => r,
+            SonarEcho::Saturated if raw_range.is_finite() => raw_range.max(cap),
+            SonarEcho::Saturated => cap,
+            SonarEcho::Missing => return None,
+        };
+        let pose = self.geometry.pose(section.sonar_index).copied()?;
+        let end = section.end.min(l.len()).min(self.paint.len());
+        let first = section.first.min(end);
+        self.paint[first..end].fill(f32::INFINITY);
+        let (geometry, paint) = (&self.geometry, &mut self.paint);
+        geometry.for_each_arc_beam(shape, &pose, radius, |i, t| {
+            if (first..end).contains(&i) {
+                paint[i] = paint[i].min(t as f32);
+            }
+        });
+        let margin = self.fuzzy.params().contradiction_margin_m;
+        let (mut compared, mut nearer) = (0usize, 0usize);
+        for i in first..end {
+            let arc = f64::from(self.paint[i]);
+            let Some(r) = l.beam(i).range().filter(|r| r.is_finite()) else {
+                continue;
+            };
+            if !arc.is_finite() {
+                continue;
+            }
+            compared += 1;
+            if f64::from(r) < arc - margin {
+                nearer += 1;
+            }
+        }
+        (compared > 0).then(|| nearer as f64 / compared as f64)
+    }
+
+    /// Blanks the section's laser beams nearer than the arc painted by the
+    /// last [`Self::contradicted_share`] call for it, by more than the margin.
+    fn blank_contradicted(&self, l: &LaserScan, section: &Section, out: &mut FusedScan) {
+        let margin = self.fuzzy.params().contradiction_margin_m;
+        let end = section.end.min(l.len()).min(self.paint.len());
+        for i in section.first.min(end)..end {
+            let arc = f64::from(self.paint[i]);
+            if let Some(r) = l.beam(i).range().filter(|r| r.is_finite())
+                && arc.is_finite()
+                && f64::from(r) < arc - margin
+            {
+                blank(out, i, i + 1);
+            }
+        }
     }
 
     fn record_section(&self, k: usize, rho_sonar: f32, rho_laser: f32, out: &mut FusedScan) {

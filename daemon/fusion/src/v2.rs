@@ -8,6 +8,11 @@
 //! - laser:  w_L = max(1 − μ_Alcoholized(a), 1 − μ_Dense(σ))  — clean air OR a non-uniform scan;
 //! - ELSE-IF sonar: w_S = min(1 − w_L, μ_Confident(s)).
 //!
+//! Beyond the paper, per section τ (see `smokenav_config::fusion`, "the sonar
+//! as a witness"): w_L(τ) = min(w_L, max(1 − μ_Alcoholized(a),
+//! 1 − μ_Contradicted(c_τ))), where c_τ is the share of the section's laser
+//! ranges nearer than its sonar's arc; the sonar rule uses w_L(τ).
+//!
 //! Each strength goes through Mamdani min/max and a centroid (ρL, ρS). With
 //! no usable smoke reading the laser rule uses σ alone.
 
@@ -59,7 +64,28 @@ impl FuzzyModel {
         }
     }
 
-    /// ρS of one section, given the laser rule's strength.
+    /// The laser rule of one section: the scan-wide strength, lowered where
+    /// the smoke is in the air and the section's sonar contradicts the laser
+    /// (`contradicted_share`: the share of the section's laser ranges nearer
+    /// than the sonar's arc; `None` when the sonar gave nothing to compare).
+    pub fn section_laser_trust(
+        &self,
+        scan: &LaserTrust,
+        contradicted_share: Option<f64>,
+    ) -> LaserTrust {
+        let mu_c = contradicted_share.map_or(0.0, |c| pi(c, &self.params.contradicted));
+        let w = scan.w.min((1.0 - scan.mu_alcoholized).max(1.0 - mu_c));
+        if w == scan.w {
+            return *scan;
+        }
+        LaserTrust {
+            w,
+            rho: self.defuzz.rho(w),
+            ..*scan
+        }
+    }
+
+    /// ρS of one section, given the (section's) laser rule.
     pub fn sonar_trust(&self, laser: &LaserTrust, echo: SonarEcho, raw_range: f64) -> f64 {
         let s = match echo {
             SonarEcho::Echo(r) => r,
@@ -153,6 +179,36 @@ mod tests {
         assert_eq!(m.decide(s, l.rho), SectionSource::Sonar);
         let l = m.laser_trust(None, 1.2);
         assert_eq!(m.decide_gap(&l), SectionSource::Laser);
+    }
+
+    #[test]
+    fn a_contradicted_section_in_smoky_air_goes_to_the_sonar() {
+        // Smoke 60 (alcoholized) but a structured scan (σ 1.2): the scan-wide
+        // rule trusts the laser; the section whose laser ranges all lie well
+        // inside the sonar's echo is the smoke front, not a wall.
+        let m = model();
+        let scan = m.laser_trust(Some(60.0), 1.2);
+        assert_eq!(scan.w, 1.0);
+        let sec = m.section_laser_trust(&scan, Some(0.9));
+        assert!(sec.w < 1e-9 && sec.rho < 0.5);
+        let s = m.sonar_trust(&sec, SonarEcho::Echo(2.0), 2.0);
+        assert_eq!(m.decide(s, sec.rho), SectionSource::Sonar);
+        // The sonar heard nothing within its cap: conflicting sensors, neither.
+        let s = m.sonar_trust(&sec, SonarEcho::Saturated, 2.5);
+        assert_eq!(m.decide(s, sec.rho), SectionSource::Neither);
+        // A section the sonar agrees with keeps the laser.
+        let ok = m.section_laser_trust(&scan, Some(0.05));
+        assert_eq!(ok, scan);
+    }
+
+    #[test]
+    fn in_clean_air_a_contradicting_sonar_changes_nothing() {
+        // Sonars miss walls by specular reflection: without smoke the laser wins.
+        let m = model();
+        let scan = m.laser_trust(Some(2.0), 1.2);
+        assert_eq!(m.section_laser_trust(&scan, Some(1.0)), scan);
+        let scan = m.laser_trust(None, 1.2);
+        assert_eq!(m.section_laser_trust(&scan, Some(1.0)), scan);
     }
 
     #[test]

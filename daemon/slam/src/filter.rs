@@ -78,6 +78,8 @@ pub struct FilterStats {
     pub match_evaluations: u64,
     /// Updates that wrote the scan into the maps.
     pub map_updates: u64,
+    /// Updates without scan matching: too few laser endpoints (odometry and the sonar only).
+    pub unmatched_updates: u64,
 }
 
 pub struct Rbpf {
@@ -341,7 +343,11 @@ impl SlamBackend for Rbpf {
         let corrected = match &mut self.frontend {
             Some(fe) => {
                 let t = fe.track(
-                    self.prepared.points.iter().map(|p| (p.hx, p.hy)),
+                    self.prepared
+                        .points
+                        .iter()
+                        .filter(|p| p.from_laser)
+                        .map(|p| (p.hx, p.hy)),
                     &odom,
                     stamp_ns,
                 );
@@ -405,11 +411,18 @@ impl SlamBackend for Rbpf {
 
         let gain = 1.0 / (self.cfg.ogain * self.particles.len() as f64);
         if !self.prepared.points.is_empty() {
+            let laser_points = self.prepared.points.iter().filter(|p| p.from_laser).count();
+            let match_scan = laser_points >= self.cfg.min_match_laser_points as usize;
+            if !match_scan {
+                self.stats.unmatched_updates += 1;
+            }
             for p in &mut self.particles {
-                let refined = matcher::refine(&p.grid, &self.prepared, &p.pose, &self.mp);
-                self.stats.match_evaluations += refined.evaluations as u64;
-                if refined.score > 0.0 {
-                    p.pose = refined.pose;
+                if match_scan {
+                    let refined = matcher::refine(&p.grid, &self.prepared, &p.pose, &self.mp);
+                    self.stats.match_evaluations += refined.evaluations as u64;
+                    if refined.score > 0.0 {
+                        p.pose = refined.pose;
+                    }
                 }
                 let (l, _) = matcher::log_likelihood(
                     &p.grid,
@@ -601,6 +614,37 @@ mod tests {
         };
         let u = slam.process(&none, &Pose2::new(f64::NAN, 0.0, 0.0));
         assert!(u.pose.is_finite());
+    }
+
+    #[test]
+    fn sonar_only_scans_weigh_but_do_not_drag_the_particles() {
+        // In dense smoke the fused scan is sonar arcs only. Here they show the
+        // room as seen from the start while the wheels report 0.5 m of travel:
+        // a matcher would pull the pose back; the filter must follow the odometry.
+        let mut slam = Rbpf::new(&cfg(10), false);
+        let p = Pose2::new(-3.5, -1.5, 0.0);
+        for k in 0..3 {
+            slam.process(&scan_at(&p, k * 100_000_000), &Pose2::default());
+        }
+        let mut stale = scan_at(&p, 0);
+        stale
+            .beams
+            .iter_mut()
+            .for_each(|b| b.kind = BeamKind::Sonar);
+        for k in 1..=5u64 {
+            stale.stamp_ns = (3 + k) * 100_000_000;
+            slam.process(&stale, &Pose2::new(0.1 * k as f64, 0.0, 0.0));
+        }
+        let est = slam.pose().unwrap();
+        assert!((est.x - 0.5).abs() < 0.15, "{est:?}");
+        assert!(slam.stats().unmatched_updates >= 1, "{:?}", slam.stats());
+        // Laser scans are matched again as soon as they return.
+        let before = slam.stats().match_evaluations;
+        slam.process(
+            &scan_at(&Pose2::new(-3.0, -1.5, 0.0), 900_000_000),
+            &Pose2::new(0.5, 0.0, 0.0),
+        );
+        assert!(slam.stats().match_evaluations > before);
     }
 
     #[test]

@@ -32,6 +32,8 @@ pub struct MatchPoint {
     pub lik_k: f64,
     /// Search radius in cells.
     pub kernel: i32,
+    /// The range came from the laser (not painted from a sonar cone).
+    pub from_laser: bool,
 }
 
 /// A beam for map integration: endpoint in the robot frame, and whether it ends on an obstacle.
@@ -148,6 +150,7 @@ impl PreparedScan {
                 score_k: 1.0 / (2.0 * sigma * sigma),
                 lik_k: 1.0 / (2.0 * lsigma * lsigma),
                 kernel,
+                from_laser: beam.kind == BeamKind::Laser,
             });
         }
     }

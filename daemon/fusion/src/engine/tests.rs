@@ -314,6 +314,166 @@ fn light_smoke_replaces_only_the_noisy_section() {
     assert_eq!(out.beam_source(0), SectionSource::Laser);
 }
 
+/// v2 for the small test room: its scans' σ (~0.4 m) counts as structured.
+fn v2_small_room() -> FusionEngine {
+    let cfg = profile("pioneer-3dx.toml");
+    let mut v2 = cfg.fusion.v2.clone();
+    v2.dense = smokenav_config::fusion::PiShape::new(0.0, 0.0, 0.1, 0.2);
+    let geometry = SonarGeometry::from_config(&cfg.laser, &cfg.sonar, &cfg.fusion).unwrap();
+    FusionEngine::new(FusionMethod::V2, geometry, cfg.fusion.v1.clone(), v2)
+}
+
+/// The room, except a smoke front 0.7 m ahead in sonar 3's section.
+fn phantom_in_section(e: &FusionEngine, sonar_index: u8, front: f32) -> (LaserScan, Section) {
+    let s = *e
+        .sections
+        .as_slice()
+        .iter()
+        .find(|s| s.sonar_index == sonar_index)
+        .unwrap();
+    let laser = urg(0, |i, a| {
+        if (s.first..s.end).contains(&i) {
+            front
+        } else {
+            room(0.0, 0.0, a) as f32
+        }
+    });
+    (laser, s)
+}
+
+#[test]
+fn v2_gives_a_section_the_sonar_contradicts_in_smoky_air_to_the_sonar() {
+    // Smoke 60 (alcoholized, but far below v1's 130) and a structured scan
+    // (not dense): the paper's rule alone trusts the whole laser.
+    // Sonar 3 echoes from the wall, well beyond the laser's 0.7 m smoke front.
+    let mut e = v2_small_room();
+    let mut out = fused();
+    let sonar = true_sonar(&e, 0);
+    e.step(
+        Some(&clean_scan(0)),
+        Some(&sonar),
+        Some(&smoke(0, 60.0, SmokeTrend::Rising)),
+        &mut out,
+    )
+    .unwrap();
+    let (laser, s3) = phantom_in_section(&e, 3, 0.7);
+    assert!(spread(&laser) > 0.2, "{}", spread(&laser));
+    e.step(
+        Some(&laser),
+        Some(&sonar),
+        Some(&smoke(0, 60.0, SmokeTrend::Rising)),
+        &mut out,
+    )
+    .unwrap();
+    let d3 = out.sections().iter().find(|d| d.sonar_index == 3).unwrap();
+    assert_eq!(d3.source(), SectionSource::Sonar, "{d3:?}");
+    assert!(d3.rho_laser < 0.5);
+    for i in s3.first..s3.end {
+        assert_ne!(out.scan.beam(i), BeamReading::Range(0.7), "beam {i}");
+    }
+    // Every other section agrees with its sonar and keeps its laser untouched.
+    for d in out.sections().iter().filter(|d| d.sonar_index != 3) {
+        assert_eq!(d.source(), SectionSource::Laser, "{d:?}");
+        for i in d.first_beam as usize..d.end_beam as usize {
+            assert_eq!(out.scan.beam(i), laser.beam(i));
+        }
+    }
+    // The uncovered beams bordering the contradicted section go with it.
+    assert_eq!(out.beam_source(s3.end), SectionSource::Neither);
+    assert_eq!(out.beam_source(0), SectionSource::Laser);
+
+    // With the sonar silent (saturated) in that section the sensors conflict: neither.
+    let mut quiet = sonar;
+    let n = quiet.len();
+    for r in &mut quiet.readings[..n] {
+        if r.index == 3 {
+            r.range = 5.0;
+            r.status = smokenav_types::SonarStatus::Saturated as u8;
+        }
+    }
+    e.step(
+        Some(&laser),
+        Some(&quiet),
+        Some(&smoke(0, 60.0, SmokeTrend::Rising)),
+        &mut out,
+    )
+    .unwrap();
+    let d3 = out.sections().iter().find(|d| d.sonar_index == 3).unwrap();
+    assert_eq!(d3.source(), SectionSource::Neither, "{d3:?}");
+}
+
+#[test]
+fn v2_ignores_a_contradicting_sonar_in_clean_air() {
+    // The same phantom-looking section without smoke: sonars miss walls by
+    // specular reflection far more often than the laser invents one, so the
+    // output stays the input, bit for bit.
+    let mut e = v2_small_room();
+    let mut out = fused();
+    let sonar = true_sonar(&e, 0);
+    e.step(
+        Some(&clean_scan(0)),
+        Some(&sonar),
+        Some(&smoke(0, 0.0, SmokeTrend::Steady)),
+        &mut out,
+    )
+    .unwrap();
+    let (laser, _) = phantom_in_section(&e, 3, 0.7);
+    e.step(
+        Some(&laser),
+        Some(&sonar),
+        Some(&smoke(0, 0.0, SmokeTrend::Steady)),
+        &mut out,
+    )
+    .unwrap();
+    assert_eq!(bits(&out.scan), bits(&laser));
+    assert_eq!(out.sonar_usage(), 0.0);
+}
+
+#[test]
+fn v2_drops_single_contradicted_beams_of_a_kept_section() {
+    // Patchy smoke: every fourth beam of sonar 3's section reads 0.5 m, the rest
+    // the wall. Too few to give the section away, but those beams go.
+    let mut e = v2_small_room();
+    let mut out = fused();
+    let sonar = true_sonar(&e, 0);
+    e.step(
+        Some(&clean_scan(0)),
+        Some(&sonar),
+        Some(&smoke(0, 60.0, SmokeTrend::Rising)),
+        &mut out,
+    )
+    .unwrap();
+    let s3 = *e
+        .sections
+        .as_slice()
+        .iter()
+        .find(|s| s.sonar_index == 3)
+        .unwrap();
+    let laser = urg(0, |i, a| {
+        if (s3.first..s3.end).contains(&i) && i % 12 == 0 {
+            0.5
+        } else {
+            room(0.0, 0.0, a) as f32
+        }
+    });
+    e.step(
+        Some(&laser),
+        Some(&sonar),
+        Some(&smoke(0, 60.0, SmokeTrend::Rising)),
+        &mut out,
+    )
+    .unwrap();
+    let d3 = out.sections().iter().find(|d| d.sonar_index == 3).unwrap();
+    assert_eq!(d3.source(), SectionSource::Laser, "{d3:?}");
+    for i in s3.first..s3.end {
+        if i % 12 == 0 {
+            assert_eq!(out.beam_source(i), SectionSource::Neither, "beam {i}");
+        } else {
+            assert_eq!(out.scan.beam(i), laser.beam(i), "beam {i}");
+        }
+    }
+}
+
 #[test]
 fn same_inputs_give_the_same_outputs() {
     let run = || {
