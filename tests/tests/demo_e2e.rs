@@ -48,6 +48,8 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
     // The first 30 s of the dense-smoke trial: the robot maps the left bay in clean air.
     let v = demo(&[
         "--fast",
+        "--seeds",
+        "1",
         "--duration",
         "30",
         "--particles",
@@ -130,6 +132,8 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
     let out = dir.path().join("out").to_string_lossy().into_owned();
     let v = demo(&[
         "--fast",
+        "--seeds",
+        "1",
         "--scenario",
         "mrl-clean",
         "--duration",

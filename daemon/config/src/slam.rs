@@ -164,6 +164,12 @@ slam_section! {
     resample_threshold: f64 = (0.5, 0.5),
     /// Log-odds added to a cell a beam ends in.
     hit_logodds: f64 = (0.9, 0.9),
+    /// Log-odds added to the cell a sonar-painted beam ends in. The fused scan
+    /// paints a sonar's echo as an arc across its cone, but the echo came
+    /// from one place on it (the nearest surface): the arc's cells are
+    /// weaker evidence than a laser endpoint (seed 003: weigh each sensor by
+    /// its precision). The free space before the arc is as sure as a laser's.
+    sonar_hit_logodds: f64 = (0.3, 0.3),
     /// Log-odds removed from a cell a beam passes through.
     miss_logodds: f64 = (0.4, 0.4),
     /// Log-odds saturate at ± this value, so the map can still change.
@@ -275,6 +281,7 @@ impl Validate for SlamSection {
         v.within(&k("map_update_rad"), self.map_update_rad, 0.0, 10.0);
         v.within(&k("resample_threshold"), self.resample_threshold, 0.0, 1.0);
         v.within(&k("hit_logodds"), self.hit_logodds, 0.01, 20.0);
+        v.within(&k("sonar_hit_logodds"), self.sonar_hit_logodds, 0.01, 20.0);
         v.within(&k("miss_logodds"), self.miss_logodds, 0.01, 20.0);
         v.within(&k("max_logodds"), self.max_logodds, 0.1, 50.0);
         v.within(&k("sonar_sigma_m"), self.sonar_sigma_m, 0.001, 5.0);

@@ -87,6 +87,8 @@ pub struct Rbpf {
     mp: MatchParams,
     motion: MotionModel,
     model: LogOddsModel,
+    /// The same with the sonar's hit log-odds.
+    sonar_model: LogOddsModel,
     particles: Vec<Particle>,
     rng: Rng,
     frontend: Option<FrontEnd>,
@@ -130,6 +132,11 @@ impl Rbpf {
             mp,
             motion: MotionModel::from_config(cfg),
             model: LogOddsModel::new(cfg.hit_logodds, cfg.miss_logodds, cfg.max_logodds),
+            sonar_model: LogOddsModel::new(
+                cfg.sonar_hit_logodds,
+                cfg.miss_logodds,
+                cfg.max_logodds,
+            ),
             particles: Vec::new(),
             rng: Rng::new(cfg.seed),
             frontend,
@@ -199,15 +206,24 @@ impl Rbpf {
         let p = &mut self.particles[i];
         let sensor = p.pose.compose(&self.prepared.sensor);
         let (s, c) = p.pose.theta.sin_cos();
-        self.world_beams.clear();
-        for b in &self.prepared.beams {
-            self.world_beams.push(BeamEnd {
-                ex: p.pose.x + c * b.x - s * b.y,
-                ey: p.pose.y + s * b.x + c * b.y,
-                hit: b.hit,
-            });
+        // Laser beams first, then sonar beams with their weaker hit (an arc's
+        // end is a guess at where in the cone the echo came from).
+        for sonar in [false, true] {
+            self.world_beams.clear();
+            for b in self.prepared.beams.iter().filter(|b| b.sonar == sonar) {
+                self.world_beams.push(BeamEnd {
+                    ex: p.pose.x + c * b.x - s * b.y,
+                    ey: p.pose.y + s * b.x + c * b.y,
+                    hit: b.hit,
+                });
+            }
+            let model = if sonar {
+                &self.sonar_model
+            } else {
+                &self.model
+            };
+            p.grid.integrate(&sensor, &self.world_beams, model);
         }
-        p.grid.integrate(&sensor, &self.world_beams, &self.model);
     }
 
     fn push_path(&mut self, stamp_ns: u64) {
@@ -645,6 +661,36 @@ mod tests {
             &Pose2::new(0.5, 0.0, 0.0),
         );
         assert!(slam.stats().match_evaluations > before);
+    }
+
+    #[test]
+    fn sonar_arcs_mark_walls_more_weakly_than_laser_endpoints() {
+        // One scan of the room from the start, once as laser and once as sonar:
+        // the same free space, but a sonar arc's cells are less sure to be wall.
+        let p = Pose2::new(-3.5, -1.5, 0.0);
+        let occupancy = |kind: BeamKind| {
+            let mut slam = Rbpf::new(&cfg(1), false);
+            let mut scan = scan_at(&p, 0);
+            scan.beams.iter_mut().for_each(|b| b.kind = kind);
+            slam.process(&scan, &Pose2::default());
+            let map = slam.map().unwrap();
+            // Straight ahead (the map frame is the first pose) lies the room's
+            // east wall, x = 5 in the room, 8.5 m away.
+            let (cx, cy) = map.world_to_cell(8.5, 0.0).unwrap();
+            let wall = (cx.saturating_sub(1)..cx + 2)
+                .filter_map(|x| map.get(x, cy))
+                .max()
+                .unwrap();
+            let (fx, fy) = map.world_to_cell(4.0, 0.0).unwrap();
+            (wall, map.get(fx, fy).unwrap())
+        };
+        let (laser_wall, laser_free) = occupancy(BeamKind::Laser);
+        let (sonar_wall, sonar_free) = occupancy(BeamKind::Sonar);
+        assert!(
+            sonar_wall > 50 && sonar_wall < laser_wall,
+            "{sonar_wall} vs {laser_wall}"
+        );
+        assert_eq!(sonar_free, laser_free);
     }
 
     #[test]

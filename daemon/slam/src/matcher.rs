@@ -42,6 +42,8 @@ pub struct RobotBeam {
     pub x: f64,
     pub y: f64,
     pub hit: bool,
+    /// Painted from a sonar cone: its end is somewhere on an arc, not a point.
+    pub sonar: bool,
 }
 
 /// A scan turned into what matching and mapping need, computed once per scan
@@ -118,6 +120,7 @@ impl PreparedScan {
                 x: self.sensor.x + c * re,
                 y: self.sensor.y + s * re,
                 hit: !cropped,
+                sonar: beam.kind == BeamKind::Sonar,
             });
             if cropped {
                 continue;
