@@ -388,9 +388,10 @@ impl Driver {
                     tracing::debug!("packet type 0x{packet_type:02X} did not decode: {error}");
                 }
                 SessionEvent::Fatal(e) => {
+                    // Only a profile change fixes it: exit 78, which systemd does not restart.
                     p.health.set_state(HealthState::Error);
                     p.health.error(&e.to_string());
-                    return Err(anyhow::anyhow!(e));
+                    return Err(anyhow::anyhow!(smokenav_runtime::ConfigFailure(e.to_string())));
                 }
             }
         }
