@@ -391,7 +391,9 @@ impl Driver {
                     // Only a profile change fixes it: exit 78, which systemd does not restart.
                     p.health.set_state(HealthState::Error);
                     p.health.error(&e.to_string());
-                    return Err(anyhow::anyhow!(smokenav_runtime::ConfigFailure(e.to_string())));
+                    return Err(anyhow::anyhow!(smokenav_runtime::ConfigFailure(
+                        e.to_string()
+                    )));
                 }
             }
         }
