@@ -165,3 +165,31 @@ fn bad_arguments_are_refused_with_a_reason() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--duration"));
 }
+
+/// The acceptance check on the whole dense-smoke trial (about 4 min in
+/// release on 2 cores, so not in the default run):
+/// `cargo test --release -p smokenav-tests --test demo_e2e -- --ignored`.
+#[test]
+#[ignore = "the full trial: run in release with --ignored"]
+fn full_dense_trial_v2_maps_far_better_than_laser_only_and_no_worse_in_clean_air() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out").to_string_lossy().into_owned();
+    let v = demo(&["--fast", "--seeds", "3", "--json", "--out", &out]);
+    let err = |section: &serde_json::Value, m: &str| section[m]["map_error_m"].as_f64().unwrap();
+    let smoke = &v["methods"];
+    let (laser, v1, v2) = (err(smoke, "laser-only"), err(smoke, "v1"), err(smoke, "v2"));
+    eprintln!(
+        "dense smoke: map error laser-only {laser:.3} m, v1 {v1:.3} m ({:.2}×), v2 {v2:.3} m ({:.2}×)",
+        v1 / laser,
+        v2 / laser
+    );
+    assert!(v2 < 0.5 * laser, "v2 {v2} vs laser-only {laser}");
+    assert!(v1 < laser, "v1 {v1} vs laser-only {laser}");
+    let clean = &v["clean_reference"]["methods"];
+    let base = err(clean, "laser-only");
+    for m in ["v1", "v2"] {
+        let ratio = err(clean, m) / base;
+        eprintln!("clean air: {m} {ratio:.3}× laser-only");
+        assert!((0.95..=1.05).contains(&ratio), "{m}: {ratio}× in clean air");
+    }
+}
