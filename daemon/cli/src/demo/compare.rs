@@ -28,7 +28,7 @@ pub struct SeriesPoint {
 pub struct MethodResult {
     pub method: FusionMethod,
     pub map: Option<OccupancyGrid>,
-    /// The best particle's (smoothed) trajectory.
+    /// The best particle's (smoothed) trajectory, of the median run.
     pub trajectory: Vec<StampedPose>,
     pub series: Vec<SeriesPoint>,
     /// Share of sections that used the sonar (seed 000's "sonar usage").
@@ -36,10 +36,10 @@ pub struct MethodResult {
     pub scans: u64,
     /// Fusion gave SLAM exactly the same scans as this method did (so the SLAM result is shared).
     pub same_slam_input_as: Option<FusionMethod>,
-    /// The first SLAM run's scores (its map and trajectory are the ones above).
+    /// The median SLAM run's scores (its map and trajectory are the ones above).
     pub map_report: Result<MapReport, String>,
     pub trajectory_report: Result<TrajectoryReport, String>,
-    /// (map error, ATE) of every SLAM run, one per random seed; the first is the one above.
+    /// (map error, ATE) of every SLAM run, one per random seed; the median by map error is the one above.
     pub runs: Vec<(Option<f64>, Option<f64>)>,
 }
 
@@ -194,6 +194,24 @@ fn slam_and_score(
     }
 }
 
+/// Index of the run with the median map error (the lower middle of an even
+/// count); runs without a score sort last; 0 when there is none.
+fn median_run(runs: &[(Option<f64>, Option<f64>)]) -> usize {
+    let mut order: Vec<usize> = (0..runs.len()).collect();
+    order.sort_by(|&a, &b| {
+        let key = |i: usize| runs[i].0.filter(|x| x.is_finite()).unwrap_or(f64::INFINITY);
+        key(a).total_cmp(&key(b)).then(a.cmp(&b))
+    });
+    let scored = runs
+        .iter()
+        .filter(|r| r.0.is_some_and(f64::is_finite))
+        .count();
+    match scored {
+        0 => 0,
+        n => order[(n - 1) / 2],
+    }
+}
+
 /// Every method over the same recording. Fusion runs first (cheap); SLAM
 /// runs once per distinct sequence of fused scans (in clean air v1 and v2
 /// usually hand SLAM the very same scans, and SLAM is deterministic) and per
@@ -263,7 +281,7 @@ pub fn run_all(
     let mut results = Vec::with_capacity(METHODS.len());
     for (i, m) in METHODS.into_iter().enumerate() {
         let all = &outcomes[owner[i]];
-        let runs = all
+        let runs: Vec<(Option<f64>, Option<f64>)> = all
             .iter()
             .map(|o| match o {
                 Some(o) => (
@@ -273,8 +291,11 @@ pub fn run_all(
                 None => (None, None),
             })
             .collect();
+        // The run shown (map, trajectory, per-direction errors): the median
+        // by map error, so one lucky or unlucky seed is not the picture.
+        let shown = median_run(&runs);
         let o = all
-            .first()
+            .get(shown)
             .cloned()
             .flatten()
             .ok_or_else(|| anyhow::anyhow!("the {} SLAM run did not finish", m.as_str()))?;
@@ -315,6 +336,20 @@ mod tests {
             theta: th,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn the_run_shown_is_the_median_by_map_error() {
+        let r = |e: Option<f64>| (e, Some(0.1));
+        assert_eq!(
+            median_run(&[r(Some(0.38)), r(Some(0.13)), r(Some(0.12))]),
+            1
+        );
+        assert_eq!(median_run(&[r(Some(0.2)), r(Some(0.1))]), 1);
+        assert_eq!(median_run(&[r(None), r(Some(0.3)), r(Some(0.1))]), 2);
+        assert_eq!(median_run(&[r(Some(0.5))]), 0);
+        assert_eq!(median_run(&[r(None), r(Some(f64::NAN))]), 0);
+        assert_eq!(median_run(&[]), 0);
     }
 
     #[test]

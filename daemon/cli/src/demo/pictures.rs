@@ -196,7 +196,7 @@ pub fn maps_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
         }
         let l = i64::from(line_height(scale));
         c.text(x, 8, title(r.method), BLACK, scale);
-        // The scores of the map shown (the first seed's).
+        // The scores of the map shown (the median seed's).
         let err = match (&r.map_report, &r.trajectory_report) {
             (Ok(m), Ok(t)) => format!(
                 "map error {:.3} m, ATE {:.3} m",

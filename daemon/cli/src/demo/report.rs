@@ -131,7 +131,7 @@ fn table_rows(s: &mut String, c: &Comparison) {
     if c.seeds > 1 {
         let _ = writeln!(
             s,
-            "  (map error and ATE: mean of {} SLAM seeds; truth→map and map→truth: the first seed's map)",
+            "  (map error and ATE: mean of {} SLAM seeds; maps, trajectories, truth→map and map→truth: the median seed's run)",
             c.seeds
         );
         for r in &c.results {
