@@ -67,10 +67,9 @@
 //! a high spread, so the Dense test does not fire either. Ultrasound is not
 //! scattered by smoke, and a sonar echoes from the nearest surface in its
 //! cone, so laser ranges clearly nearer than the sonar's arc in that cone
-//! are something the sonar cannot see. (When the sonar heard nothing within
-//! its cap, the arc is its raw reading: a long first echo's range is
-//! unreliable, which is why the cap exists, but it still says the cone was
-//! empty up to there.) Each section's laser rule is therefore
+//! are something the sonar cannot see. When the sonar heard nothing within
+//! its cap, the arc is the cap's: beyond it a sonar misses weak and glancing
+//! echoes, so its silence there proves nothing. Each section's laser rule is therefore
 //! `w_L(τ) = min(w_L, max(1 − μ_Alcoholized, 1 − μ_Contradicted(τ)))`: in
 //! clean air nothing changes (bit-identical output); in alcoholized air a
 //! contradicted section goes to a confident sonar, or to neither when the
@@ -273,8 +272,8 @@ pub struct V2Params {
     pub dense: PiShape,
     /// Beyond the paper: μ Contradicted over the share of a section's laser
     /// ranges that lie nearer than the section's sonar says anything is (its
-    /// echo arc or, when it heard nothing within its cap, its raw reading) by
-    /// more than `contradiction_margin_m`. Ultrasound passes through smoke, so in
+    /// echo arc, or its cap when it heard nothing within it) by more than
+    /// `contradiction_margin_m`. Ultrasound passes through smoke, so in
     /// alcoholized air such a section is a phantom wall (see the module docs).
     pub contradicted: PiShape,
     /// How much nearer than the sonar's arc a laser range must be to count as contradicting it, m.

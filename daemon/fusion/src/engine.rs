@@ -328,7 +328,7 @@ impl FusionEngine {
             let (echo, raw) = self.echo(s.sonar_index);
             // The witness is only consulted when there is smoke to explain a contradiction.
             let share = if trust.mu_alcoholized > 0.0 {
-                self.contradicted_share(l, shape, &s, echo, f64::from(raw))
+                self.contradicted_share(l, shape, &s, echo)
             } else {
                 None
             };
@@ -371,24 +371,19 @@ impl FusionEngine {
 
     /// The share of the section's laser ranges that lie nearer than the
     /// sonar's arc by more than the margin: the echo's arc or, when the sonar
-    /// heard nothing within its cap, the arc of its raw reading (as a witness
-    /// a long first echo still says the cone was empty up to there; the cap
-    /// exists because the range of such echoes is unreliable, not their
-    /// absence nearer). `None` without a sonar reading or without a beam
-    /// both sensors cover.
+    /// heard nothing within its cap, the cap's (beyond it a sonar misses weak
+    /// and glancing echoes, so its silence there proves nothing). `None`
+    /// without a sonar reading or without a beam both sensors cover.
     fn contradicted_share(
         &mut self,
         l: &LaserScan,
         shape: &ScanShape,
         section: &Section,
         echo: SonarEcho,
-        raw_range: f64,
     ) -> Option<f64> {
-        let cap = self.geometry.cap_m();
         let radius = match echo {
             SonarEcho::Echo(r) => r,
-            SonarEcho::Saturated if raw_range.is_finite() => raw_range.max(cap),
-            SonarEcho::Saturated => cap,
+            SonarEcho::Saturated => self.geometry.cap_m(),
             SonarEcho::Missing => return None,
         };
         let pose = self.geometry.pose(section.sonar_index).copied()?;
