@@ -75,6 +75,9 @@ pub struct FusionEngine {
     decisions: [SectionSource; MAX_SONARS],
     /// v2: whether each section's own laser rule trusts its laser (ρL(τ) > ρT).
     section_laser_ok: [bool; MAX_SONARS],
+    /// `paint` already holds the section's sonar echo arc (painted by the
+    /// witness this cycle), so `apply_sections` need not paint it again.
+    echo_painted: [bool; MAX_SONARS],
 }
 
 impl FusionEngine {
@@ -92,6 +95,7 @@ impl FusionEngine {
             paint: Box::new([f32::INFINITY; MAX_BEAMS]),
             decisions: [SectionSource::Laser; MAX_SONARS],
             section_laser_ok: [true; MAX_SONARS],
+            echo_painted: [false; MAX_SONARS],
         }
     }
 
@@ -242,6 +246,7 @@ impl FusionEngine {
             frame_id: l.header.frame_id,
         };
         self.sections.update(&self.geometry, &shape);
+        self.echo_painted = [false; MAX_SONARS];
         let n_sections = self.sections.as_slice().len();
         report.sections = n_sections;
         let fuse = complete && self.method != FusionMethod::LaserOnly;
@@ -287,25 +292,14 @@ impl FusionEngine {
             self.record_section(k, rs, rl, out);
         }
         // Uncovered runs: accepted only between clean sections.
-        let count = l.len();
-        let mut i = 0;
-        while i < count {
-            if self.sections.owner(i).is_some() {
-                i += 1;
-                continue;
-            }
-            let first = i;
-            while i < count && self.sections.owner(i).is_none() {
-                i += 1;
-            }
-            let (left, right) = self.sections.neighbours(first, i);
+        for g in self.sections.gaps(l.len()) {
             let gap = v1::decide_gap(
                 state,
-                left.map(|k| self.decisions[k]),
-                right.map(|k| self.decisions[k]),
+                g.left.map(|k| self.decisions[k]),
+                g.right.map(|k| self.decisions[k]),
             );
             if gap == SectionSource::Neither {
-                blank(out, first, i);
+                blank(out, g.first, g.end);
             }
         }
     }
@@ -328,7 +322,7 @@ impl FusionEngine {
             let (echo, raw) = self.echo(s.sonar_index);
             // The witness is only consulted when there is smoke to explain a contradiction.
             let share = if trust.mu_alcoholized > 0.0 {
-                self.contradicted_share(l, shape, &s, echo)
+                self.contradicted_share(l, shape, k, echo)
             } else {
                 None
             };
@@ -345,31 +339,20 @@ impl FusionEngine {
             }
         }
         let scan_gap = self.fuzzy.decide_gap(&trust);
-        let count = out.scan.len();
-        let mut i = 0;
-        while i < count {
-            if self.sections.owner(i).is_some() {
-                i += 1;
-                continue;
-            }
-            let first = i;
-            while i < count && self.sections.owner(i).is_none() {
-                i += 1;
-            }
+        for g in self.sections.gaps(out.scan.len()) {
             // A gap between sections whose laser the sonar contradicted is the same smoke.
-            let (left, right) = self.sections.neighbours(first, i);
-            let neighbours_ok = [left, right]
+            let neighbours_ok = [g.left, g.right]
                 .into_iter()
                 .flatten()
                 .all(|k| self.section_laser_ok[k]);
             if scan_gap == SectionSource::Neither || !neighbours_ok {
-                blank(out, first, i);
+                blank(out, g.first, g.end);
             }
         }
         trust.rho
     }
 
-    /// The share of the section's laser ranges that lie nearer than the
+    /// The share of section `k`'s laser ranges that lie nearer than the
     /// sonar's arc by more than the margin: the echo's arc or, when the sonar
     /// heard nothing within its cap, the cap's (beyond it a sonar misses weak
     /// and glancing echoes, so its silence there proves nothing). `None`
@@ -378,24 +361,20 @@ impl FusionEngine {
         &mut self,
         l: &LaserScan,
         shape: &ScanShape,
-        section: &Section,
+        k: usize,
         echo: SonarEcho,
     ) -> Option<f64> {
+        let section = self.sections.as_slice()[k];
         let radius = match echo {
             SonarEcho::Echo(r) => r,
             SonarEcho::Saturated => self.geometry.cap_m(),
             SonarEcho::Missing => return None,
         };
-        let pose = self.geometry.pose(section.sonar_index).copied()?;
+        self.paint_arc(shape, &section, radius, f64::from(l.range_min));
+        // apply_sections needs this very arc if the section goes to its sonar.
+        self.echo_painted[k] = matches!(echo, SonarEcho::Echo(_));
         let end = section.end.min(l.len()).min(self.paint.len());
         let first = section.first.min(end);
-        self.paint[first..end].fill(f32::INFINITY);
-        let (geometry, paint) = (&self.geometry, &mut self.paint);
-        geometry.for_each_arc_beam(shape, &pose, radius, |i, t| {
-            if (first..end).contains(&i) {
-                paint[i] = paint[i].min(t as f32);
-            }
-        });
         let margin = self.fuzzy.params().contradiction_margin_m;
         let (mut compared, mut nearer) = (0usize, 0usize);
         for i in first..end {
@@ -412,6 +391,25 @@ impl FusionEngine {
             }
         }
         (compared > 0).then(|| nearer as f64 / compared as f64)
+    }
+
+    /// Paints into `paint[section]` the distance along each beam to the arc of
+    /// radius `radius` of the section's sonar (infinity where a beam misses
+    /// it or meets it nearer than `range_min`).
+    fn paint_arc(&mut self, shape: &ScanShape, section: &Section, radius: f64, range_min: f64) {
+        let range_min = range_min.max(0.0);
+        let (first, end) = (section.first, section.end.min(self.paint.len()));
+        let first = first.min(end);
+        self.paint[first..end].fill(f32::INFINITY);
+        let Some(pose) = self.geometry.pose(section.sonar_index).copied() else {
+            return;
+        };
+        let (geometry, paint) = (&self.geometry, &mut self.paint);
+        geometry.for_each_arc_beam(shape, &pose, radius, |i, t| {
+            if (first..end).contains(&i) && t >= range_min {
+                paint[i] = paint[i].min(t as f32);
+            }
+        });
     }
 
     /// Blanks the section's laser beams nearer than the arc painted by the
@@ -447,7 +445,7 @@ impl FusionEngine {
 
     /// Writes the beams of every non-laser section.
     fn apply_sections(&mut self, l: &LaserScan, shape: &ScanShape, out: &mut FusedScan) {
-        let range_min = f64::from(l.range_min).max(0.0);
+        let range_min = f64::from(l.range_min);
         for k in 0..self.sections.as_slice().len() {
             let d = self.decisions[k];
             let s = self.sections.as_slice()[k];
@@ -455,16 +453,11 @@ impl FusionEngine {
                 SectionSource::Laser => {}
                 SectionSource::Neither => blank(out, s.first, s.end),
                 SectionSource::Sonar | SectionSource::Both => {
-                    let pose = self.geometry.pose(s.sonar_index).copied();
-                    let (echo, _) = self.echo(s.sonar_index);
-                    let (geometry, paint) = (&self.geometry, &mut self.paint);
-                    paint[s.first..s.end].fill(f32::INFINITY);
-                    if let (Some(pose), SonarEcho::Echo(r)) = (pose, echo) {
-                        geometry.for_each_arc_beam(shape, &pose, r, |i, t| {
-                            if (s.first..s.end).contains(&i) && t >= range_min {
-                                paint[i] = paint[i].min(t as f32);
-                            }
-                        });
+                    if !self.echo_painted[k] {
+                        match self.echo(s.sonar_index).0 {
+                            SonarEcho::Echo(r) => self.paint_arc(shape, &s, r, range_min),
+                            _ => self.paint[s.first..s.end].fill(f32::INFINITY),
+                        }
                     }
                     for i in s.first..s.end {
                         let p = self.paint[i];

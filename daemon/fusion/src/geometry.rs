@@ -455,6 +455,40 @@ impl Sections {
         let right = self.owner(end);
         (left, right)
     }
+
+    /// The maximal runs of the first `count` beams that no section covers.
+    pub fn gaps(&self, count: usize) -> impl Iterator<Item = Gap> + '_ {
+        let mut i = 0;
+        std::iter::from_fn(move || {
+            while i < count && self.owner(i).is_some() {
+                i += 1;
+            }
+            if i >= count {
+                return None;
+            }
+            let first = i;
+            while i < count && self.owner(i).is_none() {
+                i += 1;
+            }
+            let (left, right) = self.neighbours(first, i);
+            Some(Gap {
+                first,
+                end: i,
+                left,
+                right,
+            })
+        })
+    }
+}
+
+/// A run of beams `[first, end)` between sections, with the sections (their
+/// positions in [`Sections::as_slice`]) on either side, if any.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Gap {
+    pub first: usize,
+    pub end: usize,
+    pub left: Option<usize>,
+    pub right: Option<usize>,
 }
 
 #[cfg(test)]
@@ -623,6 +657,22 @@ mod tests {
         assert_eq!(s.owner(90), None);
         assert_eq!(s.neighbours(71, 110), (Some(0), Some(1)));
         assert_eq!(s.neighbours(0, 50), (None, Some(0)));
+        let gaps: Vec<Gap> = s.gaps(181).collect();
+        let gap = |first, end, left, right| Gap {
+            first,
+            end,
+            left,
+            right,
+        };
+        assert_eq!(
+            gaps,
+            vec![
+                gap(0, 50, None, Some(0)),
+                gap(71, 110, Some(0), Some(1)),
+                gap(131, 181, Some(1), None),
+            ]
+        );
+        assert_eq!(s.gaps(60).count(), 1, "a scan ending inside a section");
     }
 
     #[test]

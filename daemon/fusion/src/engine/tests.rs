@@ -314,13 +314,25 @@ fn light_smoke_replaces_only_the_noisy_section() {
     assert_eq!(out.beam_source(0), SectionSource::Laser);
 }
 
-/// v2 for the small test room: its scans' σ (~0.4 m) counts as structured.
-fn v2_small_room() -> FusionEngine {
+/// v2 for the small test room (its scans' σ of ~0.4 m counts as
+/// structured), after one clean scan at `level` so its sections are laid out;
+/// with the room's true sonar ring and an output buffer.
+fn v2_small_room(level: f32, trend: SmokeTrend) -> (FusionEngine, SonarRing, Box<FusedScan>) {
     let cfg = profile("pioneer-3dx.toml");
     let mut v2 = cfg.fusion.v2.clone();
     v2.dense = smokenav_config::fusion::PiShape::new(0.0, 0.0, 0.1, 0.2);
     let geometry = SonarGeometry::from_config(&cfg.laser, &cfg.sonar, &cfg.fusion).unwrap();
-    FusionEngine::new(FusionMethod::V2, geometry, cfg.fusion.v1.clone(), v2)
+    let mut e = FusionEngine::new(FusionMethod::V2, geometry, cfg.fusion.v1.clone(), v2);
+    let mut out = fused();
+    let sonar = true_sonar(&e, 0);
+    e.step(
+        Some(&clean_scan(0)),
+        Some(&sonar),
+        Some(&smoke(0, level, trend)),
+        &mut out,
+    )
+    .unwrap();
+    (e, sonar, out)
 }
 
 /// The room, except a smoke front 0.7 m ahead in sonar 3's section.
@@ -346,16 +358,7 @@ fn v2_gives_a_section_the_sonar_contradicts_in_smoky_air_to_the_sonar() {
     // Smoke 60 (alcoholized, but far below v1's 130) and a structured scan
     // (not dense): the paper's rule alone trusts the whole laser.
     // Sonar 3 echoes from the wall, well beyond the laser's 0.7 m smoke front.
-    let mut e = v2_small_room();
-    let mut out = fused();
-    let sonar = true_sonar(&e, 0);
-    e.step(
-        Some(&clean_scan(0)),
-        Some(&sonar),
-        Some(&smoke(0, 60.0, SmokeTrend::Rising)),
-        &mut out,
-    )
-    .unwrap();
+    let (mut e, sonar, mut out) = v2_small_room(60.0, SmokeTrend::Rising);
     let (laser, s3) = phantom_in_section(&e, 3, 0.7);
     assert!(spread(&laser) > 0.2, "{}", spread(&laser));
     e.step(
@@ -407,16 +410,7 @@ fn v2_ignores_a_contradicting_sonar_in_clean_air() {
     // The same phantom-looking section without smoke: sonars miss walls by
     // specular reflection far more often than the laser invents one, so the
     // output stays the input, bit for bit.
-    let mut e = v2_small_room();
-    let mut out = fused();
-    let sonar = true_sonar(&e, 0);
-    e.step(
-        Some(&clean_scan(0)),
-        Some(&sonar),
-        Some(&smoke(0, 0.0, SmokeTrend::Steady)),
-        &mut out,
-    )
-    .unwrap();
+    let (mut e, sonar, mut out) = v2_small_room(0.0, SmokeTrend::Steady);
     let (laser, _) = phantom_in_section(&e, 3, 0.7);
     e.step(
         Some(&laser),
@@ -433,16 +427,7 @@ fn v2_ignores_a_contradicting_sonar_in_clean_air() {
 fn v2_drops_single_contradicted_beams_of_a_kept_section() {
     // Patchy smoke: every fourth beam of sonar 3's section reads 0.5 m, the rest
     // the wall. Too few to give the section away, but those beams go.
-    let mut e = v2_small_room();
-    let mut out = fused();
-    let sonar = true_sonar(&e, 0);
-    e.step(
-        Some(&clean_scan(0)),
-        Some(&sonar),
-        Some(&smoke(0, 60.0, SmokeTrend::Rising)),
-        &mut out,
-    )
-    .unwrap();
+    let (mut e, sonar, mut out) = v2_small_room(60.0, SmokeTrend::Rising);
     let s3 = *e
         .sections
         .as_slice()
