@@ -224,6 +224,22 @@ fn spawn_publisher(instance: &str, role: &str, count: u64, base: u64) -> Child {
 
 // ---- the independent reader ------------------------------------------------------
 
+/// The three stand-in drivers publish `COUNT` messages each, starting after
+/// `lead`; returns once all are done, with the children (kept alive) and the
+/// stamp base their messages are built from.
+fn publish_all(instance: &str, lead: Duration) -> (Vec<Child>, u64) {
+    let base = stamp_base(lead);
+    let publishers: Vec<Child> = ["laser", "base", "smoke"]
+        .iter()
+        .map(|role| spawn_publisher(instance, role, COUNT, base))
+        .collect();
+    for p in &publishers {
+        p.wait_for_line(&format!("done {COUNT}"), Duration::from_secs(60))
+            .unwrap();
+    }
+    (publishers, base)
+}
+
 fn python() -> String {
     std::env::var("SMOKENAV_PYTHON").unwrap_or_else(|_| "python3".into())
 }
@@ -463,15 +479,7 @@ fn live_run_recorded_decodes_in_python_and_replays_bit_identical() {
     recorder
         .wait_for_line("recording", Duration::from_secs(60))
         .unwrap();
-    let base = stamp_base(Duration::from_secs(2));
-    let publishers: Vec<Child> = ["laser", "base", "smoke"]
-        .iter()
-        .map(|role| spawn_publisher(&live, role, COUNT, base))
-        .collect();
-    for p in &publishers {
-        p.wait_for_line(&format!("done {COUNT}"), Duration::from_secs(60))
-            .unwrap();
-    }
+    let (publishers, base) = publish_all(&live, Duration::from_secs(2));
     // The last messages reach the recorder within a wait; then stop it cleanly.
     std::thread::sleep(Duration::from_millis(500));
     recorder.signal(nix::sys::signal::Signal::SIGINT);
@@ -802,15 +810,7 @@ fn replayed_inputs_give_fusion_and_slam_the_same_output_as_live() {
     let stop = Arc::new(AtomicBool::new(false));
     // Only to know when SLAM has caught up before the recorder stops.
     let live_watch = collect::<PoseEstimate>(&live, "slam/pose", &stop, Duration::from_secs(1));
-    let base = stamp_base(Duration::from_secs(3));
-    let publishers: Vec<Child> = ["laser", "base", "smoke"]
-        .iter()
-        .map(|role| spawn_publisher(&live, role, COUNT, base))
-        .collect();
-    for p in &publishers {
-        p.wait_for_line(&format!("done {COUNT}"), Duration::from_secs(60))
-            .unwrap();
-    }
+    let (publishers, _) = publish_all(&live, Duration::from_secs(3));
     stop.store(true, Ordering::Relaxed);
     let watched = live_watch.join().unwrap();
     std::thread::sleep(Duration::from_millis(300));
