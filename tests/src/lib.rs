@@ -14,8 +14,8 @@
 //! - [`wait_for`]: receive messages of a topic until a predicate holds or a timeout passes.
 
 use anyhow::{Context, bail};
-use smokenav_bus::{Bus, BusOptions, Message, Waiter};
-use smokenav_config::RobotConfig;
+use smokenav_platform_bus::{Bus, BusOptions, Message, Waiter};
+use smokenav_platform_config::RobotConfig;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -279,4 +279,97 @@ pub fn profile(dir: &Path, shipped: &str, edit: impl FnOnce(&mut RobotConfig)) -
     let path = dir.join(format!("test-{shipped}"));
     std::fs::write(&path, cfg.to_toml()).expect("write profile");
     path
+}
+
+/// A Python interpreter that has the independent readers the tests check
+/// smokenav's files against (`tests/python/requirements.txt`): a virtual
+/// environment under `target/`, created and filled by the first test that
+/// needs it (other test processes wait on a lock), so `cargo test` alone works
+/// on a fresh machine. `SMOKENAV_PYTHON` names another interpreter instead.
+/// Panics with the reason when it cannot be set up: these checks are never
+/// skipped.
+pub fn python() -> PathBuf {
+    static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    PYTHON
+        .get_or_init(|| {
+            if let Ok(p) = std::env::var("SMOKENAV_PYTHON") {
+                return Ok(PathBuf::from(p));
+            }
+            prepare_venv()
+        })
+        .clone()
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn prepare_venv() -> Result<PathBuf, String> {
+    let requirements = workspace_root().join("tests/python/requirements.txt");
+    let wanted = std::fs::read_to_string(&requirements)
+        .map_err(|e| format!("cannot read {}: {e}", requirements.display()))?;
+    // target/<profile>/.. is target/, shared by debug and release test runs.
+    let target = target_profile_dir()
+        .parent()
+        .map(Path::to_owned)
+        .ok_or("no target folder")?;
+    let venv = target.join("python-venv");
+    let stamp = venv.join("smokenav-requirements.txt");
+    let interpreter = venv.join("bin/python");
+    let ready = || std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted);
+    if ready() {
+        return Ok(interpreter);
+    }
+    std::fs::create_dir_all(&target)
+        .map_err(|e| format!("cannot create {}: {e}", target.display()))?;
+    let lock_path = target.join("python-venv.lock");
+    let lock_file = std::fs::File::create(&lock_path)
+        .map_err(|e| format!("cannot create {}: {e}", lock_path.display()))?;
+    let _lock = nix::fcntl::Flock::lock(lock_file, nix::fcntl::FlockArg::LockExclusive)
+        .map_err(|(_, e)| format!("cannot lock {}: {e}", lock_path.display()))?;
+    if ready() {
+        return Ok(interpreter);
+    }
+    let base = std::env::var("PYTHON3").unwrap_or_else(|_| "python3".into());
+    let run = |cmd: &mut Command, what: &str| -> Result<(), String> {
+        let out = cmd
+            .output()
+            .map_err(|e| format!("{what}: cannot run {:?}: {e}", cmd.get_program()))?;
+        if out.status.success() {
+            Ok(())
+        } else {
+            Err(format!(
+                "{what} failed ({}):\n{}{}",
+                out.status,
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr)
+            ))
+        }
+    };
+    if !interpreter.exists() {
+        run(
+            Command::new(&base).args(["-m", "venv"]).arg(&venv),
+            &format!(
+                "creating the test Python environment {} (Debian: apt-get install python3-venv)",
+                venv.display()
+            ),
+        )?;
+    }
+    run(
+        Command::new(&interpreter)
+            .args([
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--disable-pip-version-check",
+                "-r",
+            ])
+            .arg(&requirements),
+        &format!(
+            "installing {} into {}",
+            requirements.display(),
+            venv.display()
+        ),
+    )?;
+    std::fs::write(&stamp, &wanted)
+        .map_err(|e| format!("cannot write {}: {e}", stamp.display()))?;
+    Ok(interpreter)
 }

@@ -6,10 +6,10 @@
 //! role (the `#[ignore]`d `child_role` entry point), so no extra binaries are needed.
 
 use iceoryx2_bb_derive_macros::ZeroCopySend;
-use smokenav_bus::{Message, WaitOutcome, Waiter};
+use smokenav_platform_bus::{Message, WaitOutcome, Waiter};
+use smokenav_shared_types::laser::{BEAM_NO_RETURN, BeamReading};
+use smokenav_shared_types::{Header, LaserScan, ZeroCopySend};
 use smokenav_tests::{Child, open_bus, unique_instance};
-use smokenav_types::laser::{BEAM_NO_RETURN, BeamReading};
-use smokenav_types::{Header, LaserScan, ZeroCopySend};
 use std::time::{Duration, Instant};
 
 const ROLE_ENV: &str = "SMOKENAV_TEST_ROLE";

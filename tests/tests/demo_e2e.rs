@@ -1,10 +1,10 @@
-//! `smokenav demo --fast` end to end (the real binary): a recording straight
+//! `smokenav-lab demo --fast` end to end (the real binary): a recording straight
 //! from the simulator, fusion + SLAM three ways, scored against the ground
 //! truth, and every promised output file. Kept short (`--duration`,
 //! `--particles`) so a debug build on two cores finishes well within CI's
 //! two minutes.
 
-use smokenav_recording::Playback;
+use smokenav_platform_recording::Playback;
 use smokenav_tests::bin;
 use std::path::Path;
 use std::process::Command;
@@ -24,7 +24,7 @@ fn png_size(path: &Path) -> (u32, u32) {
 }
 
 fn demo(args: &[&str]) -> serde_json::Value {
-    let out = Command::new(bin("smokenav"))
+    let out = Command::new(bin("smokenav-lab"))
         .arg("demo")
         .args(args)
         .output()
@@ -32,7 +32,7 @@ fn demo(args: &[&str]) -> serde_json::Value {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         out.status.success(),
-        "smokenav demo failed: {}\n{stderr}",
+        "smokenav-lab demo failed: {}\n{stderr}",
         out.status
     );
     let stdout = String::from_utf8(out.stdout).unwrap();
@@ -85,11 +85,12 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
     assert_eq!(file, v);
 
     // Ground truth and one map_server map and trajectory per method.
-    let truth = smokenav_mapio::load_map_server(&out.join("truth.yaml")).unwrap();
+    let truth = smokenav_platform_map::load_map_server(&out.join("truth.yaml")).unwrap();
     assert!((truth.resolution - 0.05).abs() < 1e-9);
     for m in ["laser-only", "v1", "v2"] {
         let map =
-            smokenav_mapio::load_map_server(&out.join("maps").join(format!("{m}.yaml"))).unwrap();
+            smokenav_platform_map::load_map_server(&out.join("maps").join(format!("{m}.yaml")))
+                .unwrap();
         assert!(!map.occupied_points(65).is_empty(), "{m}: a map with walls");
         let traj =
             std::fs::read_to_string(out.join("trajectories").join(format!("{m}.txt"))).unwrap();
@@ -151,14 +152,14 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
 
 #[test]
 fn bad_arguments_are_refused_with_a_reason() {
-    let out = Command::new(bin("smokenav"))
+    let out = Command::new(bin("smokenav-lab"))
         .args(["demo", "--fast", "--scenario", "no-such-scenario"])
         .output()
         .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no-such-scenario"), "{err}");
-    let out = Command::new(bin("smokenav"))
+    let out = Command::new(bin("smokenav-lab"))
         .args(["demo", "--fast", "--duration=-3"])
         .output()
         .unwrap();

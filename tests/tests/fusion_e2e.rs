@@ -4,17 +4,17 @@
 //! the health reports are checked here, and the fused scans are compared with
 //! an offline replay of exactly the published inputs (`smokenav fuse`'s library).
 
-use smokenav_bus::{Bus, Publisher, Subscriber, Waiter, topics};
-use smokenav_config::{Method, RobotConfig};
-use smokenav_fusion::offline::fuse_jsonl;
-use smokenav_fusion::pipeline::FusionPipeline;
-use smokenav_fusion::testkit::{Room, smoke_reading, smoky_scan};
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
-use smokenav_types::clock::monotonic_now_ns;
-use smokenav_types::record::{FusedScanRecord, Message, TopicRecord};
-use smokenav_types::{
+use smokenav_algorithms_fusion::offline::fuse_jsonl;
+use smokenav_algorithms_fusion::pipeline::FusionPipeline;
+use smokenav_algorithms_fusion::testkit::{Room, smoke_reading, smoky_scan};
+use smokenav_platform_bus::{Bus, Publisher, Subscriber, Waiter, topics};
+use smokenav_platform_config::{Method, RobotConfig};
+use smokenav_shared_types::clock::monotonic_now_ns;
+use smokenav_shared_types::record::{FusedScanRecord, Message, TopicRecord};
+use smokenav_shared_types::{
     FusedScan, Health, HealthState, LaserScan, SmokeReading, SmokeTrend, SonarRing, SyncState,
 };
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -196,7 +196,7 @@ fn dense_smoke_sections_use_the_sonar_and_a_replay_gives_the_same_scans() {
             assert!(
                 f.sections()
                     .iter()
-                    .all(|d| d.source() == smokenav_types::SectionSource::Sonar),
+                    .all(|d| d.source() == smokenav_shared_types::SectionSource::Sonar),
                 "scan {k}"
             );
             assert_eq!(f.sonar_usage(), 1.0);

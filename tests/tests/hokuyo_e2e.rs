@@ -2,11 +2,11 @@
 //! ↔ the real `smokenav-hokuyo` binary (its own process) ↔ bus subscribers (this
 //! process). Scans are checked beam by beam against what the emulator was fed.
 
-use smokenav_bus::{Bus, Subscriber, Waiter, topics};
 use smokenav_hokuyo_emulator::{BootState, DeviceConfig, Emulator, EmulatorConfig};
+use smokenav_platform_bus::{Bus, Subscriber, Waiter, topics};
+use smokenav_shared_types::laser::{BeamReading, LaserScan};
+use smokenav_shared_types::{Health, HealthState};
 use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
-use smokenav_types::laser::{BeamReading, LaserScan};
-use smokenav_types::{Health, HealthState};
 use std::f64::consts::TAU;
 use std::time::{Duration, Instant};
 

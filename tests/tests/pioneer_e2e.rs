@@ -2,10 +2,12 @@
 //! test process) ↔ the real `smokenav-pioneer` binary (its own process) ↔ bus
 //! subscribers here and the real `smokenav drive` CLI as the controller.
 
-use smokenav_bus::{Bus, Publisher, Subscriber, Waiter, topics};
 use smokenav_pioneer_emulator::{Emulator, Phase, Pose, RobotConfig};
+use smokenav_platform_bus::{Bus, Publisher, Subscriber, Waiter, topics};
+use smokenav_shared_types::{
+    Health, Odometry, OdometryFlags, SonarRing, SonarStatus, VelocityCommand,
+};
 use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
-use smokenav_types::{Health, Odometry, OdometryFlags, SonarRing, SonarStatus, VelocityCommand};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -27,7 +29,7 @@ fn start(
     test: &str,
     robot: RobotConfig,
     transport: Transport,
-    edit: impl FnOnce(&mut smokenav_config::RobotConfig),
+    edit: impl FnOnce(&mut smokenav_platform_config::RobotConfig),
 ) -> (tempfile::TempDir, Emulator, Child, Bus, String) {
     let dir = tempfile::tempdir().unwrap();
     let emu = match transport {
@@ -69,7 +71,7 @@ fn rig(test: &str, robot: RobotConfig, transport: Transport) -> Rig {
 }
 
 /// Everything `sub` receives for `d`.
-fn collect<T: smokenav_bus::Message>(sub: &Subscriber<T>, d: Duration) -> Vec<T> {
+fn collect<T: smokenav_platform_bus::Message>(sub: &Subscriber<T>, d: Duration) -> Vec<T> {
     let waiter = Waiter::new().unwrap();
     let _g = waiter.attach(sub).unwrap();
     let end = Instant::now() + d;
@@ -378,7 +380,7 @@ fn unknown_subclass_exits_with_a_clear_error_unless_the_profile_names_one() {
     assert!(out.contains("[base.pioneer]"), "{out}");
 
     let (_dir, _emu, driver, bus, _i) = start("pioneer_box_ok", boxy(), Transport::Pty, |c| {
-        c.base.pioneer = Some(smokenav_config::base::PioneerOptions {
+        c.base.pioneer = Some(smokenav_platform_config::base::PioneerOptions {
             subclass: Some("p3dx".into()),
             ..Default::default()
         });

@@ -13,16 +13,16 @@
 //! The Python packages are required, not optional: without them the
 //! recording tests fail and say how to install them.
 
-use smokenav_bus::{Message as BusMsg, Subscriber, Waiter};
-use smokenav_config::slam::SlamInput;
-use smokenav_recording::{BitIdentical, EndOfData, McapSource, Message, Playback};
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
-use smokenav_types::clock::monotonic_now_ns;
-use smokenav_types::laser::BEAM_SENSOR_CODE;
-use smokenav_types::{
+use smokenav_platform_bus::{Message as BusMsg, Subscriber, Waiter};
+use smokenav_platform_config::slam::SlamInput;
+use smokenav_platform_recording::{BitIdentical, EndOfData, McapSource, Message, Playback};
+use smokenav_shared_types::clock::monotonic_now_ns;
+use smokenav_shared_types::laser::BEAM_SENSOR_CODE;
+use smokenav_shared_types::{
     BeamReading, FusedScan, Header, LaserScan, Odometry, PoseEstimate, SmokeReading, SonarReading,
     SonarRing, SonarStatus,
 };
+use smokenav_tests::{Child, bin, open_bus, profile, python, unique_instance, workspace_root};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -68,7 +68,7 @@ fn make_odom(base: u64, seq: u64) -> Odometry {
         header: Header::new(base + seq * 100_000_000 + 1_000, seq, "odom"),
         x: 0.3 * t,
         y: 0.05 * t * t,
-        theta: smokenav_types::odom::normalize_angle(0.4 * t),
+        theta: smokenav_shared_types::odom::normalize_angle(0.4 * t),
         linear: 0.3,
         angular: 0.4,
         flags: 1 | u32::from(seq.is_multiple_of(7)) << 1,
@@ -240,31 +240,21 @@ fn publish_all(instance: &str, lead: Duration) -> (Vec<Child>, u64) {
     (publishers, base)
 }
 
-fn python() -> String {
-    std::env::var("SMOKENAV_PYTHON").unwrap_or_else(|_| "python3".into())
-}
-
-/// Runs tests/python/check_recording.py; panics with the install hint if
-/// Python or its packages are missing.
+/// Runs tests/python/check_recording.py with the kit's Python (which has the
+/// independent readers).
 fn run_python_check(args: &[&Path]) -> String {
     let script = workspace_root().join("tests/python/check_recording.py");
     let out = Command::new(python())
         .arg(&script)
         .args(args)
         .output()
-        .unwrap_or_else(|e| {
-            panic!(
-                "cannot run {} ({e}): the recording tests need Python 3 with \
-                 `python3 -m pip install mcap mcap-ros2-support rosbags`",
-                python()
-            )
-        });
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", python().display()));
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         !stdout.contains("MISSING"),
-        "{stdout}\nThe recording tests need the independent readers: \
-         python3 -m pip install mcap mcap-ros2-support rosbags"
+        "{stdout}\n{} lacks the independent readers of tests/python/requirements.txt",
+        python().display()
     );
     assert!(
         out.status.success(),
@@ -355,7 +345,7 @@ fn check_python_dump(dump: &Path, count: u64, base: u64) {
                 assert_eq!(f["linear"].as_u64(), Some(bits64(o.linear)));
                 assert_eq!(f["angular"].as_u64(), Some(bits64(o.angular)));
                 let yaw = f["yaw"].as_f64().unwrap();
-                let d = smokenav_types::odom::normalize_angle(yaw - o.theta);
+                let d = smokenav_shared_types::odom::normalize_angle(yaw - o.theta);
                 assert!(d.abs() < 1e-9, "odometry {seq}: yaw {yaw} vs θ {}", o.theta);
             }
             "/base/odom/extras" => {
@@ -961,7 +951,7 @@ fn replayed_inputs_give_fusion_and_slam_the_same_output_as_live() {
     let difference = |r: &PoseEstimate, l: &PoseEstimate| {
         (
             (r.x - l.x).hypot(r.y - l.y),
-            smokenav_types::odom::normalize_angle(r.theta - l.theta).abs(),
+            smokenav_shared_types::odom::normalize_angle(r.theta - l.theta).abs(),
         )
     };
     // While both runs processed the same scans, the filters had the same
@@ -1044,7 +1034,7 @@ fn replayed_inputs_give_fusion_and_slam_the_same_output_as_live() {
     let (first, last) = (live_poses[0], live_poses[live_poses.len() - 1]);
     assert!(
         (last.x - first.x).hypot(last.y - first.y) > 0.01
-            || smokenav_types::odom::normalize_angle(last.theta - first.theta).abs() > 0.05,
+            || smokenav_shared_types::odom::normalize_angle(last.theta - first.theta).abs() > 0.05,
         "SLAM's pose never moved from ({}, {}, {}): the comparison would prove little",
         first.x,
         first.y,

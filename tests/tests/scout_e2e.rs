@@ -2,12 +2,12 @@
 //! process) ↔ the real `smokenav-scout` binary (its own process) ↔ bus
 //! subscribers and a command publisher (this process).
 
-use smokenav_bus::{Bus, Publisher, topics};
+use smokenav_platform_bus::{Bus, Publisher, topics};
 use smokenav_scout_emulator::{EmulatorConfig, Pose, ScoutEmulator, SonarOrder};
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
-use smokenav_types::{
+use smokenav_shared_types::{
     Health, HealthState, Odometry, OdometryFlags, SonarRing, SonarStatus, VelocityCommand,
 };
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -227,12 +227,12 @@ fn link_pulled_and_restored_resumes_within_1_s() {
     // Messages queued before the unplug may still be delivered; none after.
     if let Ok(msgs) = &stale {
         let newest = msgs.iter().map(|m| m.header.stamp_ns).max().unwrap_or(0);
-        let unplugged_ago = smokenav_types::clock::monotonic_now_ns() - newest;
+        let unplugged_ago = smokenav_shared_types::clock::monotonic_now_ns() - newest;
         assert!(unplugged_ago > 1_000_000_000, "published while unplugged");
     }
     r.emu.reconnect();
     let back = Instant::now();
-    let replugged_at = smokenav_types::clock::monotonic_now_ns();
+    let replugged_at = smokenav_shared_types::clock::monotonic_now_ns();
     let odoms = wait_for::<Odometry>(&r.bus, topics::BASE_ODOM, Duration::from_secs(3), |o| {
         o.header.stamp_ns > replugged_at
     })

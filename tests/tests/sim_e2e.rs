@@ -8,14 +8,14 @@
 //! stamped when the world measured it (checked against a second, identical
 //! world stepped here: same scenario and seed ⇒ same sensor data).
 
-use smokenav_bus::{Bus, Publisher, Subscriber, Waiter, topics};
-use smokenav_sim::{Scenario, World};
-use smokenav_simlink::{RunSummary, SimLink, SimLinkConfig, TRUTH_TOPIC, TruthPublisher, Until};
-use smokenav_tests::{Child, bin, open_bus, unique_instance, wait_for};
-use smokenav_types::{
+use smokenav_platform_bus::{Bus, Publisher, Subscriber, Waiter, topics};
+use smokenav_shared_types::{
     BeamReading, FusedScan, Health, HealthState, LaserScan, Odometry, PoseEstimate, SmokeReading,
     SonarRing, SonarStatus, SyncState, VelocityCommand,
 };
+use smokenav_sim_link::{RunSummary, SimLink, SimLinkConfig, TRUTH_TOPIC, TruthPublisher, Until};
+use smokenav_sim_world::{Scenario, World};
+use smokenav_tests::{Child, bin, open_bus, unique_instance, wait_for};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -93,13 +93,13 @@ fn run_world(
 }
 
 /// Arrival times and messages of one topic.
-struct Tap<T: smokenav_bus::Message> {
+struct Tap<T: smokenav_platform_bus::Message> {
     sub: Subscriber<T>,
     /// Filled while the subscriber is attached to a waiter (borrowed).
     got: std::cell::RefCell<Vec<(Instant, T)>>,
 }
 
-impl<T: smokenav_bus::Message> Tap<T> {
+impl<T: smokenav_platform_bus::Message> Tap<T> {
     fn new(bus: &Bus, topic: &str) -> Self {
         Self {
             sub: bus.subscriber(topic).unwrap(),
@@ -346,7 +346,7 @@ fn pioneer_in_the_corridor_streams_through_its_driver() {
 #[test]
 fn without_a_route_the_drivers_velocity_commands_move_the_world() {
     // mrl-clean without its [route]: the robot is driven by base/cmd_vel.
-    let text = smokenav_sim::BUILTIN_SCENARIOS
+    let text = smokenav_sim_world::BUILTIN_SCENARIOS
         .iter()
         .find(|(n, _)| *n == "mrl-clean")
         .unwrap()

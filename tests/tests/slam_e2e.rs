@@ -5,16 +5,16 @@
 //! is saved with `smokenav map save` and with SIGUSR1, and a burst of scans
 //! shows the process skipping to the newest instead of queueing.
 
-use smokenav_bus::{MapSubscriber, Publisher, Waiter, topics};
-use smokenav_config::MountPose;
-use smokenav_config::slam::SlamInput;
-use smokenav_slam::carmen::{CarmenReader, LaserRecord, Record};
-use smokenav_slam::eval::{absolute_trajectory_error, parse_pose_file};
-use smokenav_slam::{Pose2, StampedPose};
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
-use smokenav_types::{
+use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_algorithms_slam::eval::{absolute_trajectory_error, parse_pose_file};
+use smokenav_algorithms_slam::{Pose2, StampedPose};
+use smokenav_platform_bus::{MapSubscriber, Publisher, Waiter, topics};
+use smokenav_platform_config::MountPose;
+use smokenav_platform_config::slam::SlamInput;
+use smokenav_shared_types::{
     BeamReading, Clock, Header, LaserScan, MonotonicClock, Odometry, PoseEstimate,
 };
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
 use std::io::BufReader;
 use std::time::{Duration, Instant};
 
@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 const RANGE_MAX: f32 = 81.9;
 
 fn log_records() -> Vec<LaserRecord> {
-    let path = workspace_root().join("daemon/slam/tests/data/csail-prefix-200.clf");
+    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
     CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
         .filter_map(|r| match r {
             Ok(Record::Laser(l)) => Some(l),
@@ -68,7 +68,7 @@ fn publish(
 
 /// Waits for the pose of the scan stamped `stamp_ns`.
 fn pose_for(
-    poses: &smokenav_bus::Subscriber<PoseEstimate>,
+    poses: &smokenav_platform_bus::Subscriber<PoseEstimate>,
     waiter: &Waiter,
     stamp_ns: u64,
     timeout: Duration,
@@ -146,7 +146,7 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
         });
     }
     let reference = parse_pose_file(&std::fs::read_to_string(
-        workspace_root().join("daemon/slam/tests/data/csail-reference-poses.txt"),
+        workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"),
     )?)?;
     let ate = absolute_trajectory_error(&estimate, &reference, 1_000_000).expect("common poses");
     eprintln!("slam_e2e: ATE of the online poses over the first 200 CSAIL scans: {ate:?}");
@@ -172,17 +172,17 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let map = smokenav_mapio::load_map_server(&saved.join("map.yaml"))?;
+    let map = smokenav_platform_map::load_map_server(&saved.join("map.yaml"))?;
     assert_eq!(map.resolution, 0.05);
     let occupied = map
         .cells
         .iter()
-        .filter(|&&c| c == smokenav_mapio::OCCUPIED)
+        .filter(|&&c| c == smokenav_platform_map::OCCUPIED)
         .count();
     let free = map
         .cells
         .iter()
-        .filter(|&&c| c == smokenav_mapio::FREE)
+        .filter(|&&c| c == smokenav_platform_map::FREE)
         .count();
     assert!(
         occupied > 500 && free > 10 * occupied,
@@ -195,11 +195,11 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
     // SIGUSR1 makes the process write its own map.
     slam.signal(nix::sys::signal::Signal::SIGUSR1);
     slam.wait_for_line("map saved", Duration::from_secs(10))?;
-    let own = smokenav_mapio::load_map_server(&sig_dir.join("map.yaml"))?;
+    let own = smokenav_platform_map::load_map_server(&sig_dir.join("map.yaml"))?;
     assert!(
         own.cells
             .iter()
-            .filter(|&&c| c == smokenav_mapio::OCCUPIED)
+            .filter(|&&c| c == smokenav_platform_map::OCCUPIED)
             .count()
             >= occupied / 2
     );

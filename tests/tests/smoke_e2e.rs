@@ -7,13 +7,13 @@
 //! 25 s so a puff fits in a short test; it still recovers 8× slower than it
 //! rises (τ = 1 s), the asymmetry the paper describes.
 
-use smokenav_bus::{Bus, topics};
+use smokenav_platform_bus::{Bus, topics};
+use smokenav_shared_types::{Health, HealthState, SmokeReading, SmokeSensorState, SmokeTrend};
 use smokenav_smoke_emulator::{
     AdcScale, BoardConfig, FakeIio, Fault, IioConfig, Profile, SensorParams, SerialConfig,
     SerialEmulator,
 };
 use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
-use smokenav_types::{Health, HealthState, SmokeReading, SmokeSensorState, SmokeTrend};
 use std::path::Path;
 use std::time::{Duration, Instant};
 

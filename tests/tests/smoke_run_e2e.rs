@@ -15,15 +15,15 @@
 //! - SLAM: the poses on `slam/pose` follow the true trajectory (absolute
 //!   trajectory error after the best rigid alignment).
 
-use smokenav_bus::{Bus, Subscriber, Waiter, topics};
-use smokenav_config::Method;
-use smokenav_sim::Scenario;
-use smokenav_sim::geom::{Pose2, Vec2};
-use smokenav_simlink::{SimLink, SimLinkConfig, TruthPublisher, TruthTrack, Until};
-use smokenav_tests::{Child, bin, open_bus, unique_instance, wait_for, workspace_root};
-use smokenav_types::{
+use smokenav_platform_bus::{Bus, Subscriber, Waiter, topics};
+use smokenav_platform_config::Method;
+use smokenav_shared_types::{
     BeamReading, FusedScan, Health, HealthState, LaserScan, PoseEstimate, SectionSource, SyncState,
 };
+use smokenav_sim_link::{SimLink, SimLinkConfig, TruthPublisher, TruthTrack, Until};
+use smokenav_sim_world::Scenario;
+use smokenav_sim_world::geom::{Pose2, Vec2};
+use smokenav_tests::{Child, bin, open_bus, unique_instance, wait_for, workspace_root};
 use std::collections::HashMap;
 use std::time::Duration;
 
@@ -37,7 +37,7 @@ const KEPT_M: f64 = 0.35;
 /// Smoke level at which v2 holds the air alcoholized (μ = 0.5, the paper's "20").
 const SMOKE_SENSED: f32 = 20.0;
 
-fn drain<T: smokenav_bus::Message>(sub: &Subscriber<T>, into: &mut Vec<T>) {
+fn drain<T: smokenav_platform_bus::Message>(sub: &Subscriber<T>, into: &mut Vec<T>) {
     while let Some(m) = sub.receive().unwrap() {
         into.push(*m);
     }
@@ -305,7 +305,7 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
     );
 
     // --- SLAM: its poses against the truth. ---
-    let to_eval = |t_ns: u64, x: f64, y: f64, theta: f64| smokenav_eval::StampedPose {
+    let to_eval = |t_ns: u64, x: f64, y: f64, theta: f64| smokenav_algorithms_eval::StampedPose {
         t: t_ns as f64 * 1e-9,
         x,
         y,
@@ -320,10 +320,10 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
         .iter()
         .map(|p| to_eval(p.header.stamp_ns, p.x, p.y, p.theta))
         .collect();
-    let report = smokenav_eval::evaluate_trajectories(
+    let report = smokenav_algorithms_eval::evaluate_trajectories(
         &truth_poses,
         &est,
-        &smokenav_eval::TrajectoryOptions::default(),
+        &smokenav_algorithms_eval::TrajectoryOptions::default(),
     )
     .unwrap();
     let processed = slam_health.metric("scans_processed").unwrap_or(0.0);

@@ -1,8 +1,8 @@
 //! `smokenav topic list|echo|hz` against a live publisher in another process.
 
+use smokenav_shared_types::record::{Message, TopicRecord};
+use smokenav_shared_types::{LaserScan, laser::BeamReading};
 use smokenav_tests::{Child, bin, unique_instance};
-use smokenav_types::record::{Message, TopicRecord};
-use smokenav_types::{LaserScan, laser::BeamReading};
 use std::process::Command;
 use std::time::Duration;
 
@@ -19,7 +19,7 @@ fn child_laser_publisher() {
     for n in 0u64.. {
         publisher
             .publish_with(|s| {
-                s.header.stamp_ns = smokenav_types::clock::monotonic_now_ns();
+                s.header.stamp_ns = smokenav_shared_types::clock::monotonic_now_ns();
                 s.header.frame_id.set("laser");
                 s.count = 682;
                 s.angle_min = -2.0862;

@@ -6,7 +6,7 @@ use nix::fcntl::OFlag;
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use nix::sys::stat::Mode;
 use nix::sys::termios::{BaudRate, LocalFlags, SetArg, cfsetspeed, tcgetattr, tcsetattr};
-use smokenav_pty::{DropCause, PtyOptions, PtyPair, PtyPort};
+use smokenav_common_pty::{DropCause, PtyOptions, PtyPair, PtyPort};
 use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};

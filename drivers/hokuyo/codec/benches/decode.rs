@@ -1,7 +1,7 @@
 //! Decode time of a full 682-step URG-04LX MD scan (target < 5 µs), plus the
-//! frame splitter on the same bytes. Prints figures; `cargo bench -p smokenav-scip`.
+//! frame splitter on the same bytes. Prints figures; `cargo bench -p smokenav-hokuyo-codec`.
 
-use smokenav_scip::{FrameSplitter, ReplyWriter, parse_reply};
+use smokenav_hokuyo_codec::{FrameSplitter, ReplyWriter, parse_reply};
 use std::hint::black_box;
 use std::time::Instant;
 

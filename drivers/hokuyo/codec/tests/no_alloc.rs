@@ -2,7 +2,7 @@
 //! parsing replies, decoding 682-step MD scans and mapping their timestamps.
 //! A counting global allocator proves it (this test binary only).
 
-use smokenav_scip::{ClockSync, FrameSplitter, ReplyWriter, SyncConfig, parse_reply};
+use smokenav_hokuyo_codec::{ClockSync, FrameSplitter, ReplyWriter, SyncConfig, parse_reply};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 

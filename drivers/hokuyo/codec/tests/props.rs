@@ -3,7 +3,7 @@
 //! always caught by its line checksum.
 
 use proptest::prelude::*;
-use smokenav_scip::{
+use smokenav_hokuyo_codec::{
     Command, DecodeError, FrameSplitter, ReplyWriter, decode_capture, parse_param_line,
     parse_reply, parse_request,
 };
@@ -20,9 +20,9 @@ fn poke(frame: &[u8]) {
         for p in r.params() {
             let _ = p;
         }
-        let _ = smokenav_scip::VersionInfo::from_reply(&r);
-        let _ = smokenav_scip::SensorSpec::from_reply(&r);
-        let _ = smokenav_scip::SensorState::from_reply(&r);
+        let _ = smokenav_hokuyo_codec::VersionInfo::from_reply(&r);
+        let _ = smokenav_hokuyo_codec::SensorSpec::from_reply(&r);
+        let _ = smokenav_hokuyo_codec::SensorState::from_reply(&r);
         let _ = r.status.meaning(r.echo.command);
     }
 }

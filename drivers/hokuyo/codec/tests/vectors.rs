@@ -4,7 +4,7 @@
 //! Expected numbers were worked out by hand from the capture text and checked
 //! with an independent decoder (strip checksums, join, 3 chars per value).
 
-use smokenav_scip::{
+use smokenav_hokuyo_codec::{
     Command, DecodeError, FrameSplitter, Geometry, ModelFamily, Reading, SensorSpec, SensorState,
     Status, VersionInfo, decode_capture, parse_param_line, parse_reply,
 };

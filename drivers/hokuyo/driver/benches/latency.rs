@@ -2,16 +2,16 @@
 //! `LaserScan` published on the bus (target p99 < 100 µs). The emulator serves a
 //! real PTY (URG-04LX, 682-step MD at 10 Hz) and TCP (UTM-30LX-EW, 1081-step ME at
 //! 40 Hz); the driver core publishes through a real iceoryx2 publisher with a
-//! subscriber attached. `cargo bench -p smokenav-hokuyo --bench latency`.
+//! subscriber attached. `cargo bench -p smokenav-hokuyo-driver --bench latency`.
 
 use hdrhistogram::Histogram;
-use smokenav_bus::{Bus, BusOptions, Publisher, Subscriber, topics};
-use smokenav_hokuyo::{
+use smokenav_hokuyo_driver::{
     Driver, DriverConfig, DriverEvent, DriverSink, PortSpec, ScanSink, StreamConfig, StreamCounters,
 };
 use smokenav_hokuyo_emulator::{BootState, DeviceConfig, Emulator, EmulatorConfig, Model};
-use smokenav_types::laser::LaserScan;
-use smokenav_types::{Clock, MonotonicClock};
+use smokenav_platform_bus::{Bus, BusOptions, Publisher, Subscriber, topics};
+use smokenav_shared_types::laser::LaserScan;
+use smokenav_shared_types::{Clock, MonotonicClock};
 use std::sync::Arc;
 use std::time::Duration;
 

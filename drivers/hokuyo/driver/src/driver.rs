@@ -3,8 +3,8 @@
 use crate::port::PortSpec;
 use crate::session::{SensorInfo, Session, SessionError};
 use crate::stream::{ScanConverter, ScanSink, StreamConfig, StreamCounters, stream};
-use smokenav_scip::{ClockSync, SyncConfig, SyncStats};
-use smokenav_types::Clock;
+use smokenav_hokuyo_codec::{ClockSync, SyncConfig, SyncStats};
+use smokenav_shared_types::Clock;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -23,7 +23,7 @@ pub struct DriverConfig {
 
 impl DriverConfig {
     /// From the `[laser]` section; `port` overrides the configured device.
-    pub fn from_section(s: &smokenav_config::LaserSection, port: Option<&str>) -> Self {
+    pub fn from_section(s: &smokenav_platform_config::LaserSection, port: Option<&str>) -> Self {
         DriverConfig {
             port: PortSpec::parse(port.unwrap_or(&s.port)),
             baud: s.baud,

@@ -1,14 +1,16 @@
 //! `smokenav-hokuyo`: publishes `laser/scan` from a Hokuyo on a serial port or TCP.
 //!
 //! Thin wiring: the runtime (config, bus, signals, health, systemd) around
-//! [`smokenav_hokuyo::Driver`], which owns the port, the codec and reconnects.
+//! [`smokenav_hokuyo_driver::Driver`], which owns the port, the codec and reconnects.
 
 use clap::Parser;
-use smokenav_bus::{Publisher, topics};
-use smokenav_hokuyo::{Driver, DriverConfig, DriverEvent, DriverSink, ScanSink, StreamCounters};
-use smokenav_runtime::{CommonArgs, HealthReporter, Process};
-use smokenav_types::laser::LaserScan;
-use smokenav_types::{Clock, HealthState, MonotonicClock};
+use smokenav_hokuyo_driver::{
+    Driver, DriverConfig, DriverEvent, DriverSink, ScanSink, StreamCounters,
+};
+use smokenav_platform_bus::{Publisher, topics};
+use smokenav_platform_runtime::{CommonArgs, HealthReporter, Process};
+use smokenav_shared_types::laser::LaserScan;
+use smokenav_shared_types::{Clock, HealthState, MonotonicClock};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Duration;
@@ -128,7 +130,7 @@ impl DriverSink for BusSink<'_> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    smokenav_runtime::main("hokuyo", &args.common, |p: &mut Process| {
+    smokenav_platform_runtime::main("hokuyo", &args.common, |p: &mut Process| {
         let section = p.config.laser.clone();
         let cfg = DriverConfig::from_section(&section, p.port_override.as_deref());
         let port = cfg.port.to_string();

@@ -4,11 +4,11 @@
 //! hot path lives in [`crate::stream`].
 
 use crate::port::{Port, PortSpec};
-use smokenav_scip::{
+use smokenav_hokuyo_codec::{
     ClockSync, Command, DecodeError, FrameSplitter, OffsetEstimate, ParamError, Request,
     SensorSpec, SensorState, Status, StatusKind, TimeMode, TimeSample, VersionInfo, parse_reply,
 };
-use smokenav_types::Clock;
+use smokenav_shared_types::Clock;
 use std::io;
 use std::sync::Arc;
 use std::time::Duration;

@@ -2,12 +2,12 @@
 //! After start-up nothing here allocates: fixed buffers, reused scan.
 
 use crate::session::{SensorInfo, Session, SessionError, use_intensity};
-use smokenav_scip::{
+use smokenav_hokuyo_codec::{
     ClockSync, Command, DecodeError, Geometry, ModelFamily, Reading, Request, ScanHeader,
     StatusKind, StepRange, SyncStats, parse_reply,
 };
-use smokenav_types::Header;
-use smokenav_types::laser::{BeamReading, LaserScan, MAX_BEAMS};
+use smokenav_shared_types::Header;
+use smokenav_shared_types::laser::{BeamReading, LaserScan, MAX_BEAMS};
 use std::time::Duration;
 
 /// Streaming settings.
@@ -229,7 +229,7 @@ enum Frame {
     Checksum,
     Damaged,
     Other,
-    SensorError(StatusKind, smokenav_scip::Status),
+    SensorError(StatusKind, smokenav_hokuyo_codec::Status),
 }
 
 fn handle_frame(
@@ -273,7 +273,7 @@ pub fn family(info: &SensorInfo) -> ModelFamily {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_scip::{ReplyWriter, parse_reply};
+    use smokenav_hokuyo_codec::{ReplyWriter, parse_reply};
 
     #[test]
     fn converter_keeps_codes_apart_and_stamps_the_first_beam() {

@@ -2,14 +2,14 @@
 //! real pseudo-terminal. The bus is not involved here: tests/tests/hokuyo_e2e.rs
 //! in the workspace covers the full process chain.
 
-use smokenav_hokuyo::{
+use smokenav_hokuyo_codec::{ClockSync, SyncConfig};
+use smokenav_hokuyo_driver::{
     Driver, DriverConfig, DriverEvent, DriverSink, PortSpec, ScanSink, Session, StreamConfig,
     StreamCounters,
 };
 use smokenav_hokuyo_emulator::{BootState, DeviceConfig, Emulator, EmulatorConfig, Link, Model};
-use smokenav_scip::{ClockSync, SyncConfig};
-use smokenav_types::laser::{BeamReading, LaserScan};
-use smokenav_types::{Clock, MonotonicClock};
+use smokenav_shared_types::laser::{BeamReading, LaserScan};
+use smokenav_shared_types::{Clock, MonotonicClock};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 

@@ -3,7 +3,7 @@
 //! [`crate::Emulator`] runs it on a pseudo-terminal or a TCP socket.
 
 use crate::model::{Model, ModelSpec};
-use smokenav_scip::{Command, ReplyWriter, Request, StepRange, TimeMode, parse_request};
+use smokenav_hokuyo_codec::{Command, ReplyWriter, Request, StepRange, TimeMode, parse_request};
 use std::collections::VecDeque;
 
 /// How the host is attached: decides whether the bit rate matters.
@@ -794,7 +794,7 @@ impl Device {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_scip::{FrameSplitter, parse_reply};
+    use smokenav_hokuyo_codec::{FrameSplitter, parse_reply};
 
     const MS: u64 = 1_000_000;
 

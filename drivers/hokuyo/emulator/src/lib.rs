@@ -23,7 +23,7 @@ pub use device::{
 pub use model::{Model, ModelSpec};
 
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
-use smokenav_types::{Clock, MonotonicClock};
+use smokenav_shared_types::{Clock, MonotonicClock};
 use std::io;
 use std::os::fd::{AsFd, OwnedFd};
 use std::path::{Path, PathBuf};

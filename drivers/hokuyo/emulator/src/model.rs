@@ -5,7 +5,7 @@
 //! real one (I_utm30lxew_pp.txt); its VV and II were not captured and are
 //! plausible stand-ins, marked below.
 
-use smokenav_scip::Geometry;
+use smokenav_hokuyo_codec::Geometry;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Model {

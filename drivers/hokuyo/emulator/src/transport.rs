@@ -2,7 +2,7 @@
 //! slave) or a TCP listener with one client.
 
 use crate::Endpoint;
-use smokenav_pty::{PtyOptions, PtyPair, PtyPort};
+use smokenav_common_pty::{PtyOptions, PtyPair, PtyPort};
 use std::io::{self, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::os::fd::{AsFd, AsRawFd, BorrowedFd};

@@ -4,8 +4,8 @@ mod common;
 
 use common::Host;
 use nix::sys::termios::BaudRate;
+use smokenav_hokuyo_codec::{Command, SensorSpec, SensorState, Status, VersionInfo, parse_reply};
 use smokenav_hokuyo_emulator::{BootState, DeviceConfig, Emulator, EmulatorConfig, Link, Model};
-use smokenav_scip::{Command, SensorSpec, SensorState, Status, VersionInfo, parse_reply};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -230,7 +230,10 @@ fn injected_faults_damage_exactly_what_they_say() {
         .decode_scan(&mut r, &mut [])
         .unwrap_err();
     assert!(
-        matches!(err, smokenav_scip::DecodeError::Checksum { line: 4, .. }),
+        matches!(
+            err,
+            smokenav_hokuyo_codec::DecodeError::Checksum { line: 4, .. }
+        ),
         "{err}"
     );
     // 682·3 = 2046 chars → 32 data lines, all corrupted.

@@ -1,9 +1,9 @@
 //! Codec throughput on the AMRISim capture: framing + SIP decoding, and
 //! command encoding. Prints figures; no assertions (run with
-//! `cargo bench -p smokenav-arcos`).
+//! `cargo bench -p smokenav-pioneer-codec`).
 
-use smokenav_arcos::capture::parse_hex_line;
-use smokenav_arcos::{
+use smokenav_pioneer_codec::capture::parse_hex_line;
+use smokenav_pioneer_codec::{
     Command, Framer, OdometryIntegrator, PacketBuf, RobotPacket, decode_robot_packet, params_for,
 };
 use std::hint::black_box;

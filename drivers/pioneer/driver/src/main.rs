@@ -13,15 +13,15 @@
 use anyhow::Context;
 use clap::Parser;
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
-use smokenav_arcos::{Command, Framer, OdometryIntegrator, PacketBuf};
-use smokenav_bus::{Publisher, Subscriber, topics};
-use smokenav_pioneer::messages::{self, SonarAssembler, SonarGeometry};
-use smokenav_pioneer::motion::{MotionGuard, MotionLimits};
-use smokenav_pioneer::port::{Link, PortSpec, parse_port};
-use smokenav_pioneer::session::{Session, SessionConfig, SessionEvent};
-use smokenav_runtime::{CommonArgs, HealthReporter, Process};
-use smokenav_types::clock::monotonic_now_ns;
-use smokenav_types::{Header, HealthState, Odometry, SonarRing, VelocityCommand};
+use smokenav_pioneer_codec::{Command, Framer, OdometryIntegrator, PacketBuf};
+use smokenav_pioneer_driver::messages::{self, SonarAssembler, SonarGeometry};
+use smokenav_pioneer_driver::motion::{MotionGuard, MotionLimits};
+use smokenav_pioneer_driver::port::{Link, PortSpec, parse_port};
+use smokenav_pioneer_driver::session::{Session, SessionConfig, SessionEvent};
+use smokenav_platform_bus::{Publisher, Subscriber, topics};
+use smokenav_platform_runtime::{CommonArgs, HealthReporter, Process};
+use smokenav_shared_types::clock::monotonic_now_ns;
+use smokenav_shared_types::{Header, HealthState, Odometry, SonarRing, VelocityCommand};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -44,7 +44,7 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    smokenav_runtime::main(ROLE, &args.common, run)
+    smokenav_platform_runtime::main(ROLE, &args.common, run)
 }
 
 fn secs(s: f64) -> Duration {
@@ -391,7 +391,7 @@ impl Driver {
                     // Only a profile change fixes it: exit 78, which systemd does not restart.
                     p.health.set_state(HealthState::Error);
                     p.health.error(&e.to_string());
-                    return Err(anyhow::anyhow!(smokenav_runtime::ConfigFailure(
+                    return Err(anyhow::anyhow!(smokenav_platform_runtime::ConfigFailure(
                         e.to_string()
                     )));
                 }

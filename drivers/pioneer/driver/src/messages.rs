@@ -1,7 +1,7 @@
 //! SIPs to bus messages: `Odometry` per SIP, a `SonarRing` per firing cycle.
 
-use smokenav_arcos::{OdomEstimate, Sip, SonarSample};
-use smokenav_types::{
+use smokenav_pioneer_codec::{OdomEstimate, Sip, SonarSample};
+use smokenav_shared_types::{
     Header, MAX_SONARS, Odometry, OdometryFlags, SonarReading, SonarRing, SonarStatus,
 };
 
@@ -159,7 +159,7 @@ impl SonarAssembler {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_arcos::sip::SIP_STOPPED;
+    use smokenav_pioneer_codec::sip::SIP_STOPPED;
 
     fn front8() -> SonarGeometry {
         SonarGeometry {

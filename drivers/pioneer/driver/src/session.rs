@@ -14,8 +14,8 @@
 //!   targets go out as VEL/RVEL when they change and are refreshed every
 //!   `refresh`; otherwise a PULSE keeps the firmware watchdog fed.
 
-use smokenav_arcos::sip::{SIP_MOVING, SIP_STOPPED};
-use smokenav_arcos::{
+use smokenav_pioneer_codec::sip::{SIP_MOVING, SIP_STOPPED};
+use smokenav_pioneer_codec::{
     Command, ConfigPacket, RobotIdent, RobotPacket, RobotParams, Sip, UnknownSubclass,
     decode_robot_packet, params_for,
 };
@@ -431,8 +431,8 @@ impl Session {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_arcos::PacketBuf;
-    use smokenav_arcos::sip::SIP_STOPPED;
+    use smokenav_pioneer_codec::PacketBuf;
+    use smokenav_pioneer_codec::sip::SIP_STOPPED;
 
     const MS: u64 = 1_000_000;
 

@@ -22,8 +22,8 @@ pub use robot::{
     ArcosRobot, Motion, Phase, Pose, RobotConfig, RobotCounters, RobotStatus, SonarMode,
 };
 
-use smokenav_arcos::FramerStats;
-use smokenav_types::{Clock, MonotonicClock};
+use smokenav_pioneer_codec::FramerStats;
+use smokenav_shared_types::{Clock, MonotonicClock};
 use std::io::Write;
 use std::net::{SocketAddr, TcpListener};
 use std::os::unix::net::UnixStream;
@@ -51,7 +51,7 @@ pub enum EmulatorError {
     #[error("emulator setup: {0}")]
     Io(#[from] std::io::Error),
     #[error(transparent)]
-    Subclass(smokenav_arcos::UnknownSubclass),
+    Subclass(smokenav_pioneer_codec::UnknownSubclass),
 }
 
 /// Transmit-side faults, applied by the I/O thread.
@@ -190,7 +190,7 @@ impl EmulatorHandle {
         });
     }
 
-    /// Raw STALL/BUMPERS word (see `smokenav_arcos::Sip::stall_bumpers`).
+    /// Raw STALL/BUMPERS word (see `smokenav_pioneer_codec::Sip::stall_bumpers`).
     pub fn set_stall_bumpers(&self, v: u16) {
         self.with(|s| s.robot.set_stall_bumpers(v));
     }

@@ -3,9 +3,9 @@
 
 use crate::{Shared, State};
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
-use smokenav_arcos::{Framer, PacketBuf};
-use smokenav_pty::{PtyOptions, PtyPair, PtyPort};
-use smokenav_types::Clock;
+use smokenav_common_pty::{PtyOptions, PtyPair, PtyPort};
+use smokenav_pioneer_codec::{Framer, PacketBuf};
+use smokenav_shared_types::Clock;
 use std::io::{self, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::os::fd::{AsFd, BorrowedFd};

@@ -7,10 +7,10 @@
 //! when no command arrived for `watchdog_ms` (a real controller stops;
 //! AMRISim only warns).
 
-use smokenav_arcos::command::{num, vel2_split};
-use smokenav_arcos::odometry::normalize_angle;
-use smokenav_arcos::sip::{SIP_MOVING, SIP_STOPPED, SonarSample, flag};
-use smokenav_arcos::{
+use smokenav_pioneer_codec::command::{num, vel2_split};
+use smokenav_pioneer_codec::odometry::normalize_angle;
+use smokenav_pioneer_codec::sip::{SIP_MOVING, SIP_STOPPED, SonarSample, flag};
+use smokenav_pioneer_codec::{
     Arg, ConfigPacket, PacketBuf, RobotIdent, RobotParams, Sip, decode_command, params_for,
 };
 
@@ -216,7 +216,7 @@ pub struct ArcosRobot {
 }
 
 /// The subclass has no conversion factors: the emulator cannot report odometry.
-pub use smokenav_arcos::UnknownSubclass;
+pub use smokenav_pioneer_codec::UnknownSubclass;
 
 impl ArcosRobot {
     pub fn new(cfg: RobotConfig) -> Result<Self, UnknownSubclass> {
@@ -675,7 +675,7 @@ fn ramp(v: f64, target: f64, accel: f64, decel: f64, dt: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_arcos::{Command, Framer, RobotPacket, decode_robot_packet};
+    use smokenav_pioneer_codec::{Command, Framer, RobotPacket, decode_robot_packet};
 
     const MS: u64 = 1_000_000;
 

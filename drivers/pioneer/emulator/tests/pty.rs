@@ -1,7 +1,7 @@
 //! The emulator over a real pseudo-terminal (opened with `serialport`, as a
 //! driver opens a robot) and over TCP.
 
-use smokenav_arcos::{
+use smokenav_pioneer_codec::{
     Command, Framer, FramerStats, RobotIdent, RobotPacket, Sip, decode_robot_packet,
 };
 use smokenav_pioneer_emulator::{Emulator, Phase, Pose, RobotConfig};

@@ -1,8 +1,8 @@
 //! Codec timing: splitting and decoding a Scout state reply, encoding a `vm`.
-//! Run: `cargo bench -p smokenav-nomadic` (prints ns per operation).
+//! Run: `cargo bench -p smokenav-scout-codec` (prints ns per operation).
 
-use smokenav_nomadic::frame::MAX_FRAME;
-use smokenav_nomadic::{
+use smokenav_scout_codec::frame::MAX_FRAME;
+use smokenav_scout_codec::{
     Command, DiffDrive, Direction, MotorStatus, PacketType, Reply, Splitter, StateReply, WheelOrder,
 };
 use std::hint::black_box;

@@ -3,9 +3,9 @@
 //! Pure: stamps come in as arguments, messages go out as values; the process
 //! (`main.rs`) owns the port, the bus and the clock.
 
-use smokenav_nomadic::units::{SONAR_MAX_RANGE_M, SonarRange};
-use smokenav_nomadic::{Command, DiffDrive, SONARS, SonarOrder, StateSi};
-use smokenav_types::{
+use smokenav_scout_codec::units::{SONAR_MAX_RANGE_M, SonarRange};
+use smokenav_scout_codec::{Command, DiffDrive, SONARS, SonarOrder, StateSi};
+use smokenav_shared_types::{
     Header, Odometry, OdometryFlags, SonarReading, SonarRing, SonarStatus, VelocityCommand,
 };
 
@@ -262,7 +262,7 @@ pub fn sonar_ring(si: &StateSi, header: Header, min_range: f32, max_range: f32) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_nomadic::{MotorStatus, StateReply, WheelOrder};
+    use smokenav_scout_codec::{MotorStatus, StateReply, WheelOrder};
 
     const MS: u64 = 1_000_000;
 

@@ -1,7 +1,7 @@
 //! The serial (or TCP) link to the robot and one request/reply exchange.
 
-use smokenav_nomadic::frame::MAX_FRAME;
-use smokenav_nomadic::{Command, Direction, Reply, Splitter, SplitterStats, StateReply};
+use smokenav_scout_codec::frame::MAX_FRAME;
+use smokenav_scout_codec::{Command, Direction, Reply, Splitter, SplitterStats, StateReply};
 use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
@@ -43,7 +43,7 @@ pub enum LinkError {
     #[error("link lost: {0}")]
     Io(#[from] std::io::Error),
     #[error("cannot encode the command: {0}")]
-    Encode(#[from] smokenav_nomadic::EncodeError),
+    Encode(#[from] smokenav_scout_codec::EncodeError),
 }
 
 impl LinkError {

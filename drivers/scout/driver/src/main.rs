@@ -7,14 +7,14 @@
 
 use anyhow::Context;
 use clap::Parser;
-use smokenav_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
-use smokenav_config::{RobotConfig, WheelOrder as ConfigWheelOrder};
-use smokenav_nomadic::{DiffDrive, SonarOrder, WheelOrder};
-use smokenav_runtime::{CommonArgs, Process};
+use smokenav_platform_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
+use smokenav_platform_config::{RobotConfig, WheelOrder as ConfigWheelOrder};
+use smokenav_platform_runtime::{CommonArgs, Process};
+use smokenav_scout_codec::{DiffDrive, SonarOrder, WheelOrder};
 use smokenav_scout_driver::link::reply_timeout;
 use smokenav_scout_driver::{CoreConfig, Link, LinkError, LinkStats, PortSpec, ScoutCore};
-use smokenav_types::clock::monotonic_now_ns;
-use smokenav_types::{HealthState, Odometry, SonarRing, VelocityCommand};
+use smokenav_shared_types::clock::monotonic_now_ns;
+use smokenav_shared_types::{HealthState, Odometry, SonarRing, VelocityCommand};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -37,7 +37,7 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    smokenav_runtime::main(ROLE, &args.common, run)
+    smokenav_platform_runtime::main(ROLE, &args.common, run)
 }
 
 fn core_config(cfg: &RobotConfig) -> anyhow::Result<CoreConfig> {
@@ -77,7 +77,7 @@ struct Driver {
     link: Option<Link>,
     /// Counters of links already closed (a reconnect starts a fresh `Link`).
     closed: LinkStats,
-    closed_frames: smokenav_nomadic::SplitterStats,
+    closed_frames: smokenav_scout_codec::SplitterStats,
     connects: u64,
     last_ok: Instant,
     down_since: Option<Instant>,
@@ -85,7 +85,7 @@ struct Driver {
 }
 
 impl Driver {
-    fn link_stats(&self) -> (LinkStats, smokenav_nomadic::SplitterStats) {
+    fn link_stats(&self) -> (LinkStats, smokenav_scout_codec::SplitterStats) {
         let mut s = self.closed;
         let mut f = self.closed_frames;
         if let Some(l) = &self.link {
@@ -307,7 +307,7 @@ fn run(p: &mut Process) -> anyhow::Result<()> {
     // Leave the robot stopped, not driving on its last command until the
     // robot-side watchdog notices.
     if let Some(link) = d.link.as_mut() {
-        match link.exchange(smokenav_nomadic::Command::Stop, d.reply_timeout) {
+        match link.exchange(smokenav_scout_codec::Command::Stop, d.reply_timeout) {
             Ok(_) => tracing::info!("{ROLE}: robot stopped"),
             Err(e) => tracing::warn!("{ROLE}: could not stop the robot on exit: {e}"),
         }

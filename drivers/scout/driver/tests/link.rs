@@ -1,6 +1,6 @@
 //! The driver's link against the emulator on a real PTY.
 
-use smokenav_nomadic::Command;
+use smokenav_scout_codec::Command;
 use smokenav_scout_driver::{Link, LinkError, PortSpec};
 use smokenav_scout_emulator::{EmulatorConfig, ScoutEmulator};
 use std::time::Duration;

@@ -14,15 +14,15 @@
 pub mod model;
 
 pub use model::{Kinematics, Pose, RobotModel};
-pub use smokenav_nomadic::{Battery, DiffDrive, SonarOrder, WheelOrder, WheelSpeeds};
+pub use smokenav_scout_codec::{Battery, DiffDrive, SonarOrder, WheelOrder, WheelSpeeds};
 
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
-use smokenav_nomadic::frame::MAX_FRAME;
-use smokenav_nomadic::reply::SONARS;
-use smokenav_nomadic::units::sonar_byte;
-use smokenav_nomadic::{Command, Direction, FrameError, Reply, Splitter};
-use smokenav_pty::{PtyError, PtyOptions, PtyPort};
-use smokenav_types::clock::{Clock, MonotonicClock};
+use smokenav_common_pty::{PtyError, PtyOptions, PtyPort};
+use smokenav_scout_codec::frame::MAX_FRAME;
+use smokenav_scout_codec::reply::SONARS;
+use smokenav_scout_codec::units::sonar_byte;
+use smokenav_scout_codec::{Command, Direction, FrameError, Reply, Splitter};
+use smokenav_shared_types::clock::{Clock, MonotonicClock};
 use std::collections::VecDeque;
 use std::io::ErrorKind;
 use std::os::fd::{AsFd, OwnedFd};
@@ -597,7 +597,7 @@ fn serve(inner: Arc<Inner>, wake_rx: OwnedFd, mut port: PtyPort) {
 /// `out` and returns its length (0 = no reply).
 fn respond(
     inner: &Inner,
-    item: Result<smokenav_nomadic::Frame<'_>, FrameError>,
+    item: Result<smokenav_scout_codec::Frame<'_>, FrameError>,
     out: &mut [u8],
 ) -> usize {
     let now = inner.clock.now_ns();

@@ -3,13 +3,13 @@
 //! Pure and lazy: time is passed in (ns of whatever clock the caller uses)
 //! and the model catches up on every call, so nothing needs a periodic tick.
 
-use smokenav_nomadic::command::SonarOrder;
-use smokenav_nomadic::reply::SONARS;
-use smokenav_nomadic::units::{
+use smokenav_scout_codec::command::SonarOrder;
+use smokenav_scout_codec::reply::SONARS;
+use smokenav_scout_codec::units::{
     self, CPU_VOLTAGE_RANGE, MOTOR_VOLTAGE_RANGE, SONAR_NO_ECHO, m_to_tenth_inches, rad_to_heading,
     voltage_raw, wrap_angle,
 };
-use smokenav_nomadic::{Battery, Command, DiffDrive, MotorStatus, StateReply, WheelSpeeds};
+use smokenav_scout_codec::{Battery, Command, DiffDrive, MotorStatus, StateReply, WheelSpeeds};
 
 /// A planar pose, m and rad.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -318,7 +318,7 @@ impl RobotModel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_nomadic::WheelOrder;
+    use smokenav_scout_codec::WheelOrder;
     use std::f64::consts::PI;
 
     const S: u64 = 1_000_000_000;

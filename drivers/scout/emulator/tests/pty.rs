@@ -1,8 +1,8 @@
 //! The emulator over a real pseudo-terminal, spoken to the way a driver does
 //! (serialport at 38400 8N1 on the stable link path).
 
-use smokenav_nomadic::units::SONAR_NO_ECHO;
-use smokenav_nomadic::{
+use smokenav_scout_codec::units::SONAR_NO_ECHO;
+use smokenav_scout_codec::{
     Command, Direction, FrameError, PacketType, Reply, SonarOrder, Splitter, StateReply,
 };
 use smokenav_scout_emulator::{EmulatorConfig, ScoutEmulator};
@@ -343,8 +343,9 @@ fn voltages_and_power_bits_reach_the_state_reply() {
     emu.set_power(smokenav_scout_emulator::Battery::Medium, true, true);
     emu.set_bumpers(0b101);
     let s = host.request(Command::GetState);
-    let si = smokenav_nomadic::DiffDrive::new(0.345, smokenav_nomadic::WheelOrder::RightLeft)
-        .state_si(&s);
+    let si =
+        smokenav_scout_codec::DiffDrive::new(0.345, smokenav_scout_codec::WheelOrder::RightLeft)
+            .state_si(&s);
     assert!((si.cpu_v - 10.0).abs() < 0.03, "{}", si.cpu_v);
     assert!((si.motor_v - 12.0).abs() < 0.03, "{}", si.motor_v);
     assert_eq!(s.motor.battery(), smokenav_scout_emulator::Battery::Medium);

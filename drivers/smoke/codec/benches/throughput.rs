@@ -1,10 +1,10 @@
 //! Decode and signal-chain throughput. Run:
-//! `cargo bench -p smokenav-adc --bench throughput`
+//! `cargo bench -p smokenav-smoke-codec --bench throughput`
 //!
 //! The paper's sensor produces 10 samples per second; these figures show
 //! how far below a microsecond budget per sample the chain stays.
 
-use smokenav_adc::{
+use smokenav_smoke_codec::{
     AdcScale, ChecksumPolicy, Eol, Measurement, Sample, SampleValue, SerialDecoder, SignalConfig,
     SmokeProcessor, encode_sample,
 };

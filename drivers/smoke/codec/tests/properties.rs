@@ -2,9 +2,9 @@
 //! bounded, and framing does not depend on how the bytes were chunked.
 
 use proptest::prelude::*;
-use smokenav_adc::iio::{IioCalibration, parse_offset, parse_raw, parse_scale};
-use smokenav_adc::line::xor_checksum;
-use smokenav_adc::{
+use smokenav_smoke_codec::iio::{IioCalibration, parse_offset, parse_raw, parse_scale};
+use smokenav_smoke_codec::line::xor_checksum;
+use smokenav_smoke_codec::{
     AdcScale, BaselineMode, ChecksumPolicy, Eol, Line, Measurement, Sample, SampleValue,
     SerialDecoder, SignalConfig, SmokeProcessor, encode_sample, parse_line,
 };

@@ -4,9 +4,9 @@
 
 use crate::link::LinkEvent;
 use crate::settings::{FRAME_ID, Settings};
-use smokenav_adc::{RateDecimator, Reading, SensorState, SmokeProcessor, Trend};
-use smokenav_config::AdcBackend;
-use smokenav_types::{Header, HealthState, SmokeReading, SmokeSensorState, SmokeTrend};
+use smokenav_platform_config::AdcBackend;
+use smokenav_shared_types::{Header, HealthState, SmokeReading, SmokeSensorState, SmokeTrend};
+use smokenav_smoke_codec::{RateDecimator, Reading, SensorState, SmokeProcessor, Trend};
 
 /// After a malformed or out-of-range input, health stays `degraded` this
 /// long, so one report period cannot miss it.
@@ -69,7 +69,7 @@ impl DriverCore {
     pub fn new(
         settings: &Settings,
         start_ns: u64,
-    ) -> Result<Self, smokenav_adc::SignalConfigError> {
+    ) -> Result<Self, smokenav_smoke_codec::SignalConfigError> {
         let period_ns = (1e9 / settings.rate_hz) as u64;
         Ok(Self {
             processor: SmokeProcessor::new(settings.signal, start_ns)?,
@@ -202,8 +202,8 @@ impl DriverCore {
 mod tests {
     use super::*;
     use crate::link::Malformed;
-    use smokenav_adc::{AdcScale, LineError, StreamError};
-    use smokenav_config::SmokeSection;
+    use smokenav_platform_config::SmokeSection;
+    use smokenav_smoke_codec::{AdcScale, LineError, StreamError};
 
     const MS: u64 = 1_000_000;
 

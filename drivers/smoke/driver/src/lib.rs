@@ -1,4 +1,4 @@
-//! The `smokenav-smoke` driver: thin wiring around [`smokenav_adc`].
+//! The `smokenav-smoke` driver: thin wiring around [`smokenav_smoke_codec`].
 //!
 //! * [`settings`]: the `[smoke]` section plus `--port` / `--warmup` turned
 //!   into codec configuration, and the choice of back-end;

@@ -3,14 +3,14 @@
 //! busy loop), and appends what happened to a reusable event list.
 
 use crate::settings::Settings;
-use smokenav_adc::iio::{
+use smokenav_shared_types::Clock;
+use smokenav_smoke_codec::iio::{
     IioCalibration, SHARED_OFFSET_ATTR, SHARED_SCALE_ATTR, offset_attr, parse_offset, parse_raw,
     parse_scale, raw_attr, scale_attr,
 };
-use smokenav_adc::{
+use smokenav_smoke_codec::{
     AdcScale, ChecksumPolicy, IioError, Measurement, RangeError, SerialDecoder, StreamError,
 };
-use smokenav_types::Clock;
 use std::fmt;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -88,10 +88,10 @@ pub enum Link {
 impl Link {
     pub fn new(settings: &Settings) -> Self {
         match settings.backend {
-            smokenav_config::AdcBackend::Serial => {
+            smokenav_platform_config::AdcBackend::Serial => {
                 Link::Serial(Box::new(SerialLink::new(settings)))
             }
-            smokenav_config::AdcBackend::Iio => Link::Iio(IioLink::new(settings)),
+            smokenav_platform_config::AdcBackend::Iio => Link::Iio(IioLink::new(settings)),
         }
     }
 
@@ -144,7 +144,7 @@ impl SerialLink {
     }
 
     /// Counters of the line decoder (lines, comments, skipped bytes, …).
-    pub fn decoder_stats(&self) -> smokenav_adc::DecoderStats {
+    pub fn decoder_stats(&self) -> smokenav_smoke_codec::DecoderStats {
         *self.decoder.stats()
     }
 
@@ -248,7 +248,7 @@ pub struct IioLink {
 
 /// Bytes read from an attribute: more than the parser accepts, so an
 /// oversized file is reported as such.
-const ATTR_BUF: usize = smokenav_adc::iio::MAX_ATTR_LEN + 16;
+const ATTR_BUF: usize = smokenav_smoke_codec::iio::MAX_ATTR_LEN + 16;
 
 /// Reads a whole attribute into `buf` (open, read, close: a sysfs file
 /// converts on each read, and a removed device fails the open).

@@ -10,12 +10,12 @@
 //! ```
 
 use clap::Parser;
-use smokenav_bus::topics;
-use smokenav_runtime::{CommonArgs, Process};
+use smokenav_platform_bus::topics;
+use smokenav_platform_runtime::{CommonArgs, Process};
+use smokenav_shared_types::{Clock, MonotonicClock, SmokeReading};
 use smokenav_smoke_driver::core::DriverCore;
 use smokenav_smoke_driver::link::{Link, LinkEvent, policy_name};
 use smokenav_smoke_driver::settings::Settings;
-use smokenav_types::{Clock, MonotonicClock, SmokeReading};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -41,7 +41,7 @@ const ERROR_LOG_PERIOD: Duration = Duration::from_secs(1);
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    smokenav_runtime::main("smoke", &args.common, |p| run(p, args.warmup))
+    smokenav_platform_runtime::main("smoke", &args.common, |p| run(p, args.warmup))
 }
 
 /// Logs recurring input errors at most once per [`ERROR_LOG_PERIOD`].
@@ -144,7 +144,7 @@ fn run(p: &mut Process, warmup: Option<f64>) -> anyhow::Result<()> {
 
 fn publish(
     p: &mut Process,
-    publisher: &mut smokenav_bus::Publisher<SmokeReading>,
+    publisher: &mut smokenav_platform_bus::Publisher<SmokeReading>,
     msg: &SmokeReading,
     clock: &MonotonicClock,
 ) -> anyhow::Result<()> {

@@ -1,8 +1,8 @@
 //! What the driver runs with: the `[smoke]` section and command-line
 //! overrides, turned into codec configuration.
 
-use smokenav_adc::{AdcScale, BaselineMode, ChecksumPolicy, SignalConfig, TrendConfig};
-use smokenav_config::{AdcBackend, SmokeSection};
+use smokenav_platform_config::{AdcBackend, SmokeSection};
+use smokenav_smoke_codec::{AdcScale, BaselineMode, ChecksumPolicy, SignalConfig, TrendConfig};
 use std::path::Path;
 
 /// Frame id of every `SmokeReading`.
@@ -25,9 +25,9 @@ pub enum SettingsError {
     #[error("--warmup must be a number of seconds within [0, 3600], got {0}")]
     Warmup(f64),
     #[error("[smoke] ADC: {0}")]
-    Adc(#[from] smokenav_adc::AdcConfigError),
+    Adc(#[from] smokenav_smoke_codec::AdcConfigError),
     #[error("[smoke] signal chain: {0}")]
-    Signal(#[from] smokenav_adc::SignalConfigError),
+    Signal(#[from] smokenav_smoke_codec::SignalConfigError),
 }
 
 /// The back-end for `port`: an explicit `backend` in the section wins for

@@ -4,7 +4,7 @@
 
 use crate::model::{Mq303a, Profile, SensorParams};
 use crate::noise::Noise;
-use smokenav_adc::AdcScale;
+use smokenav_smoke_codec::AdcScale;
 use std::str::FromStr;
 
 /// A fault to inject.

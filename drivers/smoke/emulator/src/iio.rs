@@ -10,7 +10,7 @@
 
 use crate::board::{Board, BoardConfig, BoardStats, Command, Fault, Output};
 use crate::model::Profile;
-use smokenav_adc::iio::{SHARED_SCALE_ATTR, offset_attr, raw_attr, scale_attr};
+use smokenav_smoke_codec::iio::{SHARED_SCALE_ATTR, offset_attr, raw_attr, scale_attr};
 use std::collections::VecDeque;
 use std::fs;
 use std::io;

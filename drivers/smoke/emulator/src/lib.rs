@@ -25,4 +25,4 @@ pub use model::{Mq303a, Profile, ProfileError, SensorParams};
 pub use noise::Noise;
 pub use serial::{SerialConfig, SerialEmulator, SerialStats, ValueFormat};
 /// Codec types this crate's API takes.
-pub use smokenav_adc::{AdcScale, Eol};
+pub use smokenav_smoke_codec::{AdcScale, Eol};

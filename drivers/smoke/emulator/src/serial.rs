@@ -3,16 +3,16 @@
 //! [`SerialEmulator`] opens a PTY pair (close-on-exec), puts the slave in raw mode and
 //! points a stable symlink (e.g. `/tmp/x/smoke-adc`) at the slave, so a
 //! driver opens the symlink exactly as it would `/dev/ttyACM0`. A thread
-//! prints one line per tick in the [`smokenav_adc::line`] format. A board
+//! prints one line per tick in the [`smokenav_smoke_codec::line`] format. A board
 //! unplug closes the PTY (the driver's reads fail) and removes the symlink;
 //! the replug opens a fresh PTY (usually a different `/dev/pts/N`) and moves
 //! the symlink to it, as udev does with a `/dev/serial/by-id` link.
 
 use crate::board::{Board, BoardConfig, BoardStats, Command, Fault, Output};
 use crate::model::Profile;
-use smokenav_adc::line::xor_checksum;
-use smokenav_adc::{Eol, Sample, SampleValue, encode_sample};
-use smokenav_pty::{PtyOptions, PtyPair, PtyPort};
+use smokenav_common_pty::{PtyOptions, PtyPair, PtyPort};
+use smokenav_smoke_codec::line::xor_checksum;
+use smokenav_smoke_codec::{Eol, Sample, SampleValue, encode_sample};
 use std::collections::VecDeque;
 use std::io;
 use std::path::{Path, PathBuf};

@@ -3,7 +3,7 @@
 //! chain. This is issue 6's "Must be true" on simulated time, at the
 //! paper's 10 Hz.
 
-use smokenav_adc::{
+use smokenav_smoke_codec::{
     AdcScale, BaselineMode, ChecksumPolicy, SensorState, SerialDecoder, SignalConfig,
     SmokeProcessor, Trend,
 };

@@ -1,8 +1,8 @@
 //! The fake IIO directory, read with the codec's attribute parsers as the
 //! driver reads it.
 
-use smokenav_adc::iio::{IioCalibration, parse_offset, parse_raw, parse_scale};
-use smokenav_adc::{AdcScale, IioError};
+use smokenav_smoke_codec::iio::{IioCalibration, parse_offset, parse_raw, parse_scale};
+use smokenav_smoke_codec::{AdcScale, IioError};
 use smokenav_smoke_emulator::{BoardConfig, FakeIio, Fault, IioConfig, Profile};
 use std::path::Path;
 use std::time::{Duration, Instant};

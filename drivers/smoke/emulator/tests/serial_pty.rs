@@ -1,7 +1,7 @@
 //! The serial emulator on a real PTY, read the way the driver reads it:
 //! through the symlink with the `serialport` crate.
 
-use smokenav_adc::{AdcScale, ChecksumPolicy, SampleValue, SerialDecoder, StreamError};
+use smokenav_smoke_codec::{AdcScale, ChecksumPolicy, SampleValue, SerialDecoder, StreamError};
 use smokenav_smoke_emulator::{
     BoardConfig, Fault, Profile, SerialConfig, SerialEmulator, ValueFormat,
 };

@@ -15,7 +15,7 @@
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use nix::sys::signal::{SigSet, Signal};
-use smokenav_adc::{AdcScale, Eol};
+use smokenav_smoke_codec::{AdcScale, Eol};
 use smokenav_smoke_emulator::{
     BoardConfig, Command, FakeIio, Fault, IioConfig, Profile, SensorParams, SerialConfig,
     SerialEmulator, ValueFormat,

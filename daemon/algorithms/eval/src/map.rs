@@ -1,0 +1,597 @@
+//! Map accuracy against a ground-truth map.
+//!
+//! * k-nearest-neighbour error (seed 000, Sec. 3 and Table 4, after Santos et
+//!   al. 2013): after a best-fit alignment, for each occupied ground-truth
+//!   cell the distance to the nearest occupied cell of the estimate (walls
+//!   missed or misplaced), and — so phantom walls, e.g. smoke mapped as an
+//!   obstacle, are penalised too — for each occupied estimated cell the
+//!   distance to the nearest occupied ground-truth cell. Reported in metres
+//!   and in cells of the ground truth (the seed's tables are in pixels).
+//! * Pixel error (seed 004): with cells normalised to −1 unknown, 0 free, 1
+//!   occupied (occupancy/100 in between), Error = (Σ (T − M)²)^½ over the
+//!   ground-truth grid, and the same as a root mean square per cell.
+//!
+//! The alignment is rigid (x, y, θ), found by minimising the truncated squared
+//! distance of the estimate's occupied cells to the ground truth's walls:
+//! a coarse search over rotations and translations, then a pattern search
+//! with the truncation shrinking to two cells, so a wall displaced by more
+//! than that does not drag the whole map along. Ties keep the identity, so
+//! a map already in the ground truth's frame is not moved by symmetric rooms.
+
+use crate::nn::{PointIndex, distance_transform};
+use serde::Serialize;
+use smokenav_platform_map::OccupancyGrid;
+
+/// Cells at or above this occupancy count as occupied (map_server's 0.65 threshold).
+pub const DEFAULT_OCCUPIED: i8 = 65;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapOptions {
+    /// Search for the best rigid alignment (otherwise both maps are taken in one frame).
+    pub align: bool,
+    /// Occupancy at or above which a cell is a wall.
+    pub occupied_threshold: i8,
+    /// Largest rotation searched, degrees (180: any).
+    pub max_rotation_deg: f64,
+}
+
+impl Default for MapOptions {
+    fn default() -> Self {
+        Self {
+            align: true,
+            occupied_threshold: DEFAULT_OCCUPIED,
+            max_rotation_deg: 180.0,
+        }
+    }
+}
+
+/// Rigid transform taking estimate-map coordinates into ground-truth coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct Alignment {
+    pub dx_m: f64,
+    pub dy_m: f64,
+    pub dtheta_deg: f64,
+}
+
+impl Alignment {
+    fn apply(&self, (x, y): (f64, f64)) -> (f64, f64) {
+        let (s, c) = self.dtheta_deg.to_radians().sin_cos();
+        (c * x - s * y + self.dx_m, s * x + c * y + self.dy_m)
+    }
+
+    fn inverse_apply(&self, (x, y): (f64, f64)) -> (f64, f64) {
+        let (s, c) = self.dtheta_deg.to_radians().sin_cos();
+        let (x, y) = (x - self.dx_m, y - self.dy_m);
+        (c * x + s * y, -s * x + c * y)
+    }
+}
+
+/// Summary of a set of distances, m.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct DistanceStats {
+    pub count: usize,
+    pub mean_m: f64,
+    pub rms_m: f64,
+    pub median_m: f64,
+    pub max_m: f64,
+}
+
+impl DistanceStats {
+    pub fn from_distances(mut d: Vec<f64>) -> Self {
+        if d.is_empty() {
+            return Self::default();
+        }
+        let n = d.len() as f64;
+        let mean = d.iter().sum::<f64>() / n;
+        let rms = (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+        d.sort_by(f64::total_cmp);
+        let median = if d.len() % 2 == 1 {
+            d[d.len() / 2]
+        } else {
+            (d[d.len() / 2 - 1] + d[d.len() / 2]) / 2.0
+        };
+        Self {
+            count: d.len(),
+            mean_m: mean,
+            rms_m: rms,
+            median_m: median,
+            max_m: d[d.len() - 1],
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MapReport {
+    /// Ground-truth cell side, m.
+    pub resolution_m: f64,
+    pub alignment: Alignment,
+    /// Ground-truth walls → nearest estimated wall (missed or misplaced walls).
+    pub truth_to_map: DistanceStats,
+    /// Estimated walls → nearest ground-truth wall (phantom or misplaced walls).
+    pub map_to_truth: DistanceStats,
+    /// The k-NN error: mean of the two directions' mean distances, m.
+    pub knn_error_m: f64,
+    /// The same in ground-truth cells (pixels).
+    pub knn_error_cells: f64,
+    /// Seed 004's error: (Σ (T − M)²)^½ over the ground-truth grid.
+    pub pixel_error: f64,
+    /// Per-cell root mean square of T − M.
+    pub pixel_rms: f64,
+    pub pixel_count: usize,
+}
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum MapMetricError {
+    #[error("the {which} map has no occupied cells (occupancy ≥ {threshold})")]
+    NoWalls { which: &'static str, threshold: i8 },
+    #[error("the {which} map has an invalid geometry: {reason}")]
+    Geometry { which: &'static str, reason: String },
+}
+
+fn occupied(g: &OccupancyGrid, threshold: i8) -> Vec<(f64, f64)> {
+    g.occupied_points(threshold)
+}
+
+fn check_geometry(g: &OccupancyGrid, which: &'static str) -> Result<(), MapMetricError> {
+    let bad = |reason: String| MapMetricError::Geometry { which, reason };
+    if !(g.resolution.is_finite() && g.resolution > 0.0) {
+        return Err(bad(format!("resolution {}", g.resolution)));
+    }
+    if g.cells.len() != g.width * g.height {
+        return Err(bad(format!(
+            "{} cells for {}×{}",
+            g.cells.len(),
+            g.width,
+            g.height
+        )));
+    }
+    if g.origin.iter().any(|v| !v.is_finite()) {
+        return Err(bad("origin is not finite".into()));
+    }
+    Ok(())
+}
+
+/// Distance field of the ground-truth walls, padded so aligned points just
+/// outside the truth's grid still find their distance.
+struct TruthField {
+    origin: (f64, f64),
+    res: f64,
+    w: usize,
+    h: usize,
+    /// Distance in metres from each cell centre to the nearest wall centre.
+    dist: Vec<f64>,
+}
+
+impl TruthField {
+    fn new(truth: &OccupancyGrid, threshold: i8) -> Self {
+        let pad = 20usize;
+        let (w, h) = (truth.width + 2 * pad, truth.height + 2 * pad);
+        let mut sites = vec![false; w * h];
+        for y in 0..truth.height {
+            for x in 0..truth.width {
+                if truth.cells[y * truth.width + x] >= threshold {
+                    sites[(y + pad) * w + x + pad] = true;
+                }
+            }
+        }
+        let dist = distance_transform(w, h, &sites)
+            .into_iter()
+            .map(|d| d * truth.resolution)
+            .collect();
+        Self {
+            origin: (
+                truth.origin[0] - pad as f64 * truth.resolution,
+                truth.origin[1] - pad as f64 * truth.resolution,
+            ),
+            res: truth.resolution,
+            w,
+            h,
+            dist,
+        }
+    }
+
+    /// Bilinear distance to the nearest wall at a world point; `far` outside the field.
+    fn at(&self, (x, y): (f64, f64), far: f64) -> f64 {
+        let fx = (x - self.origin.0) / self.res - 0.5;
+        let fy = (y - self.origin.1) / self.res - 0.5;
+        if !(fx >= 0.0 && fy >= 0.0 && fx < (self.w - 1) as f64 && fy < (self.h - 1) as f64) {
+            return far;
+        }
+        let (x0, y0) = (fx as usize, fy as usize);
+        let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+        let i = y0 * self.w + x0;
+        let d = &self.dist;
+        let a = d[i] * (1.0 - tx) + d[i + 1] * tx;
+        let b = d[i + self.w] * (1.0 - tx) + d[i + self.w + 1] * tx;
+        (a * (1.0 - ty) + b * ty).min(far)
+    }
+
+    /// Mean truncated squared distance of the aligned points.
+    fn cost(&self, pts: &[(f64, f64)], al: &Alignment, trunc: f64) -> f64 {
+        let t2 = trunc * trunc;
+        let (s, c) = al.dtheta_deg.to_radians().sin_cos();
+        let mut sum = 0.0;
+        for &(x, y) in pts {
+            let p = (c * x - s * y + al.dx_m, s * x + c * y + al.dy_m);
+            let d = self.at(p, trunc);
+            sum += (d * d).min(t2);
+        }
+        sum / pts.len().max(1) as f64
+    }
+}
+
+/// Every `step`-th point, so the coarse search stays cheap on big maps.
+fn subsample(pts: &[(f64, f64)], max: usize) -> Vec<(f64, f64)> {
+    let step = pts.len().div_ceil(max.max(1)).max(1);
+    pts.iter().step_by(step).copied().collect()
+}
+
+fn centroid(pts: &[(f64, f64)]) -> (f64, f64) {
+    let n = pts.len().max(1) as f64;
+    let (sx, sy) = pts.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0, a.1 + p.1));
+    (sx / n, sy / n)
+}
+
+/// Pattern search from `start` at truncation `trunc`, halving steps down to the floor.
+fn refine(
+    field: &TruthField,
+    pts: &[(f64, f64)],
+    start: Alignment,
+    trunc: f64,
+    res: f64,
+) -> (Alignment, f64) {
+    let mut best = start;
+    let mut best_cost = field.cost(pts, &best, trunc);
+    let (mut step_t, mut step_r) = (4.0 * res, 2.0);
+    while step_t >= res / 8.0 {
+        let mut improved = true;
+        let mut guard = 0;
+        while improved && guard < 200 {
+            improved = false;
+            guard += 1;
+            for (dx, dy, dr) in [
+                (step_t, 0.0, 0.0),
+                (-step_t, 0.0, 0.0),
+                (0.0, step_t, 0.0),
+                (0.0, -step_t, 0.0),
+                (0.0, 0.0, step_r),
+                (0.0, 0.0, -step_r),
+            ] {
+                let cand = Alignment {
+                    dx_m: best.dx_m + dx,
+                    dy_m: best.dy_m + dy,
+                    dtheta_deg: best.dtheta_deg + dr,
+                };
+                let c = field.cost(pts, &cand, trunc);
+                // Strictly better only: ties keep the incumbent.
+                if c < best_cost - 1e-15 {
+                    best = cand;
+                    best_cost = c;
+                    improved = true;
+                }
+            }
+        }
+        step_t /= 2.0;
+        step_r /= 2.0;
+    }
+    (best, best_cost)
+}
+
+/// Finds the rigid transform that best lays the estimate over the truth.
+fn align(
+    field: &TruthField,
+    truth_pts: &[(f64, f64)],
+    est_pts: &[(f64, f64)],
+    opts: &MapOptions,
+) -> Alignment {
+    let res = field.res;
+    let coarse = subsample(est_pts, 800);
+    let identity = Alignment::default();
+    // Coarse: rotations every 3°, translations on a 0.1 m grid around the
+    // centroid match, with a generous truncation (walls within 0.5 m count).
+    let trunc_coarse = 0.5;
+    let ct = centroid(truth_pts);
+    let ce = centroid(est_pts);
+    let mut candidates: Vec<(f64, Alignment)> =
+        vec![(field.cost(&coarse, &identity, trunc_coarse), identity)];
+    let max_rot = opts.max_rotation_deg.clamp(0.0, 180.0);
+    let n_rot = (max_rot / 3.0).floor() as i64;
+    for k in -n_rot..=n_rot {
+        let th = k as f64 * 3.0;
+        if th <= -180.0 {
+            continue;
+        }
+        let (s, c) = th.to_radians().sin_cos();
+        let rc = (c * ce.0 - s * ce.1, s * ce.0 + c * ce.1);
+        let base = (ct.0 - rc.0, ct.1 - rc.1);
+        for iy in -6..=6 {
+            for ix in -6..=6 {
+                let a = Alignment {
+                    dx_m: base.0 + ix as f64 * 0.1,
+                    dy_m: base.1 + iy as f64 * 0.1,
+                    dtheta_deg: th,
+                };
+                candidates.push((field.cost(&coarse, &a, trunc_coarse), a));
+            }
+        }
+    }
+    // Keep the identity and the best few, in a stable order.
+    let mut ranked: Vec<(f64, Alignment)> = candidates[1..].to_vec();
+    ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut seeds = vec![identity];
+    seeds.extend(ranked.iter().take(6).map(|c| c.1));
+    // Refine each with shrinking truncation; compare all at the final one.
+    let final_trunc = 2.0 * res;
+    let mut best = identity;
+    let mut best_cost = field.cost(est_pts, &identity, final_trunc);
+    for seed in seeds {
+        let mut a = seed;
+        for trunc in [0.5f64.max(8.0 * res), 4.0 * res, final_trunc] {
+            a = refine(field, est_pts, a, trunc, res).0;
+        }
+        let c = field.cost(est_pts, &a, final_trunc);
+        if c < best_cost - 1e-15 {
+            best = a;
+            best_cost = c;
+        }
+    }
+    best.dtheta_deg = ((best.dtheta_deg + 180.0).rem_euclid(360.0)) - 180.0;
+    best
+}
+
+/// Normalised cell value for the pixel metric: −1 unknown, 0..1 occupancy.
+fn pixel_value(v: i8) -> f64 {
+    if v < 0 {
+        -1.0
+    } else {
+        v.min(100) as f64 / 100.0
+    }
+}
+
+/// Compares an estimated map with the ground truth.
+pub fn evaluate_maps(
+    truth: &OccupancyGrid,
+    est: &OccupancyGrid,
+    opts: &MapOptions,
+) -> Result<MapReport, MapMetricError> {
+    check_geometry(truth, "ground-truth")?;
+    check_geometry(est, "estimated")?;
+    let thr = opts.occupied_threshold;
+    let truth_pts = occupied(truth, thr);
+    let est_pts = occupied(est, thr);
+    if truth_pts.is_empty() {
+        return Err(MapMetricError::NoWalls {
+            which: "ground-truth",
+            threshold: thr,
+        });
+    }
+    if est_pts.is_empty() {
+        return Err(MapMetricError::NoWalls {
+            which: "estimated",
+            threshold: thr,
+        });
+    }
+    let field = TruthField::new(truth, thr);
+    let alignment = if opts.align {
+        align(&field, &truth_pts, &est_pts, opts)
+    } else {
+        Alignment::default()
+    };
+    let est_aligned: Vec<(f64, f64)> = est_pts.iter().map(|&p| alignment.apply(p)).collect();
+    let bucket = 4.0 * truth.resolution;
+    let est_index = PointIndex::new(est_aligned.clone(), bucket);
+    let truth_index = PointIndex::new(truth_pts.clone(), bucket);
+    let truth_to_map = DistanceStats::from_distances(
+        truth_pts
+            .iter()
+            .map(|&(x, y)| est_index.nearest_distance(x, y))
+            .collect(),
+    );
+    let map_to_truth = DistanceStats::from_distances(
+        est_aligned
+            .iter()
+            .map(|&(x, y)| truth_index.nearest_distance(x, y))
+            .collect(),
+    );
+    let knn_error_m = (truth_to_map.mean_m + map_to_truth.mean_m) / 2.0;
+
+    // Seed 004's pixel error over the ground-truth grid, the estimate sampled at each aligned cell centre.
+    let mut sum2 = 0.0;
+    for y in 0..truth.height {
+        for x in 0..truth.width {
+            let t = pixel_value(truth.cells[y * truth.width + x]);
+            let c = truth.cell_center(x, y);
+            let (ex, ey) = alignment.inverse_apply(c);
+            let m = est
+                .world_to_cell(ex, ey)
+                .and_then(|(i, j)| est.get(i, j))
+                .map_or(-1.0, pixel_value);
+            sum2 += (t - m) * (t - m);
+        }
+    }
+    let pixel_count = truth.width * truth.height;
+    Ok(MapReport {
+        resolution_m: truth.resolution,
+        alignment,
+        truth_to_map,
+        map_to_truth,
+        knn_error_m,
+        knn_error_cells: knn_error_m / truth.resolution,
+        pixel_error: sum2.sqrt(),
+        pixel_rms: (sum2 / pixel_count.max(1) as f64).sqrt(),
+        pixel_count,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use smokenav_platform_map::{FREE, OCCUPIED};
+
+    const RES: f64 = 0.05;
+
+    /// A 4 × 3 m room (80 × 60 cells inside a 1-cell wall) with a free-standing
+    /// partition at column `partition_x`, rows 10 to 40 (31 cells, 8 cells
+    /// clear of the outer wall).
+    fn room(partition_x: usize) -> OccupancyGrid {
+        let (w, h) = (84, 64);
+        let mut g = OccupancyGrid::new(w, h, RES, [-0.1, -0.1, 0.0]);
+        for y in 0..h {
+            for x in 0..w {
+                let wall = x == 1 || y == 1 || x == w - 2 || y == h - 2;
+                let inside = x > 1 && y > 1 && x < w - 2 && y < h - 2;
+                if wall {
+                    g.set(x, y, OCCUPIED);
+                } else if inside {
+                    g.set(x, y, FREE);
+                }
+            }
+        }
+        for y in 10..=40 {
+            g.set(partition_x, y, OCCUPIED);
+        }
+        g
+    }
+
+    fn count_occupied(g: &OccupancyGrid) -> usize {
+        g.cells.iter().filter(|&&c| c >= DEFAULT_OCCUPIED).count()
+    }
+
+    #[test]
+    fn identical_maps_score_zero() {
+        let g = room(30);
+        let r = evaluate_maps(&g, &g, &MapOptions::default()).unwrap();
+        assert_eq!(r.alignment, Alignment::default());
+        assert_eq!(r.knn_error_m, 0.0);
+        assert_eq!(r.truth_to_map.max_m, 0.0);
+        assert_eq!(r.map_to_truth.max_m, 0.0);
+        assert_eq!(r.pixel_error, 0.0);
+        assert_eq!(r.truth_to_map.count, count_occupied(&g));
+    }
+
+    #[test]
+    fn partition_shifted_by_k_cells_is_off_by_k_times_resolution() {
+        let truth = room(30);
+        for k in [3usize, 5, 8] {
+            let est = room(30 + k);
+            let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
+            assert_eq!(
+                r.alignment,
+                Alignment::default(),
+                "k = {k}: the rest of the room pins the alignment"
+            );
+            let expect = k as f64 * RES;
+            // The 31 partition cells are exactly k cells from their copy; every other wall matches.
+            let n = count_occupied(&truth) as f64;
+            assert!(
+                (r.truth_to_map.max_m - expect).abs() < 1e-9,
+                "k = {k}: {:?}",
+                r.truth_to_map
+            );
+            assert!(
+                (r.map_to_truth.max_m - expect).abs() < 1e-9,
+                "k = {k}: {:?}",
+                r.map_to_truth
+            );
+            assert!(
+                (r.truth_to_map.mean_m - expect * 31.0 / n).abs() < 1e-9,
+                "k = {k}: {:?}",
+                r.truth_to_map
+            );
+            assert!((r.knn_error_cells - k as f64 * 31.0 / n).abs() < 1e-6);
+            // Seed 004: 31 cells went occupied → free and 31 free → occupied, each (1 − 0)² = 1.
+            assert!(
+                (r.pixel_error - 62f64.sqrt()).abs() < 1e-9,
+                "k = {k}: {}",
+                r.pixel_error
+            );
+        }
+    }
+
+    #[test]
+    fn whole_map_shifted_and_turned_is_realigned() {
+        let truth = room(30);
+        let mut est = room(30);
+        // Same cells, but the estimate's frame is offset by (0.37, -0.22) m.
+        est.origin = [-0.1 + 0.37, -0.1 - 0.22, 0.0];
+        let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
+        assert!(
+            (r.alignment.dx_m + 0.37).abs() < 0.01 && (r.alignment.dy_m - 0.22).abs() < 0.01,
+            "{:?}",
+            r.alignment
+        );
+        assert!(r.knn_error_m < 0.005, "{}", r.knn_error_m);
+        let unaligned = evaluate_maps(
+            &truth,
+            &est,
+            &MapOptions {
+                align: false,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(unaligned.knn_error_m > 0.1);
+    }
+
+    #[test]
+    fn rotated_map_is_realigned() {
+        let truth = room(30);
+        // Rotate the estimate's cells by 90° about the grid's corner.
+        let (w, h) = (truth.width, truth.height);
+        let mut est = OccupancyGrid::new(h, w, RES, [0.0, 0.0, 0.0]);
+        for y in 0..h {
+            for x in 0..w {
+                est.set(h - 1 - y, x, truth.get(x, y).unwrap());
+            }
+        }
+        let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
+        assert!(
+            (r.alignment.dtheta_deg.abs() - 90.0).abs() < 0.5,
+            "{:?}",
+            r.alignment
+        );
+        assert!(r.knn_error_m < 0.01, "{r:?}");
+    }
+
+    #[test]
+    fn phantom_wall_is_penalised_only_map_to_truth() {
+        let truth = room(30);
+        let mut est = room(30);
+        // Smoke mapped as a wall: a 20-cell bar across the open right half, 0.5 m from anything.
+        for x in 50..70 {
+            est.set(x, 30, OCCUPIED);
+        }
+        let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
+        assert_eq!(r.alignment, Alignment::default());
+        assert_eq!(r.truth_to_map.max_m, 0.0, "no truth wall is missing");
+        assert!(r.map_to_truth.max_m > 0.5, "{:?}", r.map_to_truth);
+        assert!(r.knn_error_m > 0.0);
+        let clean = evaluate_maps(&truth, &truth, &MapOptions::default()).unwrap();
+        assert!(r.knn_error_m > clean.knn_error_m && r.pixel_error > clean.pixel_error);
+    }
+
+    #[test]
+    fn missing_wall_is_penalised_truth_to_map() {
+        let truth = room(30);
+        let mut est = room(30);
+        for y in 10..=40 {
+            est.set(30, y, FREE);
+        }
+        let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
+        assert!(r.truth_to_map.max_m > 1.0, "{:?}", r.truth_to_map);
+        assert_eq!(r.map_to_truth.max_m, 0.0);
+    }
+
+    #[test]
+    fn empty_estimate_is_an_error_not_a_zero() {
+        let truth = room(30);
+        let est = OccupancyGrid::new(10, 10, RES, [0.0, 0.0, 0.0]);
+        assert_eq!(
+            evaluate_maps(&truth, &est, &MapOptions::default()),
+            Err(MapMetricError::NoWalls {
+                which: "estimated",
+                threshold: 65
+            })
+        );
+    }
+}

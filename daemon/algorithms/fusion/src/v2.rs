@@ -1,0 +1,223 @@
+//! SmokeNav v2: the fuzzy model of Algorithm 3 and Fig. 14 (seed 000, §5.4).
+//!
+//! Inputs: the section's sonar reading s_R[τ,t], the smoke level a_R[t] and
+//! the standard deviation σ(l_R[t]) of the scan's valid ranges. The rule
+//! base, read as the paper's rationale states it (see `smokenav_platform_config::fusion`
+//! for why the literal rule text cannot be meant):
+//!
+//! - laser:  w_L = max(1 − μ_Alcoholized(a), 1 − μ_Dense(σ))  — clean air OR a non-uniform scan;
+//! - ELSE-IF sonar: w_S = min(1 − w_L, μ_Confident(s)).
+//!
+//! Beyond the paper, per section τ (see `smokenav_platform_config::fusion`, "the sonar
+//! as a witness"): w_L(τ) = min(w_L, max(1 − μ_Alcoholized(a),
+//! 1 − μ_Contradicted(c_τ))), where c_τ is the share of the section's laser
+//! ranges nearer than its sonar's arc; the sonar rule uses w_L(τ).
+//!
+//! Each strength goes through Mamdani min/max and a centroid (ρL, ρS). With
+//! no usable smoke reading the laser rule uses σ alone.
+
+use crate::fuzzy::{Defuzzifier, pi};
+use crate::geometry::SonarEcho;
+use smokenav_platform_config::fusion::V2Params;
+use smokenav_shared_types::SectionSource;
+
+#[derive(Debug, Clone)]
+pub struct FuzzyModel {
+    params: V2Params,
+    defuzz: Defuzzifier,
+}
+
+/// The scan-wide part of the inference.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LaserTrust {
+    pub mu_alcoholized: f64,
+    pub mu_dense: f64,
+    /// Firing strength of the laser rule.
+    pub w: f64,
+    /// ρL.
+    pub rho: f64,
+}
+
+impl FuzzyModel {
+    pub fn new(params: V2Params) -> Self {
+        let defuzz = Defuzzifier::new(&params.output_bell, params.defuzz_samples);
+        Self { params, defuzz }
+    }
+
+    pub fn params(&self) -> &V2Params {
+        &self.params
+    }
+
+    /// ρL from the smoke level (if the sensor is usable) and the scan's spread.
+    pub fn laser_trust(&self, smoke_level: Option<f64>, spread: f64) -> LaserTrust {
+        let mu_dense = pi(spread, &self.params.dense);
+        let mu_alcoholized = smoke_level.map_or(0.0, |a| pi(a, &self.params.alcoholized));
+        let w = match smoke_level {
+            Some(_) => (1.0 - mu_alcoholized).max(1.0 - mu_dense),
+            None => 1.0 - mu_dense,
+        };
+        LaserTrust {
+            mu_alcoholized,
+            mu_dense,
+            w,
+            rho: self.defuzz.rho(w),
+        }
+    }
+
+    /// The laser rule of one section: the scan-wide strength, lowered where
+    /// the smoke is in the air and the section's sonar contradicts the laser
+    /// (`contradicted_share`: the share of the section's laser ranges nearer
+    /// than the sonar's arc; `None` when the sonar gave nothing to compare).
+    pub fn section_laser_trust(
+        &self,
+        scan: &LaserTrust,
+        contradicted_share: Option<f64>,
+    ) -> LaserTrust {
+        let mu_c = contradicted_share.map_or(0.0, |c| pi(c, &self.params.contradicted));
+        let w = scan.w.min((1.0 - scan.mu_alcoholized).max(1.0 - mu_c));
+        if w == scan.w {
+            return *scan;
+        }
+        LaserTrust {
+            w,
+            rho: self.defuzz.rho(w),
+            ..*scan
+        }
+    }
+
+    /// ρS of one section, given the (section's) laser rule.
+    pub fn sonar_trust(&self, laser: &LaserTrust, echo: SonarEcho, raw_range: f64) -> f64 {
+        let s = match echo {
+            SonarEcho::Echo(r) => r,
+            // Saturated: its raw range (at or beyond the cap) is what the sonar said.
+            SonarEcho::Saturated if raw_range.is_finite() => raw_range,
+            SonarEcho::Saturated => f64::INFINITY,
+            SonarEcho::Missing => return self.defuzz.rho(0.0),
+        };
+        let w = (1.0 - laser.w).min(pi(s, &self.params.confident));
+        self.defuzz.rho(w)
+    }
+
+    /// Sonar if ρS > ρL and ρS > ρT; laser if ρL ≥ ρS and ρL > ρT; else neither.
+    pub fn decide(&self, rho_sonar: f64, rho_laser: f64) -> SectionSource {
+        let t = self.params.rho_threshold;
+        if rho_sonar > rho_laser && rho_sonar > t {
+            SectionSource::Sonar
+        } else if rho_laser >= rho_sonar && rho_laser > t {
+            SectionSource::Laser
+        } else {
+            SectionSource::Neither
+        }
+    }
+
+    /// Beams no sonar covers follow the laser's trust.
+    pub fn decide_gap(&self, laser: &LaserTrust) -> SectionSource {
+        if laser.rho > self.params.rho_threshold {
+            SectionSource::Laser
+        } else {
+            SectionSource::Neither
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn model() -> FuzzyModel {
+        FuzzyModel::new(V2Params::default())
+    }
+
+    #[test]
+    fn clean_air_trusts_the_laser() {
+        // a = 0 (below 20): the laser rule fires fully whatever σ says.
+        let m = model();
+        let l = m.laser_trust(Some(0.0), 0.1);
+        assert_eq!(l.w, 1.0);
+        let s = m.sonar_trust(&l, SonarEcho::Echo(1.0), 1.0);
+        assert_eq!(m.decide(s, l.rho), SectionSource::Laser);
+    }
+
+    #[test]
+    fn dense_smoke_with_short_uniform_laser_prefers_a_confident_sonar() {
+        // a = 250 (alcoholized), σ = 0.05 m (dense), sonar 1.2 m (< 2.5 m).
+        let m = model();
+        let l = m.laser_trust(Some(250.0), 0.05);
+        assert!(l.w < 1e-12 && l.rho < 0.2);
+        let s = m.sonar_trust(&l, SonarEcho::Echo(1.2), 1.2);
+        assert!(s > 0.8);
+        assert_eq!(m.decide(s, l.rho), SectionSource::Sonar);
+    }
+
+    #[test]
+    fn smoke_with_a_far_sonar_trusts_neither() {
+        // a = 250, σ = 0.05: laser out; sonar saturated at 5 m → not confident.
+        let m = model();
+        let l = m.laser_trust(Some(250.0), 0.05);
+        let s = m.sonar_trust(&l, SonarEcho::Saturated, 5.0);
+        assert!(s < 0.5 && l.rho < 0.5);
+        assert_eq!(m.decide(s, l.rho), SectionSource::Neither);
+        assert_eq!(m.decide_gap(&l), SectionSource::Neither);
+    }
+
+    #[test]
+    fn high_alcohol_but_structured_scan_keeps_the_laser() {
+        // The slow alcohol sensor still reads 250 but σ = 1.5 m: the laser sees
+        // real structure again (σ > 0.8 in the paper's rationale).
+        let m = model();
+        let l = m.laser_trust(Some(250.0), 1.5);
+        assert_eq!(l.w, 1.0);
+        let s = m.sonar_trust(&l, SonarEcho::Echo(1.0), 1.0);
+        assert_eq!(m.decide(s, l.rho), SectionSource::Laser);
+    }
+
+    #[test]
+    fn without_a_smoke_reading_the_spread_alone_decides() {
+        let m = model();
+        let l = m.laser_trust(None, 0.05);
+        let s = m.sonar_trust(&l, SonarEcho::Echo(1.0), 1.0);
+        assert_eq!(m.decide(s, l.rho), SectionSource::Sonar);
+        let l = m.laser_trust(None, 1.2);
+        assert_eq!(m.decide_gap(&l), SectionSource::Laser);
+    }
+
+    #[test]
+    fn a_contradicted_section_in_smoky_air_goes_to_the_sonar() {
+        // Smoke 60 (alcoholized) but a structured scan (σ 1.2): the scan-wide
+        // rule trusts the laser; the section whose laser ranges all lie well
+        // inside the sonar's echo is the smoke front, not a wall.
+        let m = model();
+        let scan = m.laser_trust(Some(60.0), 1.2);
+        assert_eq!(scan.w, 1.0);
+        let sec = m.section_laser_trust(&scan, Some(0.9));
+        assert!(sec.w < 1e-9 && sec.rho < 0.5);
+        let s = m.sonar_trust(&sec, SonarEcho::Echo(2.0), 2.0);
+        assert_eq!(m.decide(s, sec.rho), SectionSource::Sonar);
+        // The sonar heard nothing within its cap: conflicting sensors, neither.
+        let s = m.sonar_trust(&sec, SonarEcho::Saturated, 2.5);
+        assert_eq!(m.decide(s, sec.rho), SectionSource::Neither);
+        // A section the sonar agrees with keeps the laser.
+        let ok = m.section_laser_trust(&scan, Some(0.05));
+        assert_eq!(ok, scan);
+    }
+
+    #[test]
+    fn in_clean_air_a_contradicting_sonar_changes_nothing() {
+        // Sonars miss walls by specular reflection: without smoke the laser wins.
+        let m = model();
+        let scan = m.laser_trust(Some(2.0), 1.2);
+        assert_eq!(m.section_laser_trust(&scan, Some(1.0)), scan);
+        let scan = m.laser_trust(None, 1.2);
+        assert_eq!(m.section_laser_trust(&scan, Some(1.0)), scan);
+    }
+
+    #[test]
+    fn trust_changes_smoothly_around_the_breakpoints() {
+        // σ crossing 0.8 m with dense smoke: ρL passes ρT = 0.5 there.
+        let m = model();
+        let below = m.laser_trust(Some(250.0), 0.79).rho;
+        let above = m.laser_trust(Some(250.0), 0.81).rho;
+        assert!(below < 0.5 && above > 0.5, "{below} {above}");
+        assert!(above - below < 0.1);
+    }
+}

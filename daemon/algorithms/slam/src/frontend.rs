@@ -1,0 +1,698 @@
+//! The front end: corrects odometry by matching each scan against the last
+//! few scans before the particles see it.
+//!
+//! Real odometry is not always on time. In the MIT CSAIL log the odometry
+//! attached to a scan repeats unchanged for up to five scans (~1 s) while the
+//! robot keeps moving at up to 1 m/s and 1.5 rad/s, then jumps by the whole
+//! backlog. A particle's local scan matcher cannot bridge a metre, so the
+//! front end does it once for all particles:
+//!
+//! 1. Predict: with fresh odometry, the pose at the last scan that had fresh
+//!    odometry plus the odometry travelled since (so a backlog that arrives at
+//!    once is not applied on top of motion the matcher already found); with
+//!    repeated odometry, continue at the last odometry velocity.
+//! 2. Search: a correlative scan matcher (Olson) against a table blurred from
+//!    the last `frontend_scans` scans, over ± `frontend_window_m` and
+//!    ± `frontend_window_rad`, made exact and fast by branch and bound over
+//!    max-pooled tables of 2, 4, 8 and 16 cells (multi-resolution, as in
+//!    Hess et al. 2016). A quadratic prior keeps the result near the
+//!    prediction where the scan cannot tell (a featureless corridor, or
+//!    someone walking along with the robot).
+//! 3. The particles use the corrected motion as their odometry.
+//!
+//! Deterministic: no randomness, ties go to the first candidate in a fixed order.
+
+use crate::pose::Pose2;
+use std::collections::VecDeque;
+
+/// Fine cells per side of the coarsest table is `1 << LEVELS`.
+const LEVELS: usize = 4;
+/// Blur of the table, cells (σ) and its radius.
+const BLUR_SIGMA_CELLS: f64 = 1.5;
+const BLUR_RADIUS: i32 = 3;
+/// Points further than this from the robot are not used by the front end, m.
+const MAX_POINT_RANGE: f64 = 10.0;
+/// Odometry repeated for longer than this is treated as "stopped", s.
+const MAX_EXTRAPOLATION_S: f64 = 1.5;
+/// Prior around the prediction: a deviation of one standard deviation costs
+/// this much of the score (a mean table value in 0–1, so 0.03 ≈ 3 % of the
+/// points leaving the obstacles). The deviations scale with the predicted motion.
+const PRIOR_WEIGHT: f64 = 0.03;
+/// Translation σ of the prediction: a floor plus a share of the predicted step, m and m/m.
+const PRIOR_SIGMA_T: (f64, f64) = (0.05, 0.15);
+/// Rotation σ of the prediction: a floor plus a share of the predicted turn, rad and
+/// rad/rad (loose: logged odometry often reports a turn one scan late).
+const PRIOR_SIGMA_R: (f64, f64) = (0.05, 0.3);
+/// The same while the odometry repeats and the prediction is extrapolated: the
+/// robot may be turning at 1.5 rad/s unseen (0.3 rad between scans).
+const STALE_SIGMA_T: (f64, f64) = (0.15, 0.3);
+const STALE_SIGMA_R: (f64, f64) = (0.15, 0.3);
+/// Below this mean table value (0–1) a match is not trusted and the prediction is used.
+const MIN_SCORE: f64 = 0.25;
+/// Fewer points than this and the scan is not matched.
+const MIN_POINTS: usize = 20;
+
+#[derive(Debug, Clone)]
+pub struct FrontEndParams {
+    pub resolution: f64,
+    pub window_m: f64,
+    pub window_rad: f64,
+    pub max_scans: usize,
+}
+
+/// What the front end made of one scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tracked {
+    /// Corrected pose in the front end's (drifting) frame: use differences only.
+    pub pose: Pose2,
+    /// Mean table value of the match (0–1), or `None` if the prediction was used.
+    pub score: Option<f64>,
+    /// The odometry had not changed since the previous scan.
+    pub stale_odometry: bool,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Fresh {
+    pose: Pose2,
+    odom: Pose2,
+    stamp_ns: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct FrontEnd {
+    p: FrontEndParams,
+    history: VecDeque<Vec<(f32, f32)>>,
+    last_pose: Option<Pose2>,
+    last_odom: Option<Pose2>,
+    last_stamp_ns: u64,
+    /// The last two scans whose odometry had changed.
+    fresh: Option<Fresh>,
+    fresh_before: Option<Fresh>,
+    // Reused buffers.
+    points: Vec<(f64, f64)>,
+    tables: Vec<Vec<u8>>,
+    table_x0: i32,
+    table_y0: i32,
+    table_w: i32,
+    table_h: i32,
+    rotated: Vec<Vec<(i32, i32)>>,
+    angles: Vec<f64>,
+    candidates: Vec<Candidate>,
+    /// Prior coefficients of the current search: score lost per m² and per rad².
+    prior_t: f64,
+    prior_r: f64,
+    blur: Vec<u8>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    angle: usize,
+    ix: i32,
+    iy: i32,
+    bound: f64,
+}
+
+impl FrontEnd {
+    pub fn new(p: FrontEndParams) -> Self {
+        let mut blur = Vec::new();
+        for dy in -BLUR_RADIUS..=BLUR_RADIUS {
+            for dx in -BLUR_RADIUS..=BLUR_RADIUS {
+                let d2 = (dx * dx + dy * dy) as f64;
+                blur.push(
+                    (255.0 * (-d2 / (2.0 * BLUR_SIGMA_CELLS * BLUR_SIGMA_CELLS)).exp()).round()
+                        as u8,
+                );
+            }
+        }
+        Self {
+            p,
+            history: VecDeque::new(),
+            last_pose: None,
+            last_odom: None,
+            last_stamp_ns: 0,
+            fresh: None,
+            fresh_before: None,
+            points: Vec::new(),
+            tables: vec![Vec::new(); LEVELS + 1],
+            table_x0: 0,
+            table_y0: 0,
+            table_w: 0,
+            table_h: 0,
+            rotated: Vec::new(),
+            angles: Vec::new(),
+            candidates: Vec::new(),
+            prior_t: 0.0,
+            prior_r: 0.0,
+            blur,
+        }
+    }
+
+    /// The odometry frame jumped (the base was reset or reconnected): forget the
+    /// odometry readings so the next scan is matched from the last pose with a
+    /// wide prior instead of applying the jump as motion. The local map stays.
+    pub fn odometry_reset(&mut self) {
+        self.last_odom = None;
+        self.fresh = None;
+        self.fresh_before = None;
+    }
+
+    /// Tracks one scan. `endpoints` are the scan's obstacle endpoints in the
+    /// robot frame; `odom` the odometry pose at the scan's stamp.
+    pub fn track(
+        &mut self,
+        endpoints: impl Iterator<Item = (f64, f64)>,
+        odom: &Pose2,
+        stamp_ns: u64,
+    ) -> Tracked {
+        self.decimate(endpoints);
+        let stale = self.last_odom.is_some_and(|o| o == *odom);
+        let Some(last_pose) = self.last_pose else {
+            let pose = *odom;
+            self.accept(pose, odom, stamp_ns, false);
+            return Tracked {
+                pose,
+                score: None,
+                stale_odometry: false,
+            };
+        };
+        let prediction = self.predict(&last_pose, odom, stamp_ns, stale);
+        // The prior follows the predicted motion: wider for larger steps and
+        // while the odometry repeats (the prediction is then extrapolated).
+        let step = prediction.relative_to(&last_pose);
+        // Without a fresh odometry reference (after a reset) the prediction is a guess too.
+        let (st, sr) = if stale || self.fresh.is_none() {
+            (STALE_SIGMA_T, STALE_SIGMA_R)
+        } else {
+            (PRIOR_SIGMA_T, PRIOR_SIGMA_R)
+        };
+        let sigma_t = st.0 + st.1 * step.translation_norm();
+        let sigma_r = sr.0 + sr.1 * step.theta.abs();
+        self.prior_t = 0.5 * PRIOR_WEIGHT / (sigma_t * sigma_t);
+        self.prior_r = 0.5 * PRIOR_WEIGHT / (sigma_r * sigma_r);
+        let (pose, score) = match self.search(&prediction) {
+            Some((pose, score)) => (pose, Some(score)),
+            None => (prediction, None),
+        };
+        self.accept(pose, odom, stamp_ns, stale);
+        Tracked {
+            pose,
+            score,
+            stale_odometry: stale,
+        }
+    }
+
+    fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
+        if !stale {
+            return match &self.fresh {
+                Some(f) => f.pose.compose(&odom.relative_to(&f.odom)),
+                None => *last_pose,
+            };
+        }
+        // Repeated odometry: keep the velocity of the last two fresh readings.
+        let (Some(a), Some(b)) = (&self.fresh_before, &self.fresh) else {
+            return *last_pose;
+        };
+        let dt_v = b.stamp_ns.saturating_sub(a.stamp_ns) as f64 * 1e-9;
+        let since = stamp_ns.saturating_sub(b.stamp_ns) as f64 * 1e-9;
+        let dt = stamp_ns.saturating_sub(self.last_stamp_ns) as f64 * 1e-9;
+        if dt_v <= 1e-3 || since > MAX_EXTRAPOLATION_S {
+            return *last_pose;
+        }
+        let v = b.odom.relative_to(&a.odom);
+        let k = dt / dt_v;
+        last_pose.compose(&Pose2::new(v.x * k, v.y * k, v.theta * k))
+    }
+
+    fn accept(&mut self, pose: Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) {
+        if !stale {
+            self.fresh_before = self.fresh;
+            self.fresh = Some(Fresh {
+                pose,
+                odom: *odom,
+                stamp_ns,
+            });
+        }
+        self.last_pose = Some(pose);
+        self.last_odom = Some(*odom);
+        self.last_stamp_ns = stamp_ns;
+        if self.points.len() >= MIN_POINTS {
+            let (s, c) = pose.theta.sin_cos();
+            // Reuse the buffer of the scan that leaves the history.
+            let mut world = if self.history.len() >= self.p.max_scans.max(1) {
+                self.history.pop_front().unwrap_or_default()
+            } else {
+                Vec::with_capacity(self.points.len())
+            };
+            world.clear();
+            world.extend(self.points.iter().map(|&(x, y)| {
+                (
+                    (pose.x + c * x - s * y) as f32,
+                    (pose.y + s * x + c * y) as f32,
+                )
+            }));
+            self.history.push_back(world);
+        }
+    }
+
+    /// Keeps endpoints within range, at least ~1.5 cells apart along the scan.
+    fn decimate(&mut self, endpoints: impl Iterator<Item = (f64, f64)>) {
+        self.points.clear();
+        let min_d2 = (1.5 * self.p.resolution).powi(2);
+        for (x, y) in endpoints {
+            if !(x.is_finite() && y.is_finite()) || x.hypot(y) > MAX_POINT_RANGE {
+                continue;
+            }
+            if let Some(&(lx, ly)) = self.points.last()
+                && (x - lx).powi(2) + (y - ly).powi(2) < min_d2
+            {
+                continue;
+            }
+            self.points.push((x, y));
+        }
+    }
+
+    /// Builds the blurred table and its max-pooled levels around `center`.
+    fn build_tables(&mut self, center: &Pose2) {
+        let res = self.p.resolution;
+        let half =
+            ((MAX_POINT_RANGE + self.p.window_m) / res).ceil() as i32 + BLUR_RADIUS + (1 << LEVELS);
+        let cx = (center.x / res).floor() as i32;
+        let cy = (center.y / res).floor() as i32;
+        self.table_x0 = cx - half;
+        self.table_y0 = cy - half;
+        self.table_w = 2 * half + 1;
+        self.table_h = 2 * half + 1;
+        let (w, h) = (self.table_w, self.table_h);
+        let n = (w * h) as usize;
+        let base = &mut self.tables[0];
+        base.clear();
+        base.resize(n, 0);
+        let side = 2 * BLUR_RADIUS + 1;
+        for scan in &self.history {
+            for &(px, py) in scan {
+                let gx = (px as f64 / res).floor() as i32 - self.table_x0;
+                let gy = (py as f64 / res).floor() as i32 - self.table_y0;
+                if gx < BLUR_RADIUS
+                    || gy < BLUR_RADIUS
+                    || gx >= w - BLUR_RADIUS
+                    || gy >= h - BLUR_RADIUS
+                {
+                    continue;
+                }
+                for dy in 0..side {
+                    let row = ((gy + dy - BLUR_RADIUS) * w + gx - BLUR_RADIUS) as usize;
+                    let krow = (dy * side) as usize;
+                    for dx in 0..side as usize {
+                        let v = self.blur[krow + dx];
+                        let cell = &mut base[row + dx];
+                        if v > *cell {
+                            *cell = v;
+                        }
+                    }
+                }
+            }
+        }
+        // Level l holds, at each cell, the max over the 2^l × 2^l block starting there.
+        for level in 1..=LEVELS {
+            let step = 1i32 << (level - 1);
+            let (prev, rest) = self.tables.split_at_mut(level);
+            let src = &prev[level - 1];
+            let dst = &mut rest[0];
+            dst.clear();
+            dst.resize(n, 0);
+            for y in 0..h {
+                let y2 = (y + step).min(h - 1);
+                for x in 0..w {
+                    let x2 = (x + step).min(w - 1);
+                    let a = src[(y * w + x) as usize];
+                    let b = src[(y * w + x2) as usize];
+                    let c = src[(y2 * w + x) as usize];
+                    let d = src[(y2 * w + x2) as usize];
+                    dst[(y * w + x) as usize] = a.max(b).max(c).max(d);
+                }
+            }
+        }
+    }
+
+    /// Mean table value at `level` of the points rotated by angle index `a`, shifted by (ix, iy) cells.
+    fn table_score(&self, level: usize, a: usize, ix: i32, iy: i32) -> f64 {
+        let t = &self.tables[level];
+        let (w, h) = (self.table_w, self.table_h);
+        let mut sum = 0u32;
+        for &(bx, by) in &self.rotated[a] {
+            let (x, y) = (bx + ix, by + iy);
+            if x >= 0 && y >= 0 && x < w && y < h {
+                sum += t[(y * w + x) as usize] as u32;
+            }
+        }
+        sum as f64 / (255.0 * self.rotated[a].len().max(1) as f64)
+    }
+
+    fn prior(&self, a: usize, dx_m: f64, dy_m: f64) -> f64 {
+        let da = self.angles[a];
+        self.prior_t * (dx_m * dx_m + dy_m * dy_m) + self.prior_r * da * da
+    }
+
+    /// Branch-and-bound search around `prediction`; `None` if the scan cannot be matched.
+    fn search(&mut self, prediction: &Pose2) -> Option<(Pose2, f64)> {
+        if self.points.len() < MIN_POINTS || self.history.is_empty() {
+            return None;
+        }
+        self.build_tables(prediction);
+        let res = self.p.resolution;
+        // Angular step: the furthest point moves about one cell.
+        let far = self
+            .points
+            .iter()
+            .map(|p| p.0.hypot(p.1))
+            .fold(0.0f64, f64::max)
+            .max(res);
+        let dtheta = (res / far).clamp(0.001, 0.05);
+        let na = (self.p.window_rad / dtheta).ceil() as i32;
+        self.angles.clear();
+        for i in -na..=na {
+            self.angles.push(i as f64 * dtheta);
+        }
+        let nangles = self.angles.len();
+        if self.rotated.len() < nangles {
+            self.rotated.resize(nangles, Vec::new());
+        }
+        for (a, &da) in self.angles.iter().enumerate() {
+            let (s, c) = (prediction.theta + da).sin_cos();
+            let out = &mut self.rotated[a];
+            out.clear();
+            for &(x, y) in &self.points {
+                let wx = prediction.x + c * x - s * y;
+                let wy = prediction.y + s * x + c * y;
+                out.push((
+                    (wx / res).floor() as i32 - self.table_x0,
+                    (wy / res).floor() as i32 - self.table_y0,
+                ));
+            }
+        }
+        let nw = (self.p.window_m / res).ceil() as i32;
+        let top = 1i32 << LEVELS;
+        let mut candidates = std::mem::take(&mut self.candidates);
+        candidates.clear();
+        for a in 0..nangles {
+            let mut iy = -nw;
+            while iy <= nw {
+                let mut ix = -nw;
+                while ix <= nw {
+                    let bound =
+                        self.table_score(LEVELS, a, ix, iy) - self.min_prior(a, ix, iy, top);
+                    candidates.push(Candidate {
+                        angle: a,
+                        ix,
+                        iy,
+                        bound,
+                    });
+                    ix += top;
+                }
+                iy += top;
+            }
+        }
+        sort_desc(&mut candidates);
+        let mut best: Option<(Candidate, f64)> = None;
+        let mut best_score = f64::NEG_INFINITY;
+        for &cand in &candidates {
+            if cand.bound <= best_score {
+                break;
+            }
+            self.branch(cand, LEVELS, nw, &mut best, &mut best_score);
+        }
+        self.candidates = candidates;
+        let (c, score) = best?;
+        let raw = score + self.prior(c.angle, c.ix as f64 * res, c.iy as f64 * res);
+        if raw < MIN_SCORE {
+            return None;
+        }
+        let coarse = Pose2::new(
+            prediction.x + c.ix as f64 * res,
+            prediction.y + c.iy as f64 * res,
+            prediction.theta + self.angles[c.angle],
+        );
+        let mut pose = self.refine_subcell(prediction, coarse, dtheta);
+        pose.theta = smokenav_shared_types::odom::normalize_angle(pose.theta);
+        Some((pose, raw))
+    }
+
+    /// Mean bilinearly interpolated table value (0–1) of the points at `pose`, minus the prior.
+    fn smooth_score(&self, prediction: &Pose2, pose: &Pose2) -> f64 {
+        let t = &self.tables[0];
+        let res = self.p.resolution;
+        let (w, h) = (self.table_w, self.table_h);
+        let (s, c) = pose.theta.sin_cos();
+        let mut sum = 0.0;
+        for &(x, y) in &self.points {
+            // Table coordinates with cell centres at integers.
+            let gx = (pose.x + c * x - s * y) / res - self.table_x0 as f64 - 0.5;
+            let gy = (pose.y + s * x + c * y) / res - self.table_y0 as f64 - 0.5;
+            let (fx, fy) = (gx.floor(), gy.floor());
+            let (ix, iy) = (fx as i32, fy as i32);
+            if ix < 0 || iy < 0 || ix + 1 >= w || iy + 1 >= h {
+                continue;
+            }
+            let (ax, ay) = (gx - fx, gy - fy);
+            let at = |x: i32, y: i32| t[(y * w + x) as usize] as f64;
+            let top = at(ix, iy) * (1.0 - ax) + at(ix + 1, iy) * ax;
+            let bottom = at(ix, iy + 1) * (1.0 - ax) + at(ix + 1, iy + 1) * ax;
+            sum += top * (1.0 - ay) + bottom * ay;
+        }
+        let mean = sum / (255.0 * self.points.len().max(1) as f64);
+        let (dx, dy) = (pose.x - prediction.x, pose.y - prediction.y);
+        let dt = smokenav_shared_types::odom::normalize_angle(pose.theta - prediction.theta);
+        mean - self.prior_t * (dx * dx + dy * dy) - self.prior_r * dt * dt
+    }
+
+    /// Hill-climbs the interpolated table from the branch-and-bound result, whose
+    /// grid of candidates is a cell and one angular step wide, to sub-cell precision.
+    fn refine_subcell(&self, prediction: &Pose2, start: Pose2, dtheta: f64) -> Pose2 {
+        let mut pose = start;
+        let mut best = self.smooth_score(prediction, &pose);
+        let (mut ld, mut ad) = (0.5 * self.p.resolution, 0.5 * dtheta);
+        for _ in 0..4 {
+            for _ in 0..8 {
+                let mut round = (best, pose);
+                for (dx, dy, dt) in [
+                    (ld, 0.0, 0.0),
+                    (-ld, 0.0, 0.0),
+                    (0.0, ld, 0.0),
+                    (0.0, -ld, 0.0),
+                    (0.0, 0.0, ad),
+                    (0.0, 0.0, -ad),
+                ] {
+                    let cand = Pose2::new(pose.x + dx, pose.y + dy, pose.theta + dt);
+                    let s = self.smooth_score(prediction, &cand);
+                    if s > round.0 {
+                        round = (s, cand);
+                    }
+                }
+                if round.0 <= best {
+                    break;
+                }
+                (best, pose) = round;
+            }
+            ld *= 0.5;
+            ad *= 0.5;
+        }
+        pose
+    }
+
+    /// Smallest prior over the block of offsets `[ix, ix+size) × [iy, iy+size)`.
+    fn min_prior(&self, a: usize, ix: i32, iy: i32, size: i32) -> f64 {
+        let res = self.p.resolution;
+        let nearest = |lo: i32| -> f64 {
+            if lo > 0 {
+                lo as f64
+            } else if lo + size - 1 < 0 {
+                (lo + size - 1) as f64
+            } else {
+                0.0
+            }
+        };
+        self.prior(a, nearest(ix) * res, nearest(iy) * res)
+    }
+
+    fn branch(
+        &self,
+        cand: Candidate,
+        level: usize,
+        nw: i32,
+        best: &mut Option<(Candidate, f64)>,
+        best_score: &mut f64,
+    ) {
+        if level == 0 {
+            if cand.bound > *best_score {
+                *best_score = cand.bound;
+                *best = Some((cand, cand.bound));
+            }
+            return;
+        }
+        let half = 1i32 << (level - 1);
+        let res = self.p.resolution;
+        let mut children = [cand; 4];
+        let mut n = 0;
+        for (ox, oy) in [(0, 0), (half, 0), (0, half), (half, half)] {
+            let (ix, iy) = (cand.ix + ox, cand.iy + oy);
+            if ix > nw || iy > nw {
+                continue;
+            }
+            let bound = if level - 1 == 0 {
+                self.table_score(0, cand.angle, ix, iy)
+                    - self.prior(cand.angle, ix as f64 * res, iy as f64 * res)
+            } else {
+                self.table_score(level - 1, cand.angle, ix, iy)
+                    - self.min_prior(cand.angle, ix, iy, half)
+            };
+            children[n] = Candidate {
+                angle: cand.angle,
+                ix,
+                iy,
+                bound,
+            };
+            n += 1;
+        }
+        let children = &mut children[..n];
+        sort_desc(children);
+        for &child in children.iter() {
+            if child.bound <= *best_score {
+                break;
+            }
+            self.branch(child, level - 1, nw, best, best_score);
+        }
+    }
+}
+
+/// Sorts by bound, highest first; equal bounds keep their order (stable), so the result is deterministic.
+fn sort_desc(c: &mut [Candidate]) {
+    c.sort_by(|a, b| {
+        b.bound
+            .partial_cmp(&a.bound)
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> FrontEndParams {
+        FrontEndParams {
+            resolution: 0.05,
+            window_m: 1.0,
+            window_rad: 0.4,
+            max_scans: 10,
+        }
+    }
+
+    /// Endpoints, in the robot frame at `pose`, of an L-shaped corner plus a pillar.
+    fn scene_from(pose: &Pose2) -> Vec<(f64, f64)> {
+        let mut world = Vec::new();
+        for i in 0..200 {
+            let t = i as f64 * 0.03;
+            world.push((4.0, -3.0 + t)); // wall x = 4
+            world.push((-2.0 + t, 3.0)); // wall y = 3
+        }
+        for i in 0..40 {
+            let a = i as f64 * std::f64::consts::TAU / 40.0;
+            world.push((1.0 + 0.2 * a.cos(), -1.5 + 0.2 * a.sin()));
+        }
+        world
+            .into_iter()
+            .map(|(x, y)| {
+                let p = Pose2::new(x, y, 0.0).relative_to(pose);
+                (p.x, p.y)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn stalled_odometry_is_bridged_by_matching() {
+        let mut fe = FrontEnd::new(params());
+        let start = Pose2::new(0.0, 0.0, 0.0);
+        fe.track(scene_from(&start).into_iter(), &start, 0);
+        // Odometry stuck at the start while the robot moved 0.3 m and turned 0.15 rad.
+        let moved = Pose2::new(0.3, 0.1, 0.15);
+        let t = fe.track(scene_from(&moved).into_iter(), &start, 200_000_000);
+        assert!(t.stale_odometry);
+        assert!(t.score.is_some());
+        assert!((t.pose.x - moved.x).abs() < 0.03, "{:?}", t.pose);
+        assert!((t.pose.y - moved.y).abs() < 0.03, "{:?}", t.pose);
+        assert!((t.pose.theta - moved.theta).abs() < 0.01, "{:?}", t.pose);
+    }
+
+    #[test]
+    fn odometry_backlog_is_not_applied_twice() {
+        let mut fe = FrontEnd::new(params());
+        let p0 = Pose2::new(0.0, 0.0, 0.0);
+        fe.track(scene_from(&p0).into_iter(), &p0, 0);
+        let p1 = Pose2::new(0.2, 0.0, 0.0);
+        fe.track(scene_from(&p1).into_iter(), &p1, 200_000_000);
+        // Two scans with repeated odometry while the robot moves on…
+        let p2 = Pose2::new(0.4, 0.0, 0.0);
+        fe.track(scene_from(&p2).into_iter(), &p1, 400_000_000);
+        let p3 = Pose2::new(0.6, 0.0, 0.0);
+        fe.track(scene_from(&p3).into_iter(), &p1, 600_000_000);
+        // …then the odometry catches up with the whole backlog in one go.
+        let p4 = Pose2::new(0.8, 0.0, 0.0);
+        let t = fe.track(scene_from(&p4).into_iter(), &p4, 800_000_000);
+        assert!(!t.stale_odometry);
+        assert!((t.pose.x - 0.8).abs() < 0.06, "{:?}", t.pose);
+    }
+
+    #[test]
+    fn odometry_reset_is_not_taken_as_motion() {
+        let mut fe = FrontEnd::new(params());
+        let p0 = Pose2::default();
+        fe.track(scene_from(&p0).into_iter(), &p0, 0);
+        let p1 = Pose2::new(0.2, 0.0, 0.0);
+        fe.track(scene_from(&p1).into_iter(), &p1, 200_000_000);
+        // The base restarts its odometry at (0, 0, 0) while the robot moved on to x = 0.3.
+        fe.odometry_reset();
+        let p2 = Pose2::new(0.3, 0.0, 0.0);
+        let t = fe.track(scene_from(&p2).into_iter(), &Pose2::default(), 400_000_000);
+        assert!(
+            (t.pose.x - 0.3).abs() < 0.03 && t.pose.y.abs() < 0.03,
+            "{:?}",
+            t.pose
+        );
+        // Later readings in the new frame are motion as usual.
+        let p3 = Pose2::new(0.5, 0.0, 0.0);
+        let t = fe.track(
+            scene_from(&p3).into_iter(),
+            &Pose2::new(0.2, 0.0, 0.0),
+            600_000_000,
+        );
+        assert!((t.pose.x - 0.5).abs() < 0.03, "{:?}", t.pose);
+    }
+
+    #[test]
+    fn too_few_points_fall_back_to_the_prediction() {
+        let mut fe = FrontEnd::new(params());
+        let p0 = Pose2::default();
+        fe.track(scene_from(&p0).into_iter(), &p0, 0);
+        let odom = Pose2::new(0.1, 0.0, 0.0);
+        let t = fe.track(std::iter::empty(), &odom, 100_000_000);
+        assert_eq!(t.score, None);
+        assert_eq!(t.pose, odom);
+    }
+
+    #[test]
+    fn same_input_gives_the_same_pose() {
+        let run = || {
+            let mut fe = FrontEnd::new(params());
+            let mut out = Vec::new();
+            for k in 0..5 {
+                let truth = Pose2::new(0.1 * k as f64, 0.02 * k as f64, 0.03 * k as f64);
+                let odom = Pose2::new(0.11 * k as f64, 0.0, 0.025 * k as f64);
+                out.push(
+                    fe.track(scene_from(&truth).into_iter(), &odom, k * 200_000_000)
+                        .pose,
+                );
+            }
+            out
+        };
+        assert_eq!(run(), run());
+    }
+}

@@ -1,0 +1,151 @@
+//! The scan the filter consumes, built from a `LaserScan`, a `FusedScan` or a
+//! log record, with a noise level per beam.
+
+use crate::pose::Pose2;
+use smokenav_shared_types::{BeamReading, FusedScan, LaserScan, SectionSource};
+
+/// Where a beam's range came from, which sets its noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BeamKind {
+    Laser,
+    Sonar,
+}
+
+/// One beam: its angle in the sensor frame and its range, or `None` when the
+/// sensor saw nothing usable (no return, beyond max, error code, NaN).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Beam {
+    pub angle: f32,
+    pub range: Option<f32>,
+    pub kind: BeamKind,
+}
+
+/// A planar range scan in the form the filter uses. Reused between messages
+/// (`clear` keeps the capacity) so the hot path does not allocate.
+#[derive(Debug, Clone, Default)]
+pub struct RangeScan {
+    /// Measurement time, ns (used for ordering and for the update thresholds).
+    pub stamp_ns: u64,
+    /// Pose of the sensor in the robot frame.
+    pub sensor_pose: Pose2,
+    pub beams: Vec<Beam>,
+    /// Multiplier of the laser endpoint noise for the obscurant the scan was
+    /// taken in (1 in clear air; see `SlamSection::laser_noise_factor`).
+    pub laser_noise_factor: f64,
+}
+
+impl RangeScan {
+    pub fn clear(&mut self) {
+        self.beams.clear();
+        self.laser_noise_factor = 1.0;
+        self.sensor_pose = Pose2::default();
+        self.stamp_ns = 0;
+    }
+
+    /// Beams that carry a range.
+    pub fn valid_count(&self) -> usize {
+        self.beams.iter().filter(|b| b.range.is_some()).count()
+    }
+
+    /// Fills from a laser scan; `sensor_pose` is the laser's mount on the robot.
+    pub fn fill_from_laser(&mut self, scan: &LaserScan, sensor_pose: Pose2) {
+        self.clear();
+        self.stamp_ns = scan.header.stamp_ns;
+        self.sensor_pose = sensor_pose;
+        let range_min = if scan.range_min.is_finite() {
+            scan.range_min
+        } else {
+            0.0
+        };
+        let range_max = if scan.range_max.is_finite() && scan.range_max > 0.0 {
+            scan.range_max
+        } else {
+            f32::INFINITY
+        };
+        for (angle, reading) in scan.beams() {
+            let range = match reading {
+                BeamReading::Range(r) if r.is_finite() && r >= range_min && r < range_max => {
+                    Some(r)
+                }
+                _ => None,
+            };
+            self.beams.push(Beam {
+                angle,
+                range,
+                kind: BeamKind::Laser,
+            });
+        }
+    }
+
+    /// Fills from a fused scan: beams whose source is sonar get the sonar's
+    /// noise; `Neither` beams carry no range; the laser's noise follows the smoke level.
+    pub fn fill_from_fused(
+        &mut self,
+        fused: &FusedScan,
+        sensor_pose: Pose2,
+        laser_noise_factor: f64,
+    ) {
+        self.fill_from_laser(&fused.scan, sensor_pose);
+        self.laser_noise_factor = if laser_noise_factor.is_finite() && laser_noise_factor > 0.0 {
+            laser_noise_factor
+        } else {
+            1.0
+        };
+        for (i, beam) in self.beams.iter_mut().enumerate() {
+            match fused.beam_source(i) {
+                SectionSource::Sonar => beam.kind = BeamKind::Sonar,
+                SectionSource::Neither => beam.range = None,
+                SectionSource::Laser | SectionSource::Both => {}
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use smokenav_shared_types::Header;
+
+    #[test]
+    fn invalid_beams_carry_no_range() {
+        let mut s = LaserScan {
+            header: Header::new(5, 0, "laser"),
+            angle_min: -1.0,
+            angle_increment: 0.5,
+            range_min: 0.02,
+            range_max: 5.6,
+            count: 5,
+            ..Default::default()
+        };
+        s.set_beam(0, BeamReading::Range(1.0));
+        s.set_beam(1, BeamReading::NoReturn);
+        s.set_beam(2, BeamReading::Range(0.01));
+        s.set_beam(3, BeamReading::Range(f32::NAN));
+        s.set_beam(4, BeamReading::SensorCode(7));
+        let mut r = RangeScan::default();
+        r.fill_from_laser(&s, Pose2::default());
+        assert_eq!(r.beams.len(), 5);
+        assert_eq!(r.valid_count(), 1);
+        assert_eq!(r.beams[0].range, Some(1.0));
+        assert_eq!(r.beams[2].angle, 0.0);
+        assert_eq!(r.stamp_ns, 5);
+    }
+
+    #[test]
+    fn fused_sonar_beams_are_marked_and_neither_beams_dropped() {
+        let mut f = FusedScan::default();
+        f.scan.count = 3;
+        f.scan.range_max = 5.6;
+        for i in 0..3 {
+            f.scan.set_beam(i, BeamReading::Range(2.0));
+        }
+        f.beam_source[1] = SectionSource::Sonar as u8;
+        f.beam_source[2] = SectionSource::Neither as u8;
+        let mut r = RangeScan::default();
+        r.fill_from_fused(&f, Pose2::default(), 1.3);
+        assert_eq!(r.beams[0].kind, BeamKind::Laser);
+        assert_eq!(r.beams[1].kind, BeamKind::Sonar);
+        assert_eq!(r.beams[2].range, None);
+        assert_eq!(r.laser_noise_factor, 1.3);
+    }
+}

@@ -1,0 +1,344 @@
+//! `smokenav-slam`: the SLAM library as a process.
+//!
+//! Subscribes to `fusion/scan` (or `laser/scan`, per `[slam] input` or
+//! `--input`) and `base/odom`; pairs each scan with the odometry interpolated
+//! to the scan's stamp; runs the particle filter; publishes a `PoseEstimate`
+//! on `slam/pose` for every processed scan and the best particle's map on
+//! `slam/map` at `[slam] map_rate_hz`. When it falls behind it processes the
+//! newest scan and counts the others as skipped: nothing queues without bound
+//! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
+//! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
+//! map.png (`smokenav map save DIR` saves the published map from anywhere).
+//!
+//! ```text
+//! smokenav-slam --config robot.toml [--input fused|laser] [--map-dir DIR]
+//! ```
+
+use anyhow::Context;
+use clap::{Parser, ValueEnum};
+use smokenav_algorithms_slam::odom_buffer::{OdomAt, OdomBuffer};
+use smokenav_algorithms_slam::{Pose2, RangeScan, Rbpf, SlamBackend, SlamUpdate};
+use smokenav_platform_bus::{MapPublisher, Publisher, Subscriber, WaitOutcome, Waiter, topics};
+use smokenav_platform_config::SlamSection;
+use smokenav_platform_config::slam::SlamInput;
+use smokenav_platform_map::OccupancyGrid;
+use smokenav_platform_runtime::{CommonArgs, Process};
+use smokenav_shared_types::{
+    Clock, FusedScan, Header, LaserScan, MapInfo, MonotonicClock, Odometry, OdometryFlags,
+    PoseEstimate,
+};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum InputArg {
+    Fused,
+    Laser,
+}
+
+#[derive(Parser)]
+#[command(
+    version,
+    about = "SLAM: scans and odometry in, slam/pose and slam/map out"
+)]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+    /// Scan topic, overriding `[slam] input`: fused (fusion/scan) or laser (laser/scan).
+    #[arg(long, value_enum)]
+    input: Option<InputArg>,
+    /// Folder SIGUSR1 writes the map to.
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    map_dir: PathBuf,
+    /// Number of particles, overriding `[slam] particles`.
+    #[arg(long)]
+    particles: Option<usize>,
+}
+
+/// Odometry newer than a scan may still be on its way: wait this long for it.
+const ODOM_WAIT: Duration = Duration::from_millis(100);
+/// A scan up to this far past the newest odometry uses that odometry.
+const ODOM_MAX_GAP: Duration = Duration::from_millis(300);
+/// Odometry readings kept for interpolation (~10 s at the Pioneer's 50 Hz).
+const ODOM_HISTORY: usize = 512;
+/// Longest wait on the bus, so signals and the map timer are served promptly.
+const POLL: Duration = Duration::from_millis(50);
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    smokenav_platform_runtime::main("slam", &args.common, |p| run(p, &args))
+}
+
+enum Scans {
+    Fused(Subscriber<FusedScan>),
+    Laser(Subscriber<LaserScan>),
+}
+
+impl Scans {
+    /// Drains the queue into `scan`, keeping only the newest; returns how many arrived.
+    fn drain(&self, scan: &mut RangeScan, mount: Pose2, cfg: &SlamSection) -> anyhow::Result<u64> {
+        let mut n = 0;
+        match self {
+            Scans::Fused(s) => {
+                while let Some(f) = s.receive()? {
+                    scan.fill_from_fused(&f, mount, cfg.laser_noise_factor(f.smoke_level as f64));
+                    n += 1;
+                }
+            }
+            Scans::Laser(s) => {
+                while let Some(l) = s.receive()? {
+                    scan.fill_from_laser(&l, mount);
+                    n += 1;
+                }
+            }
+        }
+        Ok(n)
+    }
+
+    fn lost(&self) -> u64 {
+        match self {
+            Scans::Fused(s) => s.stats().lost,
+            Scans::Laser(s) => s.stats().lost,
+        }
+    }
+
+    fn topic(&self) -> &'static str {
+        match self {
+            Scans::Fused(_) => topics::FUSION_SCAN,
+            Scans::Laser(_) => topics::LASER_SCAN,
+        }
+    }
+}
+
+/// Counters surfaced as health metrics.
+#[derive(Default)]
+struct Counters {
+    processed: u64,
+    /// Superseded by a newer scan before they could be processed.
+    superseded: u64,
+    /// Processed without odometry at their stamp (the last pose used was held).
+    no_odometry: u64,
+    odom_resets: u64,
+    publish_errors: u64,
+    maps_published: u64,
+    maps_saved: u64,
+}
+
+fn map_info(grid: &OccupancyGrid, stamp_ns: u64) -> MapInfo {
+    MapInfo {
+        header: Header::new(stamp_ns, 0, "map"),
+        resolution: grid.resolution as f32,
+        width: grid.width as u32,
+        height: grid.height as u32,
+        _reserved: 0,
+        origin_x: grid.origin[0],
+        origin_y: grid.origin[1],
+        origin_theta: grid.origin[2],
+    }
+}
+
+fn save_map(grid: &OccupancyGrid, dir: &Path) -> anyhow::Result<()> {
+    smokenav_platform_map::save_map_server(grid, dir, "map")?;
+    grid.save_png(&dir.join("map.png"))?;
+    Ok(())
+}
+
+fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
+    let mut cfg = p.config.slam.clone();
+    if let Some(n) = args.particles {
+        anyhow::ensure!(
+            (1..=1000).contains(&n),
+            "--particles must be 1–1000, got {n}"
+        );
+        cfg.particles = n;
+    }
+    let input = match args.input {
+        Some(InputArg::Fused) => SlamInput::Fused,
+        Some(InputArg::Laser) => SlamInput::Laser,
+        None => cfg.input,
+    };
+    let m = &p.config.laser.mount;
+    let mount = Pose2::new(m.x, m.y, m.yaw_rad());
+    let save_requested = Arc::new(AtomicBool::new(false));
+    signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&save_requested))
+        .context("cannot install the SIGUSR1 handler")?;
+
+    let scans = match input {
+        SlamInput::Fused => Scans::Fused(p.bus.subscriber::<FusedScan>(topics::FUSION_SCAN)?),
+        SlamInput::Laser => Scans::Laser(p.bus.subscriber::<LaserScan>(topics::LASER_SCAN)?),
+    };
+    let odom_sub = p.bus.subscriber::<Odometry>(topics::BASE_ODOM)?;
+    let mut poses: Publisher<PoseEstimate> = p.bus.publisher(topics::SLAM_POSE)?;
+    let mut maps = MapPublisher::create(&p.bus, topics::SLAM_MAP)?;
+    let waiter = Waiter::new()?;
+    let _attached = match &scans {
+        Scans::Fused(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],
+        Scans::Laser(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],
+    };
+
+    let mut slam = Rbpf::new(&cfg, false);
+    let mut odom = OdomBuffer::new(ODOM_HISTORY);
+    let mut scan = RangeScan::default();
+    let mut pending = false;
+    let mut last_odom = Pose2::default();
+    let mut last_update: Option<SlamUpdate> = None;
+    let mut counters = Counters::default();
+    let map_period = Duration::from_secs_f64(1.0 / cfg.map_rate_hz);
+    let mut next_map = Instant::now() + map_period;
+    let clock = MonotonicClock;
+    let rate = p.health.add_rate("pose_hz", Some(10.0));
+    p.ready(&format!(
+        "{} particles on {} + {}, map every {:.1} s",
+        cfg.particles,
+        scans.topic(),
+        topics::BASE_ODOM,
+        map_period.as_secs_f64()
+    ));
+
+    while !p.shutdown_requested() {
+        if waiter.wait(Some(POLL))? == WaitOutcome::Shutdown {
+            break;
+        }
+        while let Some(o) = odom_sub.receive()? {
+            if o.flags & OdometryFlags::RESET != 0 {
+                // The odometry frame jumped: poses before and after must not be mixed.
+                odom.clear();
+                slam.odometry_reset();
+                counters.odom_resets += 1;
+            }
+            odom.push(o.header.stamp_ns, Pose2::new(o.x, o.y, o.theta));
+        }
+        let arrived = scans.drain(&mut scan, mount, &cfg)?;
+        if arrived > 0 {
+            // Every scan that arrived but the newest, and one still waiting for odometry, is skipped.
+            counters.superseded += arrived - 1 + u64::from(pending);
+            pending = true;
+        }
+        if pending {
+            let now = clock.now_ns();
+            let at = odom.at(
+                scan.stamp_ns,
+                now,
+                ODOM_WAIT.as_nanos() as u64,
+                ODOM_MAX_GAP.as_nanos() as u64,
+            );
+            let pose = match at {
+                OdomAt::NotYet => None,
+                OdomAt::Missing => {
+                    counters.no_odometry += 1;
+                    Some(last_odom)
+                }
+                other => other.pose(),
+            };
+            if let Some(odom_pose) = pose {
+                pending = false;
+                last_odom = odom_pose;
+                let t0 = Instant::now();
+                let update = slam.process(&scan, &odom_pose);
+                let took = t0.elapsed();
+                counters.processed += 1;
+                p.health.record_latency(took);
+                let skipped = counters.superseded + scans.lost();
+                let published = poses.publish_with(|e: &mut PoseEstimate| {
+                    e.header = Header::new(update.stamp_ns, 0, "map");
+                    e.x = update.pose.x;
+                    e.y = update.pose.y;
+                    e.theta = update.pose.theta;
+                    e.covariance = update.covariance;
+                    e.n_eff = update.n_eff as f32;
+                    e.particles = update.particles as u32;
+                    e.scans_skipped = skipped;
+                    e.processing_us = took.as_micros().min(u32::MAX as u128) as u32;
+                });
+                match published {
+                    Ok(_) => p.health.mark(rate),
+                    Err(e) => {
+                        counters.publish_errors += 1;
+                        p.health.error(&format!("cannot publish slam/pose: {e}"));
+                    }
+                }
+                last_update = Some(update);
+            }
+        }
+        let now = Instant::now();
+        let save = save_requested.swap(false, Ordering::Relaxed);
+        if now >= next_map || save {
+            if let (Some(grid), Some(u)) = (slam.map(), last_update) {
+                if now >= next_map {
+                    match maps.publish(&map_info(&grid, u.stamp_ns), &grid.cells) {
+                        Ok(_) => counters.maps_published += 1,
+                        Err(e) => {
+                            counters.publish_errors += 1;
+                            p.health.error(&format!("cannot publish slam/map: {e}"));
+                        }
+                    }
+                }
+                if save {
+                    match save_map(&grid, &args.map_dir) {
+                        Ok(()) => {
+                            counters.maps_saved += 1;
+                            tracing::info!("map saved to {}", args.map_dir.display());
+                        }
+                        Err(e) => p.health.error(&format!(
+                            "cannot save the map to {}: {e:#}",
+                            args.map_dir.display()
+                        )),
+                    }
+                }
+            }
+            if now >= next_map {
+                next_map = now + map_period;
+            }
+        }
+        report(p, &slam, &counters, &scans, &odom, last_update.as_ref());
+        p.tick()?;
+    }
+    Ok(())
+}
+
+fn report(
+    p: &mut Process,
+    slam: &Rbpf,
+    c: &Counters,
+    scans: &Scans,
+    odom: &OdomBuffer,
+    last: Option<&SlamUpdate>,
+) {
+    let h = &mut p.health;
+    let stats = slam.stats();
+    h.set_metric("scans_processed", c.processed as f64);
+    h.set_metric("scans_skipped", (c.superseded + scans.lost()) as f64);
+    h.set_metric("scans_lost_on_bus", scans.lost() as f64);
+    h.set_metric("scans_without_odometry", c.no_odometry as f64);
+    h.set_metric("scans_without_ranges", stats.empty_scans as f64);
+    h.set_metric("odom_resets", c.odom_resets as f64);
+    h.set_metric("odom_out_of_order", odom.out_of_order as f64);
+    h.set_metric("resamples", stats.resamples as f64);
+    h.set_metric("frontend_fallbacks", stats.frontend_fallbacks as f64);
+    h.set_metric("maps_published", c.maps_published as f64);
+    h.set_metric("maps_saved", c.maps_saved as f64);
+    h.set_metric("publish_errors", c.publish_errors as f64);
+    if let Some(u) = last {
+        h.set_metric("n_eff", u.n_eff);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn map_info_carries_the_grid_geometry() {
+        let grid = OccupancyGrid::new(7, 5, 0.05, [-8.6, -10.4, 0.0]);
+        let info = map_info(&grid, 42);
+        assert_eq!((info.width, info.height), (7, 5));
+        assert_eq!(info.cell_count(), grid.cells.len());
+        assert_eq!((info.origin_x, info.origin_y), (-8.6, -10.4));
+        assert_eq!(info.header.stamp_ns, 42);
+        assert_eq!(info.header.frame_id.as_str(), "map");
+        assert!((info.resolution - 0.05).abs() < 1e-9);
+    }
+}

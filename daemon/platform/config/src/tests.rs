@@ -1,0 +1,135 @@
+use super::*;
+use std::path::PathBuf;
+
+fn profile(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../config")
+        .join(name)
+}
+
+fn pioneer_text() -> String {
+    std::fs::read_to_string(profile("pioneer-3dx.toml")).unwrap()
+}
+
+fn parse(text: &str) -> Result<RobotConfig, ConfigError> {
+    RobotConfig::parse(text, Path::new("config/test-robot.toml"))
+}
+
+#[test]
+fn shipped_profiles_are_valid() {
+    for name in ["pioneer-3dx.toml", "nomad-scout.toml"] {
+        let path = profile(name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let cfg = RobotConfig::parse(&text, &path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(cfg.sonar.transducers.len(), cfg.sonar.count as usize);
+    }
+}
+
+#[test]
+fn pioneer_sonar_poses_are_arias() {
+    let cfg = parse(&pioneer_text()).unwrap();
+    let s3 = cfg.sonar.transducer(3).unwrap();
+    assert_eq!((s3.x, s3.y, s3.yaw_deg), (0.166, 0.027, 10.0));
+    assert_eq!(cfg.robot.platform, Platform::Pioneer);
+}
+
+#[test]
+fn unknown_key_names_file_key_and_reason() {
+    let text = pioneer_text().replace(
+        "stall_timeout_s = 1.0",
+        "stall_timeout_s = 1.0\nscan_hz = 10",
+    );
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("config/test-robot.toml"), "{msg}");
+    assert!(
+        msg.contains("laser.scan_hz") || msg.contains("`scan_hz`"),
+        "{msg}"
+    );
+    assert!(msg.contains("unknown field"), "{msg}");
+    // and the line of the offending key
+    let ConfigError::Parse { line, .. } = err else {
+        panic!("expected a parse error, got {err:?}")
+    };
+    let expected = text.lines().position(|l| l.starts_with("scan_hz")).unwrap() + 1;
+    assert_eq!(line, expected);
+}
+
+#[test]
+fn negative_rate_names_file_key_and_reason() {
+    let text = pioneer_text().replace(
+        "rate_hz = 10.0\n\n[base.pioneer]",
+        "rate_hz = -10.0\n\n[base.pioneer]",
+    );
+    assert!(text.contains("rate_hz = -10.0"));
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("config/test-robot.toml"), "{msg}");
+    assert_eq!(err.keys(), vec!["base.rate_hz"], "{msg}");
+    assert!(msg.contains("-10"), "{msg}");
+}
+
+#[test]
+fn missing_sonar_pose_names_the_index() {
+    let text = pioneer_text().replace(
+        "  { index = 5, x = 0.148, y = -0.078, yaw_deg = -30.0 },\n",
+        "",
+    );
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert_eq!(err.keys(), vec!["sonar.transducers"], "{msg}");
+    assert!(msg.contains("[5]"), "{msg}");
+}
+
+#[test]
+fn wrong_type_names_key() {
+    let text = pioneer_text().replace("cone_deg = 15.0", "cone_deg = \"wide\"");
+    let err = parse(&text).unwrap_err();
+    assert_eq!(err.keys(), vec!["sonar.cone_deg"], "{err}");
+}
+
+#[test]
+fn missing_required_section_is_reported() {
+    let text = pioneer_text();
+    let cut = text.find("[smoke]").unwrap();
+    let end = text.find("[fusion]").unwrap();
+    let text = format!("{}{}", &text[..cut], &text[end..]);
+    let err = parse(&text).unwrap_err().to_string();
+    assert!(err.contains("smoke"), "{err}");
+}
+
+#[test]
+fn all_issues_are_listed_at_once() {
+    let text = pioneer_text()
+        .replace("cone_deg = 15.0", "cone_deg = 0.0")
+        .replace("port = \"/dev/hokuyo\"", "port = \"tcp://nohost\"");
+    let err = parse(&text).unwrap_err();
+    let keys = err.keys();
+    assert!(
+        keys.contains(&"sonar.cone_deg") && keys.contains(&"laser.port"),
+        "{keys:?}"
+    );
+}
+
+#[test]
+fn scout_profile_needs_scout_options() {
+    let text = std::fs::read_to_string(profile("nomad-scout.toml")).unwrap();
+    let start = text.find("[base.scout]").unwrap();
+    let end = text.find("[sonar]").unwrap();
+    let text = format!("{}{}", &text[..start], &text[end..]);
+    let err = parse(&text).unwrap_err();
+    assert_eq!(err.keys(), vec!["base.scout"], "{err}");
+}
+
+#[test]
+fn effective_config_round_trips() {
+    let cfg = parse(&pioneer_text()).unwrap();
+    let again = parse(&cfg.to_toml()).unwrap();
+    assert_eq!(cfg, again);
+}
+
+#[test]
+fn unreadable_file_names_the_path() {
+    let err = RobotConfig::load(Path::new("/nonexistent/robot.toml")).unwrap_err();
+    assert!(err.to_string().contains("/nonexistent/robot.toml"));
+}

@@ -1,0 +1,591 @@
+//! Bus messages → the MCAP channels that represent them.
+//!
+//! One bus message becomes a [`Batch`]: its standard ROS 2 message, then the
+//! `smokenav_msgs` companion that completes it (same MCAP sequence number,
+//! written next in the same chunk), then any derived views (`/tf`, sonar
+//! points). A batch is never split across chunks, so a file cut short still
+//! holds complete pairs only.
+
+use crate::codec::{self, SonarPoint, Transform2};
+use crate::schema::{self, MsgDef};
+use smokenav_shared_types::header::FRAME_ID_LEN;
+use smokenav_shared_types::{
+    FixedStr, FusedScan, Health, LaserScan, MapInfo, Odometry, PoseEstimate, SmokeReading,
+    SonarRing, SonarStatus, VelocityCommand,
+};
+use std::collections::HashMap;
+
+/// Suffix of the companion channel of a standard message (`/laser/scan/extras`).
+pub const EXTRAS_SUFFIX: &str = "/extras";
+/// Suffix of the fused scan's companion (`/fusion/scan/decisions`).
+pub const DECISIONS_SUFFIX: &str = "/decisions";
+/// Suffix of the sonar ring's PointCloud2 view (`/base/sonar/points`).
+pub const POINTS_SUFFIX: &str = "/points";
+pub const TF_TOPIC: &str = "/tf";
+pub const TF_STATIC_TOPIC: &str = "/tf_static";
+
+/// What a channel is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelRole {
+    /// A standard ROS 2 message; with its companion it replays exactly.
+    Standard,
+    /// `smokenav_msgs`: what the standard message before it cannot carry.
+    Companion,
+    /// `smokenav_msgs`: the whole message (no standard type fits).
+    Complete,
+    /// Derived for viewers (`/tf`, `/tf_static`, sonar points); not replayed.
+    View,
+}
+
+/// The QoS a ROS 2 publisher of this channel would offer (`offered_qos_profiles`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RosQos {
+    /// reliable, volatile, keep last 10: accepted by sensor-data and default subscribers.
+    Stream,
+    /// reliable, transient local, keep last 1: `/tf_static` and maps (late joiners get the last).
+    Latched,
+}
+
+impl RosQos {
+    /// rosbag2's YAML with integer enums (readable by Humble and, by its
+    /// auto-detection, every later rosbag2). Durations 0 = unspecified.
+    pub fn yaml(self) -> String {
+        let (depth, durability) = match self {
+            RosQos::Stream => (10, 2), // VOLATILE
+            RosQos::Latched => (1, 1), // TRANSIENT_LOCAL
+        };
+        let zero = "\n    sec: 0\n    nsec: 0";
+        format!(
+            "- history: 1\n  depth: {depth}\n  reliability: 1\n  durability: {durability}\n  \
+             deadline:{zero}\n  lifespan:{zero}\n  liveliness: 1\n  \
+             liveliness_lease_duration:{zero}\n  avoid_ros_namespace_conventions: false\n"
+        )
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct ChannelSpec {
+    /// ROS topic, `/` + the bus topic (+ a suffix for companions and views).
+    pub topic: String,
+    pub schema: &'static MsgDef,
+    pub role: ChannelRole,
+    pub qos: RosQos,
+}
+
+/// One encoded MCAP message of a batch.
+#[derive(Debug, Default)]
+pub struct Encoded {
+    /// Index into [`Encoder::channels`].
+    pub channel: usize,
+    /// MCAP sequence: the smokenav `header.seq`, truncated to 32 bits.
+    pub sequence: u32,
+    pub log_time: u64,
+    pub publish_time: u64,
+    pub data: Vec<u8>,
+}
+
+/// The messages one bus message became. Reused: buffers keep their capacity.
+#[derive(Debug, Default)]
+pub struct Batch {
+    /// Channels first used by this batch: (index, spec). The sink registers them.
+    pub new_channels: Vec<(usize, ChannelSpec)>,
+    items: Vec<Encoded>,
+    used: usize,
+}
+
+impl Batch {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn clear(&mut self) {
+        self.new_channels.clear();
+        self.used = 0;
+    }
+
+    pub fn messages(&self) -> &[Encoded] {
+        &self.items[..self.used]
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.used == 0
+    }
+
+    /// Total payload bytes.
+    pub fn bytes(&self) -> usize {
+        self.messages().iter().map(|m| m.data.len()).sum()
+    }
+
+    /// Removes message `i` (tests build damaged files with it).
+    #[cfg(test)]
+    pub(crate) fn remove(&mut self, i: usize) {
+        if i < self.used {
+            let e = self.items.remove(i);
+            self.items.push(e);
+            self.used -= 1;
+        }
+    }
+
+    fn slot(
+        &mut self,
+        channel: usize,
+        sequence: u32,
+        log_time: u64,
+        publish_time: u64,
+    ) -> &mut Vec<u8> {
+        if self.used == self.items.len() {
+            self.items.push(Encoded::default());
+        }
+        let e = &mut self.items[self.used];
+        self.used += 1;
+        e.channel = channel;
+        e.sequence = sequence;
+        e.log_time = log_time;
+        e.publish_time = publish_time;
+        &mut e.data
+    }
+}
+
+/// A planar pose (m, m, rad).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose2 {
+    pub x: f64,
+    pub y: f64,
+    pub yaw: f64,
+}
+
+/// Where the sensors sit on the robot (from the robot profile), for `/tf_static`
+/// and the sonar points. Without it those views are not written.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RobotGeometry {
+    pub laser_frame: String,
+    pub laser: Pose2,
+    /// (transducer index, pose on the base).
+    pub sonars: Vec<(u8, Pose2)>,
+}
+
+impl RobotGeometry {
+    /// The sensor poses of a robot profile.
+    pub fn from_config(cfg: &smokenav_platform_config::RobotConfig) -> Self {
+        RobotGeometry {
+            laser_frame: cfg.laser.frame_id.clone(),
+            laser: Pose2 {
+                x: cfg.laser.mount.x,
+                y: cfg.laser.mount.y,
+                yaw: cfg.laser.mount.yaw_rad(),
+            },
+            sonars: cfg
+                .sonar
+                .transducers
+                .iter()
+                .map(|t| {
+                    (
+                        t.index,
+                        Pose2 {
+                            x: t.x,
+                            y: t.y,
+                            yaw: t.yaw_deg.to_radians(),
+                        },
+                    )
+                })
+                .collect(),
+        }
+    }
+}
+
+/// A bus message borrowed for encoding.
+#[derive(Debug, Clone, Copy)]
+pub enum BusMessage<'a> {
+    LaserScan(&'a LaserScan),
+    FusedScan(&'a FusedScan),
+    Odometry(&'a Odometry),
+    SonarRing(&'a SonarRing),
+    VelocityCommand(&'a VelocityCommand),
+    SmokeReading(&'a SmokeReading),
+    PoseEstimate(&'a PoseEstimate),
+    Map(&'a MapInfo, &'a [i8]),
+    Health(&'a Health),
+}
+
+impl BusMessage<'_> {
+    pub fn seq(&self) -> u64 {
+        self.header().seq
+    }
+
+    pub fn header(&self) -> &smokenav_shared_types::Header {
+        match self {
+            BusMessage::LaserScan(m) => &m.header,
+            BusMessage::FusedScan(m) => &m.scan.header,
+            BusMessage::Odometry(m) => &m.header,
+            BusMessage::SonarRing(m) => &m.header,
+            BusMessage::VelocityCommand(m) => &m.header,
+            BusMessage::SmokeReading(m) => &m.header,
+            BusMessage::PoseEstimate(m) => &m.header,
+            BusMessage::Map(m, _) => &m.header,
+            BusMessage::Health(m) => &m.header,
+        }
+    }
+}
+
+/// The channels of one bus topic: the main one, its companion, a view.
+#[derive(Debug, Clone, Copy)]
+struct TopicChannels {
+    main: usize,
+    companion: Option<usize>,
+    view: Option<usize>,
+}
+
+/// Turns bus messages into batches; owns the channel table.
+#[derive(Debug, Default)]
+pub struct Encoder {
+    channels: Vec<ChannelSpec>,
+    by_topic: HashMap<String, TopicChannels>,
+    tf: Option<usize>,
+    geometry: Option<RobotGeometry>,
+    /// Latest odometry pose and its frame, for map → odom.
+    last_odom: Option<(Pose2, FixedStr<FRAME_ID_LEN>)>,
+    points: Vec<SonarPoint>,
+}
+
+impl Encoder {
+    pub fn new(geometry: Option<RobotGeometry>) -> Self {
+        Self {
+            geometry,
+            ..Default::default()
+        }
+    }
+
+    pub fn channels(&self) -> &[ChannelSpec] {
+        &self.channels
+    }
+
+    fn add_channel(
+        &mut self,
+        batch: &mut Batch,
+        topic: String,
+        schema: &'static MsgDef,
+        role: ChannelRole,
+        qos: RosQos,
+    ) -> usize {
+        let i = self.channels.len();
+        let spec = ChannelSpec {
+            topic,
+            schema,
+            role,
+            qos,
+        };
+        self.channels.push(spec.clone());
+        batch.new_channels.push((i, spec));
+        i
+    }
+
+    /// The channels of `topic` for messages like `msg`, created on first use.
+    fn topic_channels(
+        &mut self,
+        batch: &mut Batch,
+        topic: &str,
+        msg: &BusMessage,
+    ) -> TopicChannels {
+        if let Some(&c) = self.by_topic.get(topic) {
+            return c;
+        }
+        use ChannelRole::*;
+        let base = format!("/{}", topic.trim_start_matches('/'));
+        type Extra = Option<(&'static str, &'static MsgDef)>;
+        let (main, companion, view, qos): (&'static MsgDef, Extra, Extra, RosQos) = match msg {
+            BusMessage::LaserScan(_) => (
+                &schema::LASER_SCAN,
+                Some((EXTRAS_SUFFIX, &schema::SCAN_EXTRAS)),
+                None,
+                RosQos::Stream,
+            ),
+            BusMessage::FusedScan(_) => (
+                &schema::LASER_SCAN,
+                Some((DECISIONS_SUFFIX, &schema::FUSED_DECISIONS)),
+                None,
+                RosQos::Stream,
+            ),
+            BusMessage::Odometry(_) => (
+                &schema::ODOMETRY,
+                Some((EXTRAS_SUFFIX, &schema::ODOMETRY_EXTRAS)),
+                None,
+                RosQos::Stream,
+            ),
+            BusMessage::SonarRing(_) => (
+                &schema::SONAR_RING,
+                None,
+                self.geometry
+                    .is_some()
+                    .then_some((POINTS_SUFFIX, &schema::POINT_CLOUD2)),
+                RosQos::Stream,
+            ),
+            BusMessage::VelocityCommand(_) => (
+                &schema::TWIST_STAMPED,
+                Some((EXTRAS_SUFFIX, &schema::STAMP_SEQ)),
+                None,
+                RosQos::Stream,
+            ),
+            BusMessage::SmokeReading(_) => (&schema::SMOKE_READING, None, None, RosQos::Stream),
+            BusMessage::PoseEstimate(_) => (
+                &schema::POSE_STAMPED,
+                Some((EXTRAS_SUFFIX, &schema::POSE_EXTRAS)),
+                None,
+                RosQos::Stream,
+            ),
+            BusMessage::Map(..) => (
+                &schema::OCCUPANCY_GRID,
+                Some((EXTRAS_SUFFIX, &schema::MAP_EXTRAS)),
+                None,
+                RosQos::Latched,
+            ),
+            BusMessage::Health(_) => (&schema::HEALTH, None, None, RosQos::Stream),
+        };
+        let main_role = if companion.is_some() {
+            Standard
+        } else {
+            Complete
+        };
+        let c = TopicChannels {
+            main: self.add_channel(batch, base.clone(), main, main_role, qos),
+            companion: companion.map(|(sfx, def)| {
+                self.add_channel(batch, format!("{base}{sfx}"), def, Companion, qos)
+            }),
+            view: view
+                .map(|(sfx, def)| self.add_channel(batch, format!("{base}{sfx}"), def, View, qos)),
+        };
+        self.by_topic.insert(topic.to_owned(), c);
+        c
+    }
+
+    fn tf_channel(&mut self, batch: &mut Batch) -> usize {
+        match self.tf {
+            Some(c) => c,
+            None => {
+                let c = self.add_channel(
+                    batch,
+                    TF_TOPIC.into(),
+                    &schema::TF_MESSAGE,
+                    ChannelRole::View,
+                    RosQos::Stream,
+                );
+                self.tf = Some(c);
+                c
+            }
+        }
+    }
+
+    /// The `/tf_static` transforms of the robot profile (base → laser), if known.
+    pub fn static_transforms(&mut self, log_time: u64, batch: &mut Batch) {
+        if self.geometry.is_none() {
+            return;
+        }
+        let ch = self.add_channel(
+            batch,
+            TF_STATIC_TOPIC.into(),
+            &schema::TF_MESSAGE,
+            ChannelRole::View,
+            RosQos::Latched,
+        );
+        let Some(g) = &self.geometry else { return };
+        let t = Transform2 {
+            stamp_ns: log_time,
+            parent: codec::BASE_FRAME,
+            child: &g.laser_frame,
+            x: g.laser.x,
+            y: g.laser.y,
+            yaw: g.laser.yaw,
+        };
+        codec::encode_tf_message(&[t], batch.slot(ch, 0, log_time, log_time));
+    }
+
+    /// Appends the channels for `msg`, published on bus topic `topic`, to `batch`.
+    pub fn encode(&mut self, topic: &str, msg: BusMessage, log_time: u64, batch: &mut Batch) {
+        let ids = self.topic_channels(batch, topic, &msg);
+        let h = msg.header();
+        let (seq, stamp) = (h.seq as u32, h.stamp_ns);
+        let main = batch.slot(ids.main, seq, log_time, stamp);
+        match msg {
+            BusMessage::LaserScan(s) => codec::encode_laser_scan(s, main),
+            BusMessage::FusedScan(f) => codec::encode_laser_scan(&f.scan, main),
+            BusMessage::Odometry(o) => codec::encode_odometry(o, main),
+            BusMessage::SonarRing(r) => codec::encode_sonar_ring(r, main),
+            BusMessage::VelocityCommand(c) => codec::encode_twist_stamped(c, main),
+            BusMessage::SmokeReading(s) => codec::encode_smoke_reading(s, main),
+            BusMessage::PoseEstimate(p) => codec::encode_pose_stamped(p, main),
+            BusMessage::Map(info, cells) => codec::encode_occupancy_grid(info, cells, main),
+            BusMessage::Health(h) => codec::encode_health(h, main),
+        }
+        if let Some(c) = ids.companion {
+            let out = batch.slot(c, seq, log_time, stamp);
+            match msg {
+                BusMessage::LaserScan(s) => codec::encode_scan_extras(s, out),
+                BusMessage::FusedScan(f) => codec::encode_fused_decisions(f, out),
+                BusMessage::Odometry(o) => codec::encode_odometry_extras(o, out),
+                BusMessage::VelocityCommand(c) => codec::encode_stamp_seq(&c.header, out),
+                BusMessage::PoseEstimate(p) => codec::encode_pose_extras(p, out),
+                BusMessage::Map(info, _) => codec::encode_map_extras(info, out),
+                BusMessage::SonarRing(_) | BusMessage::SmokeReading(_) | BusMessage::Health(_) => {}
+            }
+        }
+        match msg {
+            BusMessage::SonarRing(r) => {
+                if let Some(v) = ids.view {
+                    self.sonar_points(r);
+                    codec::encode_sonar_points(
+                        stamp,
+                        &self.points,
+                        batch.slot(v, seq, log_time, stamp),
+                    );
+                }
+            }
+            BusMessage::Odometry(o) => {
+                let pose = Pose2 {
+                    x: o.x,
+                    y: o.y,
+                    yaw: o.theta,
+                };
+                self.last_odom = Some((pose, o.header.frame_id));
+                let t = Transform2 {
+                    stamp_ns: stamp,
+                    parent: o.header.frame_id.as_str(),
+                    child: codec::BASE_FRAME,
+                    x: pose.x,
+                    y: pose.y,
+                    yaw: pose.yaw,
+                };
+                let tf = self.tf_channel(batch);
+                codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, stamp));
+            }
+            BusMessage::PoseEstimate(p) => {
+                // map → odom needs the odometry the pose was estimated against;
+                // the latest one is the best estimate the recorder has.
+                if let Some((odom, odom_frame)) = self.last_odom {
+                    let slam = Pose2 {
+                        x: p.x,
+                        y: p.y,
+                        yaw: p.theta,
+                    };
+                    let mo = map_to_odom(slam, odom);
+                    let t = Transform2 {
+                        stamp_ns: stamp,
+                        parent: p.header.frame_id.as_str(),
+                        child: odom_frame.as_str(),
+                        x: mo.x,
+                        y: mo.y,
+                        yaw: mo.yaw,
+                    };
+                    let tf = self.tf_channel(batch);
+                    codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, stamp));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn sonar_points(&mut self, ring: &SonarRing) {
+        self.points.clear();
+        let Some(g) = &self.geometry else { return };
+        for r in ring.readings() {
+            let pose = g
+                .sonars
+                .iter()
+                .find(|(i, _)| *i == r.index)
+                .map(|(_, p)| *p);
+            let (x, y) = match (r.status(), pose) {
+                (SonarStatus::Valid, Some(p)) => (
+                    (p.x + f64::from(r.range) * p.yaw.cos()) as f32,
+                    (p.y + f64::from(r.range) * p.yaw.sin()) as f32,
+                ),
+                _ => (f32::NAN, f32::NAN),
+            };
+            self.points.push(SonarPoint {
+                x,
+                y,
+                range: r.range,
+                index: r.index,
+                status: r.status,
+            });
+        }
+    }
+}
+
+/// map → odom such that map → odom → base equals the SLAM pose.
+pub fn map_to_odom(map_base: Pose2, odom_base: Pose2) -> Pose2 {
+    let yaw = map_base.yaw - odom_base.yaw;
+    let (s, c) = yaw.sin_cos();
+    Pose2 {
+        x: map_base.x - (c * odom_base.x - s * odom_base.y),
+        y: map_base.y - (s * odom_base.x + c * odom_base.y),
+        yaw,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn map_to_odom_composes_back_to_the_slam_pose() {
+        let odom = Pose2 {
+            x: 1.0,
+            y: 2.0,
+            yaw: 0.5,
+        };
+        let slam = Pose2 {
+            x: -0.3,
+            y: 4.0,
+            yaw: 1.2,
+        };
+        let mo = map_to_odom(slam, odom);
+        let (s, c) = mo.yaw.sin_cos();
+        let x = mo.x + c * odom.x - s * odom.y;
+        let y = mo.y + s * odom.x + c * odom.y;
+        assert!((x - slam.x).abs() < 1e-12 && (y - slam.y).abs() < 1e-12);
+        assert!((mo.yaw + odom.yaw - slam.yaw).abs() < 1e-12);
+    }
+
+    #[test]
+    fn scan_becomes_laser_scan_then_extras_with_the_same_sequence() {
+        let mut enc = Encoder::new(None);
+        let mut batch = Batch::new();
+        let scan = LaserScan {
+            header: smokenav_shared_types::Header::new(5, 0x1_0000_0007, "laser"),
+            count: 3,
+            ..Default::default()
+        };
+        enc.encode("laser/scan", BusMessage::LaserScan(&scan), 9, &mut batch);
+        let topics: Vec<&str> = batch
+            .messages()
+            .iter()
+            .map(|m| enc.channels()[m.channel].topic.as_str())
+            .collect();
+        assert_eq!(topics, ["/laser/scan", "/laser/scan/extras"]);
+        assert!(batch.messages().iter().all(|m| m.sequence == 7));
+        assert_eq!(batch.new_channels.len(), 2);
+        batch.clear();
+        enc.encode("laser/scan", BusMessage::LaserScan(&scan), 10, &mut batch);
+        assert!(batch.new_channels.is_empty(), "channels are announced once");
+    }
+
+    #[test]
+    fn odometry_adds_odom_to_base_link_on_tf() {
+        let mut enc = Encoder::new(None);
+        let mut batch = Batch::new();
+        let o = Odometry {
+            header: smokenav_shared_types::Header::new(1, 0, "odom"),
+            x: 1.0,
+            ..Default::default()
+        };
+        enc.encode("base/odom", BusMessage::Odometry(&o), 1, &mut batch);
+        let last = batch.messages().last().unwrap();
+        assert_eq!(enc.channels()[last.channel].topic, "/tf");
+        assert_eq!(enc.channels()[last.channel].role, ChannelRole::View);
+    }
+
+    #[test]
+    fn qos_yaml_is_rosbag2_integer_form() {
+        let y = RosQos::Latched.yaml();
+        assert!(y.starts_with("- history: 1\n  depth: 1\n  reliability: 1\n  durability: 1\n"));
+        assert!(y.contains("avoid_ros_namespace_conventions: false"));
+    }
+}

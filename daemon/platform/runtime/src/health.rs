@@ -1,0 +1,215 @@
+//! Health reporting: what `smokenav status` shows.
+
+use smokenav_platform_bus::{Bus, BusError, Publisher, topics};
+use smokenav_shared_types::{Health, HealthState, clock::monotonic_now_ns};
+use std::time::{Duration, Instant};
+
+/// Counts events and turns them into a rate per reporting window.
+#[derive(Debug, Clone)]
+pub struct RateMeter {
+    count: u64,
+    total: u64,
+    window_start: Instant,
+    last_rate: f64,
+}
+
+impl RateMeter {
+    pub fn new(now: Instant) -> Self {
+        Self {
+            count: 0,
+            total: 0,
+            window_start: now,
+            last_rate: 0.0,
+        }
+    }
+
+    pub fn mark(&mut self) {
+        self.count += 1;
+        self.total += 1;
+    }
+
+    pub fn total(&self) -> u64 {
+        self.total
+    }
+
+    /// Closes the window and returns its rate in Hz.
+    pub fn roll(&mut self, now: Instant) -> f64 {
+        let dt = now.duration_since(self.window_start).as_secs_f64();
+        if dt > 0.0 {
+            self.last_rate = self.count as f64 / dt;
+        }
+        self.count = 0;
+        self.window_start = now;
+        self.last_rate
+    }
+
+    pub fn last_rate(&self) -> f64 {
+        self.last_rate
+    }
+}
+
+/// Latency percentiles over one reporting window (fixed memory, no allocation per record).
+pub struct LatencyWindow {
+    hist: hdrhistogram::Histogram<u64>,
+}
+
+impl LatencyWindow {
+    pub fn new() -> Self {
+        Self {
+            // 1 µs .. 100 s, 3 significant digits: allocated once.
+            hist: hdrhistogram::Histogram::new_with_bounds(1, 100_000_000, 3)
+                .unwrap_or_else(|_| hdrhistogram::Histogram::new(3).expect("3 sigfigs is valid")),
+        }
+    }
+
+    pub fn record(&mut self, d: Duration) {
+        let us = (d.as_micros() as u64).clamp(1, 100_000_000);
+        let _ = self.hist.record(us);
+    }
+
+    pub fn len(&self) -> u64 {
+        self.hist.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.hist.is_empty()
+    }
+
+    /// (p50, p99, max) in µs.
+    pub fn percentiles(&self) -> (f64, f64, f64) {
+        if self.hist.is_empty() {
+            return (0.0, 0.0, 0.0);
+        }
+        (
+            self.hist.value_at_quantile(0.5) as f64,
+            self.hist.value_at_quantile(0.99) as f64,
+            self.hist.max() as f64,
+        )
+    }
+
+    pub fn reset(&mut self) {
+        self.hist.reset();
+    }
+}
+
+impl Default for LatencyWindow {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Index of a rate registered with [`HealthReporter::add_rate`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RateId(usize);
+
+/// Keeps this process's `Health` and publishes it on `health/<role>` every period.
+pub struct HealthReporter {
+    health: Health,
+    publisher: Publisher<Health>,
+    period: Duration,
+    started: Instant,
+    last_publish: Option<Instant>,
+    rates: Vec<(String, RateMeter, Option<f64>)>,
+    latency: LatencyWindow,
+}
+
+impl HealthReporter {
+    pub fn new(bus: &Bus, role: &str, period: Duration) -> Result<Self, BusError> {
+        let publisher = bus.publisher::<Health>(&topics::health(role))?;
+        let now = Instant::now();
+        Ok(Self {
+            health: Health::new(role, std::process::id()),
+            publisher,
+            period,
+            started: now,
+            last_publish: None,
+            rates: Vec::new(),
+            latency: LatencyWindow::new(),
+        })
+    }
+
+    pub fn health(&self) -> &Health {
+        &self.health
+    }
+
+    pub fn state(&self) -> HealthState {
+        self.health.state()
+    }
+
+    pub fn set_state(&mut self, s: HealthState) {
+        self.health.set_state(s);
+    }
+
+    /// Sets a named value (a counter, gauge, or setting worth showing).
+    pub fn set_metric(&mut self, name: &str, value: f64) {
+        if !self.health.set_metric(name, value, None) {
+            tracing::debug!(name, "health metric table full");
+        }
+    }
+
+    /// Registers a rate (e.g. `scan_hz`) with its nominal value.
+    pub fn add_rate(&mut self, name: &str, expected_hz: Option<f64>) -> RateId {
+        self.rates
+            .push((name.to_owned(), RateMeter::new(Instant::now()), expected_hz));
+        RateId(self.rates.len() - 1)
+    }
+
+    /// Counts one event of a rate.
+    pub fn mark(&mut self, id: RateId) {
+        if let Some((_, m, _)) = self.rates.get_mut(id.0) {
+            m.mark();
+        }
+    }
+
+    pub fn rate_total(&self, id: RateId) -> u64 {
+        self.rates.get(id.0).map(|(_, m, _)| m.total()).unwrap_or(0)
+    }
+
+    pub fn record_latency(&mut self, d: Duration) {
+        self.latency.record(d);
+    }
+
+    pub fn deadline_missed(&mut self) {
+        self.health.deadline_misses += 1;
+    }
+
+    /// Records an error for `status` and the log.
+    pub fn error(&mut self, msg: &str) {
+        tracing::warn!("{msg}");
+        self.health.last_error.set(msg);
+    }
+
+    pub fn clear_error(&mut self) {
+        self.health.last_error.set("");
+    }
+
+    /// Publishes if a period has passed since the last report (or none was sent yet).
+    pub fn maybe_publish(&mut self, now: Instant) -> Result<bool, BusError> {
+        if self
+            .last_publish
+            .is_some_and(|t| now.duration_since(t) < self.period)
+        {
+            return Ok(false);
+        }
+        self.publish_now(now)?;
+        Ok(true)
+    }
+
+    pub fn publish_now(&mut self, now: Instant) -> Result<(), BusError> {
+        for (name, meter, expected) in &mut self.rates {
+            let hz = meter.roll(now);
+            self.health.set_metric(name, hz, *expected);
+        }
+        let (p50, p99, max) = self.latency.percentiles();
+        self.health.latency_p50_us = p50 as f32;
+        self.health.latency_p99_us = p99 as f32;
+        self.health.latency_max_us = max as f32;
+        self.latency.reset();
+        self.health.uptime_s = now.duration_since(self.started).as_secs_f64();
+        self.health.header.stamp_ns = monotonic_now_ns();
+        let h = self.health;
+        self.publisher.publish(&h)?;
+        self.last_publish = Some(now);
+        Ok(())
+    }
+}

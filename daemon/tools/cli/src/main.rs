@@ -1,0 +1,93 @@
+//! `smokenav`: the operator's command-line tool.
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+mod arcos;
+mod drive;
+mod eval;
+mod fuse;
+mod play;
+mod record;
+mod scip;
+mod slam;
+mod status;
+mod topic;
+
+#[derive(Parser)]
+#[command(
+    name = "smokenav",
+    version,
+    about = "Mapping and localisation in smoke: operator tools"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Robot profile tools.
+    #[command(subcommand)]
+    Config(ConfigCommand),
+    /// See what flows on the bus: list, echo, hz.
+    #[command(subcommand)]
+    Topic(topic::TopicCommand),
+    /// One line per process: up/down, heartbeat age, rates, counters. Exit 1 if anything is unhealthy.
+    Status(status::StatusArgs),
+    /// Run SLAM offline over a CARMEN log; write trajectory, map and timing.
+    Slam(slam::SlamArgs),
+    /// Maps published by the SLAM process: `map save DIR` writes PGM + YAML + PNG.
+    #[command(subcommand)]
+    Map(slam::MapCommand),
+    /// Run SmokeNav fusion offline: `topic echo --json` lines in, `fusion/scan` lines out.
+    Fuse(fuse::FuseArgs),
+    /// Pioneer ARCOS tools: decode a capture to JSON.
+    #[command(subcommand)]
+    Arcos(arcos::ArcosCommand),
+    /// Publish `base/cmd_vel` at 10 Hz for a while, then stop (Pioneer or Scout).
+    Drive(drive::DriveArgs),
+    /// Hokuyo SCIP tools: decode a capture to JSON.
+    #[command(subcommand)]
+    Scip(scip::ScipCommand),
+    /// Record bus topics to an MCAP file (ros2 profile: Foxglove, ros2 bag).
+    Record(record::RecordArgs),
+    /// Republish a recording onto the bus, with its original timing or as fast as possible.
+    Play(play::PlayArgs),
+    /// Score an estimated map (and trajectory) against ground truth: k-NN error, pixel error, ATE, RPE.
+    Eval(eval::EvalArgs),
+}
+
+#[derive(Subcommand)]
+enum ConfigCommand {
+    /// Validate a robot profile and print the effective configuration.
+    Check {
+        /// The profile, e.g. config/pioneer-3dx.toml.
+        file: PathBuf,
+    },
+}
+
+fn main() -> anyhow::Result<std::process::ExitCode> {
+    let cli = Cli::parse();
+    let done = match cli.command {
+        Command::Status(args) => return status::run(args),
+        Command::Config(ConfigCommand::Check { file }) => {
+            let cfg = smokenav_platform_config::RobotConfig::load(&file)
+                .with_context(|| format!("invalid robot profile {}", file.display()))?;
+            print!("{}", cfg.to_toml());
+            Ok(())
+        }
+        Command::Slam(args) => slam::run(args),
+        Command::Map(cmd) => slam::run_map(cmd),
+        Command::Fuse(args) => fuse::run(args),
+        Command::Topic(cmd) => topic::run(cmd),
+        Command::Arcos(cmd) => arcos::run(cmd),
+        Command::Drive(args) => drive::run(args),
+        Command::Scip(cmd) => scip::run(cmd),
+        Command::Record(args) => record::run(args),
+        Command::Play(args) => play::run(args),
+        Command::Eval(args) => eval::run(args),
+    };
+    done.map(|()| std::process::ExitCode::SUCCESS)
+}

@@ -1,0 +1,246 @@
+//! `smokenav play run.mcap [TOPICS…] [--rate X | --fast]`: republish a recording.
+//!
+//! Messages go out in recorded order, at the recorded pace scaled by
+//! `--rate` (receive times of the recorder, so jitter is replayed too), or
+//! back to back with `--fast`. The bus never blocks a publisher: with
+//! `--fast`, a subscriber slower than the player drops messages and sees the
+//! gaps in its sequence numbers; use `--rate` for faithful re-runs.
+
+use crate::topic::BusArgs;
+use anyhow::{Context, bail};
+use clap::Args;
+use smokenav_platform_bus::{Bus, MapPublisher, Publisher};
+use smokenav_platform_recording::{EndOfData, Message, Playback};
+use smokenav_shared_types::clock::monotonic_now_ns;
+use smokenav_shared_types::{
+    FusedScan, Health, LaserScan, Odometry, PoseEstimate, SmokeReading, SonarRing, VelocityCommand,
+};
+use std::collections::{BTreeMap, HashMap};
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+#[derive(Debug, Args)]
+pub struct PlayArgs {
+    /// The recording (an MCAP file written by `smokenav record`; a file cut short is fine).
+    pub file: PathBuf,
+    /// Only these bus topics (default: every recorded one).
+    pub topics: Vec<String>,
+    /// Speed factor on the recorded timing (2 = twice as fast).
+    #[arg(long, default_value_t = 1.0)]
+    pub rate: f64,
+    /// Publish as fast as possible, ignoring the recorded timing.
+    #[arg(long, conflicts_with = "rate")]
+    pub fast: bool,
+    /// Shift every stamp so the first message looks measured now (processes
+    /// that drop stale data, like the fusion synchroniser, accept the replay).
+    /// Without it, messages are republished bit for bit.
+    #[arg(long)]
+    pub restamp: bool,
+    /// Seconds to wait after a topic's publisher appears, before its first
+    /// message, so subscribers that start with the replay connect.
+    #[arg(long, default_value_t = 0.0)]
+    pub connect_delay: f64,
+    #[command(flatten)]
+    pub bus: BusArgs,
+}
+
+enum AnyPublisher {
+    LaserScan(Publisher<LaserScan>),
+    FusedScan(Publisher<FusedScan>),
+    Odometry(Publisher<Odometry>),
+    SonarRing(Publisher<SonarRing>),
+    VelocityCommand(Publisher<VelocityCommand>),
+    SmokeReading(Publisher<SmokeReading>),
+    PoseEstimate(Publisher<PoseEstimate>),
+    Map(MapPublisher),
+    Health(Publisher<Health>),
+}
+
+impl AnyPublisher {
+    fn create(bus: &Bus, topic: &str, m: &Message) -> anyhow::Result<Self> {
+        Ok(match m {
+            Message::LaserScan(_) => AnyPublisher::LaserScan(bus.publisher(topic)?),
+            Message::FusedScan(_) => AnyPublisher::FusedScan(bus.publisher(topic)?),
+            Message::Odometry(_) => AnyPublisher::Odometry(bus.publisher(topic)?),
+            Message::SonarRing(_) => AnyPublisher::SonarRing(bus.publisher(topic)?),
+            Message::VelocityCommand(_) => AnyPublisher::VelocityCommand(bus.publisher(topic)?),
+            Message::SmokeReading(_) => AnyPublisher::SmokeReading(bus.publisher(topic)?),
+            Message::PoseEstimate(_) => AnyPublisher::PoseEstimate(bus.publisher(topic)?),
+            Message::Map(..) => AnyPublisher::Map(MapPublisher::create(bus, topic)?),
+            Message::Health(_) => AnyPublisher::Health(bus.publisher(topic)?),
+        })
+    }
+
+    fn update_connections(&self) -> anyhow::Result<()> {
+        match self {
+            AnyPublisher::LaserScan(p) => p.update_connections()?,
+            AnyPublisher::FusedScan(p) => p.update_connections()?,
+            AnyPublisher::Odometry(p) => p.update_connections()?,
+            AnyPublisher::SonarRing(p) => p.update_connections()?,
+            AnyPublisher::VelocityCommand(p) => p.update_connections()?,
+            AnyPublisher::SmokeReading(p) => p.update_connections()?,
+            AnyPublisher::PoseEstimate(p) => p.update_connections()?,
+            AnyPublisher::Health(p) => p.update_connections()?,
+            // The map publisher connects on every send.
+            AnyPublisher::Map(_) => {}
+        }
+        Ok(())
+    }
+
+    /// Publishes `m`; returns the sequence number the bus gave it.
+    fn publish(&mut self, m: &Message) -> anyhow::Result<u64> {
+        Ok(match (self, m) {
+            (AnyPublisher::LaserScan(p), Message::LaserScan(s)) => p.publish_with(|o| *o = **s)?,
+            (AnyPublisher::FusedScan(p), Message::FusedScan(f)) => p.publish_with(|o| *o = **f)?,
+            (AnyPublisher::Odometry(p), Message::Odometry(o)) => p.publish(o)?,
+            (AnyPublisher::SonarRing(p), Message::SonarRing(r)) => p.publish(r)?,
+            (AnyPublisher::VelocityCommand(p), Message::VelocityCommand(c)) => p.publish(c)?,
+            (AnyPublisher::SmokeReading(p), Message::SmokeReading(s)) => p.publish(s)?,
+            (AnyPublisher::PoseEstimate(p), Message::PoseEstimate(e)) => p.publish(e)?,
+            (AnyPublisher::Map(p), Message::Map(info, cells)) => p.publish(info, cells)?,
+            (AnyPublisher::Health(p), Message::Health(h)) => p.publish_with(|o| *o = **h)?,
+            _ => bail!("the recording changes a topic's message type mid-file"),
+        })
+    }
+}
+
+#[derive(Default)]
+struct TopicReport {
+    published: u64,
+    /// Messages whose recorded `header.seq` differs from the one the bus gave
+    /// them (the recording started mid-stream, had gaps, or mixed publishers).
+    renumbered: u64,
+}
+
+/// Sleeps until `deadline`, in slices, so SIGINT is noticed within 100 ms.
+fn sleep_until(deadline: Instant, stop: &smokenav_platform_runtime::Shutdown) {
+    loop {
+        let now = Instant::now();
+        if now >= deadline || stop.requested() {
+            return;
+        }
+        std::thread::sleep((deadline - now).min(Duration::from_millis(100)));
+    }
+}
+
+pub fn run(args: PlayArgs) -> anyhow::Result<()> {
+    smokenav_platform_runtime::init_logging("play");
+    if !args.fast && (args.rate <= 0.0 || !args.rate.is_finite()) {
+        bail!("--rate must be a positive number");
+    }
+    let size = std::fs::metadata(&args.file)
+        .with_context(|| format!("cannot open {}", args.file.display()))?
+        .len();
+    let mut playback = Playback::open(&args.file)
+        .with_context(|| format!("cannot open {}", args.file.display()))?;
+    let bus = args.bus.open("play")?;
+    let stop = smokenav_platform_runtime::Shutdown::install()?;
+
+    let bar = if std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::new(size)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:40} {percent:>3}% {msg} [{elapsed_precise} < {eta_precise}]",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+
+    let mut publishers: HashMap<String, AnyPublisher> = HashMap::new();
+    let mut report: BTreeMap<String, TopicReport> = BTreeMap::new();
+    let mut clock: Option<(u64, Instant)> = None;
+    let mut stamp_offset: Option<i64> = None;
+    let started = Instant::now();
+    let mut published = 0u64;
+    while !stop.requested() {
+        let Some(mut played) = playback
+            .read_next()
+            .with_context(|| format!("reading {} failed", args.file.display()))?
+        else {
+            break;
+        };
+        if !args.topics.is_empty() && !args.topics.contains(&played.topic) {
+            continue;
+        }
+        if !args.fast {
+            let (t0, w0) = *clock.get_or_insert((played.log_time, Instant::now()));
+            let offset = played.log_time.saturating_sub(t0) as f64 / args.rate;
+            sleep_until(w0 + Duration::from_secs_f64(offset * 1e-9), &stop);
+            if stop.requested() {
+                break;
+            }
+        }
+        if args.restamp {
+            // Recorder receive time → now: stamps keep their lag behind it.
+            let offset = *stamp_offset.get_or_insert_with(|| {
+                (i128::from(monotonic_now_ns()) - i128::from(played.log_time))
+                    .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64
+            });
+            played.message.shift_stamps(offset);
+        }
+        if !publishers.contains_key(&played.topic) {
+            let p = AnyPublisher::create(&bus, &played.topic, &played.message)
+                .with_context(|| format!("cannot publish on {}", played.topic))?;
+            p.update_connections()?;
+            if args.connect_delay > 0.0 {
+                std::thread::sleep(Duration::from_secs_f64(args.connect_delay));
+                p.update_connections()?;
+                // Keep the recorded pace after the pause.
+                if let Some((_, w0)) = &mut clock {
+                    *w0 += Duration::from_secs_f64(args.connect_delay);
+                }
+            }
+            publishers.insert(played.topic.clone(), p);
+        }
+        let Some(p) = publishers.get_mut(&played.topic) else {
+            continue;
+        };
+        let seq = p.publish(&played.message)?;
+        let r = report.entry(played.topic.clone()).or_default();
+        r.published += 1;
+        r.renumbered += u64::from(seq != played.message.header().seq);
+        published += 1;
+        if published.is_multiple_of(64) {
+            bar.set_position(playback.source().bytes_read());
+            bar.set_message(format!("{published} messages"));
+        }
+    }
+    bar.finish_and_clear();
+
+    let stats = playback.stats().clone();
+    println!(
+        "played {published} messages in {:.1} s from {}{}",
+        started.elapsed().as_secs_f64(),
+        args.file.display(),
+        match playback.source().end() {
+            Some(EndOfData::Truncated) => " (the file was cut short; played every complete chunk)",
+            None => " (interrupted)",
+            Some(EndOfData::Complete) => "",
+        }
+    );
+    for (topic, r) in &report {
+        println!(
+            "  {topic:<16} published {:>8}{}",
+            r.published,
+            if r.renumbered > 0 {
+                format!("  ({} with a new sequence number)", r.renumbered)
+            } else {
+                String::new()
+            }
+        );
+    }
+    println!(
+        "skipped: {} views (/tf, sonar points), {} foreign, {} orphaned, {} undecodable",
+        stats.views, stats.foreign, stats.orphans, stats.decode_errors
+    );
+    if let Some(e) = &stats.last_error {
+        println!("last decode error: {e}");
+    }
+    if stats.decode_errors > 0 {
+        bail!("{} messages could not be decoded", stats.decode_errors);
+    }
+    Ok(())
+}

@@ -1,0 +1,399 @@
+//! The offline comparison: one recording through fusion + SLAM (the
+//! libraries, in this process, deterministic) with each fusion method, each
+//! result scored against the ground truth.
+
+use super::recording::{Kind, SensorLog};
+use smokenav_algorithms_eval::{MapOptions, MapReport, TrajectoryOptions, TrajectoryReport};
+use smokenav_algorithms_fusion::engine::StepReport;
+use smokenav_algorithms_fusion::pipeline::FusionPipeline;
+use smokenav_algorithms_slam::{Pose2, RangeScan, Rbpf, SlamBackend, StampedPose};
+use smokenav_platform_config::RobotConfig;
+use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::{FusedScan, FusionMethod};
+use smokenav_sim_link::TruthTrack;
+
+pub const METHODS: [FusionMethod; 3] =
+    [FusionMethod::LaserOnly, FusionMethod::V1, FusionMethod::V2];
+
+/// One fused scan, for the time plot.
+#[derive(Debug, Clone, Copy)]
+pub struct SeriesPoint {
+    pub stamp_ns: u64,
+    pub smoke_level: f32,
+    /// Standard deviation of the valid laser ranges, m.
+    pub laser_spread: f32,
+    pub sonar_usage: f32,
+}
+
+pub struct MethodResult {
+    pub method: FusionMethod,
+    pub map: Option<OccupancyGrid>,
+    /// The best particle's (smoothed) trajectory, of the median run.
+    pub trajectory: Vec<StampedPose>,
+    pub series: Vec<SeriesPoint>,
+    /// Share of sections that used the sonar (seed 000's "sonar usage").
+    pub sonar_usage: f64,
+    pub scans: u64,
+    /// Fusion gave SLAM exactly the same scans as this method did (so the SLAM result is shared).
+    pub same_slam_input_as: Option<FusionMethod>,
+    /// The median SLAM run's scores (its map and trajectory are the ones above).
+    pub map_report: Result<MapReport, String>,
+    pub trajectory_report: Result<TrajectoryReport, String>,
+    /// (map error, ATE) of every SLAM run, one per random seed; the median by map error is the one above.
+    pub runs: Vec<(Option<f64>, Option<f64>)>,
+}
+
+fn mean(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let v: Vec<f64> = v.flatten().filter(|x| x.is_finite()).collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+impl MethodResult {
+    /// k-NN map error, m: the mean over the SLAM seeds.
+    pub fn map_error_m(&self) -> Option<f64> {
+        mean(self.runs.iter().map(|r| r.0))
+    }
+
+    /// ATE (RMS), m: the mean over the SLAM seeds.
+    pub fn ate_m(&self) -> Option<f64> {
+        mean(self.runs.iter().map(|r| r.1))
+    }
+}
+
+/// Wheel odometry at `stamp_ns`, interpolated between the messages around it
+/// (the first or last one outside the recorded span).
+pub fn odometry_at(odoms: &[smokenav_shared_types::Odometry], stamp_ns: u64) -> Option<Pose2> {
+    let pose = |o: &smokenav_shared_types::Odometry| Pose2::new(o.x, o.y, o.theta);
+    let i = odoms.partition_point(|o| o.header.stamp_ns < stamp_ns);
+    match (i.checked_sub(1).and_then(|j| odoms.get(j)), odoms.get(i)) {
+        (Some(a), Some(b)) => {
+            let span = b.header.stamp_ns.saturating_sub(a.header.stamp_ns);
+            let t = if span == 0 {
+                0.0
+            } else {
+                (stamp_ns - a.header.stamp_ns) as f64 / span as f64
+            };
+            Some(smokenav_algorithms_slam::pose::interpolate(
+                &pose(a),
+                &pose(b),
+                t,
+            ))
+        }
+        (Some(a), None) => Some(pose(a)),
+        (None, Some(b)) => Some(pose(b)),
+        (None, None) => None,
+    }
+}
+
+/// Fuses the recording with `method`, in receive order, exactly as the fusion
+/// process would have; returns the fused scans and the pipeline's sonar usage.
+pub fn fuse(
+    log: &SensorLog,
+    profile: &RobotConfig,
+    method: FusionMethod,
+) -> anyhow::Result<(Vec<FusedScan>, f64)> {
+    let mut pipeline = FusionPipeline::from_config(profile, Some(method))?;
+    let mut fused: Vec<FusedScan> = Vec::with_capacity(log.lasers.len());
+    let mut emit = |f: &FusedScan, _: &StepReport| fused.push(*f);
+    for &(now, kind, i) in &log.order {
+        match kind {
+            Kind::Laser => pipeline.push_laser(&log.lasers[i], now, &mut emit),
+            Kind::Sonar => pipeline.push_sonar(&log.sonars[i], now, &mut emit),
+            Kind::Smoke => pipeline.push_smoke(&log.smokes[i], now, &mut emit),
+            Kind::Odometry => continue,
+        }
+        pipeline.poll(now, &mut emit);
+    }
+    pipeline.flush(&mut emit);
+    let usage = pipeline.stats().sonar_usage();
+    Ok((fused, usage))
+}
+
+/// What SLAM made of one sequence of fused scans, scored.
+#[derive(Clone)]
+struct SlamOutcome {
+    map: Option<OccupancyGrid>,
+    trajectory: Vec<StampedPose>,
+    map_report: Result<MapReport, String>,
+    trajectory_report: Result<TrajectoryReport, String>,
+}
+
+/// The SLAM input of a fused scan: every beam as the filter reads it, and the laser noise factor.
+fn same_slam_input(a: &FusedScan, b: &FusedScan, profile: &RobotConfig) -> bool {
+    let (x, y) = (&a.scan, &b.scan);
+    let n = x.len();
+    x.header.stamp_ns == y.header.stamp_ns
+        && n == y.len()
+        && x.angle_min.to_bits() == y.angle_min.to_bits()
+        && x.angle_increment.to_bits() == y.angle_increment.to_bits()
+        && x.range_min.to_bits() == y.range_min.to_bits()
+        && x.range_max.to_bits() == y.range_max.to_bits()
+        && (0..n).all(|i| x.beam(i) == y.beam(i) && a.beam_source[i] == b.beam_source[i])
+        && profile
+            .slam
+            .laser_noise_factor(f64::from(a.smoke_level))
+            .to_bits()
+            == profile
+                .slam
+                .laser_noise_factor(f64::from(b.smoke_level))
+                .to_bits()
+}
+
+/// SLAM over `fused` (sorted by stamp) with the odometry of `log`, scored against the truth.
+fn slam_and_score(
+    log: &SensorLog,
+    profile: &RobotConfig,
+    fused: &[FusedScan],
+    truth: &TruthTrack,
+    truth_map: &OccupancyGrid,
+) -> SlamOutcome {
+    let mount = profile.laser.mount;
+    let sensor = Pose2::new(mount.x, mount.y, mount.yaw_rad());
+    let mut slam = Rbpf::new(&profile.slam, true);
+    let mut scan = RangeScan::default();
+    for f in fused {
+        let Some(odom) = odometry_at(&log.odoms, f.scan.header.stamp_ns) else {
+            continue;
+        };
+        // As the SLAM process does (a laser-only scan carries no smoke level).
+        scan.fill_from_fused(
+            f,
+            sensor,
+            profile.slam.laser_noise_factor(f64::from(f.smoke_level)),
+        );
+        slam.process(&scan, &odom);
+    }
+    let mut trajectory = slam.trajectory();
+    // One pose per stamp (a trajectory file's stamps must increase).
+    trajectory.dedup_by_key(|p| p.stamp_ns);
+    let map = slam.map();
+    let map_report = match &map {
+        Some(m) => smokenav_algorithms_eval::evaluate_maps(truth_map, m, &MapOptions::default())
+            .map_err(|e| e.to_string()),
+        None => Err("SLAM processed no scan".into()),
+    };
+    let to_eval = |t_ns: u64, p: (f64, f64, f64)| smokenav_algorithms_eval::StampedPose {
+        t: t_ns as f64 * 1e-9,
+        x: p.0,
+        y: p.1,
+        theta: p.2,
+    };
+    let truth_poses: Vec<_> = truth
+        .samples()
+        .iter()
+        .map(|s| to_eval(s.t_ns, (s.pose.x, s.pose.y, s.pose.theta)))
+        .collect();
+    let est: Vec<_> = trajectory
+        .iter()
+        .map(|p| to_eval(p.stamp_ns, (p.pose.x, p.pose.y, p.pose.theta)))
+        .collect();
+    let trajectory_report = smokenav_algorithms_eval::evaluate_trajectories(
+        &truth_poses,
+        &est,
+        &TrajectoryOptions::default(),
+    )
+    .map_err(|e| e.to_string());
+    SlamOutcome {
+        map,
+        trajectory,
+        map_report,
+        trajectory_report,
+    }
+}
+
+/// Index of the run with the median map error (the lower middle of an even
+/// count); runs without a score sort last; 0 when there is none.
+fn median_run(runs: &[(Option<f64>, Option<f64>)]) -> usize {
+    let mut order: Vec<usize> = (0..runs.len()).collect();
+    order.sort_by(|&a, &b| {
+        let key = |i: usize| runs[i].0.filter(|x| x.is_finite()).unwrap_or(f64::INFINITY);
+        key(a).total_cmp(&key(b)).then(a.cmp(&b))
+    });
+    let scored = runs
+        .iter()
+        .filter(|r| r.0.is_some_and(f64::is_finite))
+        .count();
+    match scored {
+        0 => 0,
+        n => order[(n - 1) / 2],
+    }
+}
+
+/// Every method over the same recording. Fusion runs first (cheap); SLAM
+/// runs once per distinct sequence of fused scans (in clean air v1 and v2
+/// usually hand SLAM the very same scans, and SLAM is deterministic) and per
+/// random seed (`seeds` runs: the profile's `[slam] seed`, +1, …), up to
+/// `threads` at a time.
+pub fn run_all(
+    log: &SensorLog,
+    profile: &RobotConfig,
+    truth: &TruthTrack,
+    truth_map: &OccupancyGrid,
+    threads: usize,
+    seeds: usize,
+) -> anyhow::Result<Vec<MethodResult>> {
+    let seeds = seeds.max(1);
+    let mut fused: Vec<(Vec<FusedScan>, f64)> = Vec::with_capacity(METHODS.len());
+    for m in METHODS {
+        let (mut f, usage) = fuse(log, profile, m)?;
+        f.sort_by_key(|f| f.scan.header.stamp_ns);
+        fused.push((f, usage));
+    }
+    // The first method with the same SLAM input does the work.
+    let owner: Vec<usize> = (0..METHODS.len())
+        .map(|i| {
+            (0..i)
+                .find(|&j| {
+                    fused[j].0.len() == fused[i].0.len()
+                        && fused[j]
+                            .0
+                            .iter()
+                            .zip(&fused[i].0)
+                            .all(|(a, b)| same_slam_input(a, b, profile))
+                })
+                .unwrap_or(i)
+        })
+        .collect();
+    let jobs: Vec<(usize, usize)> = (0..METHODS.len())
+        .filter(|&i| owner[i] == i)
+        .flat_map(|i| (0..seeds).map(move |k| (i, k)))
+        .collect();
+    let profiles: Vec<RobotConfig> = (0..seeds)
+        .map(|k| {
+            let mut p = profile.clone();
+            p.slam.seed = p.slam.seed.wrapping_add(k as u64);
+            p
+        })
+        .collect();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let outcomes: std::sync::Mutex<Vec<Vec<Option<SlamOutcome>>>> =
+        std::sync::Mutex::new(vec![vec![None; seeds]; METHODS.len()]);
+    std::thread::scope(|s| {
+        for _ in 0..threads.clamp(1, jobs.len().max(1)) {
+            s.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    let Some(&(i, seed)) = jobs.get(k) else { break };
+                    let o = slam_and_score(log, &profiles[seed], &fused[i].0, truth, truth_map);
+                    if let Ok(mut g) = outcomes.lock() {
+                        g[i][seed] = Some(o);
+                    }
+                }
+            });
+        }
+    });
+    let outcomes = outcomes
+        .into_inner()
+        .map_err(|_| anyhow::anyhow!("a SLAM run panicked"))?;
+    let mut results = Vec::with_capacity(METHODS.len());
+    for (i, m) in METHODS.into_iter().enumerate() {
+        let all = &outcomes[owner[i]];
+        let runs: Vec<(Option<f64>, Option<f64>)> = all
+            .iter()
+            .map(|o| match o {
+                Some(o) => (
+                    o.map_report.as_ref().ok().map(|r| r.knn_error_m),
+                    o.trajectory_report.as_ref().ok().map(|r| r.ate_m.rmse),
+                ),
+                None => (None, None),
+            })
+            .collect();
+        // The run shown (map, trajectory, per-direction errors): the median
+        // by map error, so one lucky or unlucky seed is not the picture.
+        let shown = median_run(&runs);
+        let o = all
+            .get(shown)
+            .cloned()
+            .flatten()
+            .ok_or_else(|| anyhow::anyhow!("the {} SLAM run did not finish", m.as_str()))?;
+        let (f, usage) = &fused[i];
+        results.push(MethodResult {
+            method: m,
+            map: o.map,
+            trajectory: o.trajectory,
+            series: f
+                .iter()
+                .map(|f| SeriesPoint {
+                    stamp_ns: f.scan.header.stamp_ns,
+                    smoke_level: f.smoke_level,
+                    laser_spread: f.laser_spread,
+                    sonar_usage: f.sonar_usage(),
+                })
+                .collect(),
+            sonar_usage: *usage,
+            scans: f.len() as u64,
+            same_slam_input_as: (owner[i] != i).then(|| METHODS[owner[i]]),
+            map_report: o.map_report,
+            trajectory_report: o.trajectory_report,
+            runs,
+        });
+    }
+    Ok(results)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use smokenav_shared_types::{Header, Odometry};
+
+    fn odom(t: u64, x: f64, th: f64) -> Odometry {
+        Odometry {
+            header: Header::new(t, 0, "odom"),
+            x,
+            theta: th,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_run_shown_is_the_median_by_map_error() {
+        let r = |e: Option<f64>| (e, Some(0.1));
+        assert_eq!(
+            median_run(&[r(Some(0.38)), r(Some(0.13)), r(Some(0.12))]),
+            1
+        );
+        assert_eq!(median_run(&[r(Some(0.2)), r(Some(0.1))]), 1);
+        assert_eq!(median_run(&[r(None), r(Some(0.3)), r(Some(0.1))]), 2);
+        assert_eq!(median_run(&[r(Some(0.5))]), 0);
+        assert_eq!(median_run(&[r(None), r(Some(f64::NAN))]), 0);
+        assert_eq!(median_run(&[]), 0);
+    }
+
+    #[test]
+    fn odometry_is_interpolated_at_the_scan_stamp() {
+        let o = [odom(100, 0.0, 0.0), odom(200, 1.0, 0.2)];
+        let p = odometry_at(&o, 150).unwrap();
+        assert!((p.x - 0.5).abs() < 1e-12 && (p.theta - 0.1).abs() < 1e-12);
+        assert_eq!(odometry_at(&o, 50).unwrap().x, 0.0);
+        assert_eq!(odometry_at(&o, 900).unwrap().x, 1.0);
+        assert!(odometry_at(&[], 5).is_none());
+    }
+
+    #[test]
+    fn slam_results_are_shared_only_for_identical_scans() {
+        let profile = smokenav_sim_world::Scenario::builtin("mrl-clean")
+            .unwrap()
+            .profile;
+        let mut a = FusedScan::default();
+        a.scan.count = 3;
+        a.scan.range_max = 5.6;
+        for i in 0..3 {
+            a.scan
+                .set_beam(i, smokenav_shared_types::BeamReading::Range(1.0 + i as f32));
+        }
+        let b = a;
+        assert!(same_slam_input(&a, &b, &profile));
+        // A beam that came from the sonar has another noise model in SLAM.
+        let mut c = a;
+        c.beam_source[1] = smokenav_shared_types::SectionSource::Sonar as u8;
+        assert!(!same_slam_input(&a, &c, &profile));
+        // A smoke level that changes the laser noise factor changes the input.
+        let mut d = a;
+        d.smoke_level = 300.0;
+        assert!(!same_slam_input(&a, &d, &profile));
+        let mut e = a;
+        e.scan
+            .set_beam(2, smokenav_shared_types::BeamReading::NoReturn);
+        assert!(!same_slam_input(&a, &e, &profile));
+    }
+}

@@ -1,0 +1,39 @@
+//! `smokenav-lab`: the simulator side of smokenav, kept out of the robot's
+//! `smokenav` command so an operator tool installed on a robot links no
+//! emulator and no simulated world.
+//!
+//! - `smokenav-lab sim SCENARIO`: the smoky world feeds the device emulators
+//!   on PTYs; run the real drivers against them.
+//! - `smokenav-lab demo`: the seed paper's smoke experiment end to end (what
+//!   `./demo` runs).
+
+use clap::{Parser, Subcommand};
+
+mod demo;
+mod sim;
+
+#[derive(Parser)]
+#[command(
+    name = "smokenav-lab",
+    version,
+    about = "smokenav's simulator and demo (development machines, not robots)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scenario: the smoky world feeds emulated devices on PTYs for the real drivers.
+    Sim(sim::SimArgs),
+    /// The seed paper's smoke experiment end to end: live run, then laser-only vs SmokeNav v1 vs v2.
+    Demo(demo::DemoArgs),
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse().command {
+        Command::Sim(args) => sim::run(args),
+        Command::Demo(args) => demo::run(args),
+    }
+}
