@@ -98,6 +98,12 @@ impl Default for LatencyWindow {
     }
 }
 
+/// Counters that show themselves in `smokenav status`: each struct writes
+/// its own fields as metrics, so no process lists them by hand.
+pub trait Report {
+    fn report(&self, health: &mut HealthReporter);
+}
+
 /// Index of a rate registered with [`HealthReporter::add_rate`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RateId(usize);

@@ -6,7 +6,8 @@
 //! - SIGTERM/SIGINT as a [`Shutdown`] flag;
 //! - systemd `READY=1`, `STATUS=` and `WATCHDOG=1` (sd-notify; no-ops outside systemd);
 //! - [`HealthReporter`]: periodic `Health` on `health/<role>` with rates,
-//!   counters, the last error and latency percentiles.
+//!   counters ([`Report`]), the last error and latency percentiles;
+//! - [`Reconnect`]: every driver's open → back off → reopen, shown in health.
 //!
 //! A process looks like:
 //!
@@ -37,12 +38,14 @@ mod args;
 mod health;
 mod logging;
 mod process;
+mod reconnect;
 mod shutdown;
 mod systemd;
 
 pub use args::CommonArgs;
-pub use health::{HealthReporter, LatencyWindow, RateId, RateMeter};
+pub use health::{HealthReporter, LatencyWindow, RateId, RateMeter, Report};
 pub use logging::init_logging;
 pub use process::{ConfigFailure, EXIT_CONFIG, Process, main};
+pub use reconnect::{LinkCounters, Reconnect, ReconnectPolicy};
 pub use shutdown::Shutdown;
 pub use systemd::SystemdNotifier;
