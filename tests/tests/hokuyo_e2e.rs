@@ -2,6 +2,7 @@
 //! ↔ the real `smokenav-hokuyo` binary (its own process) ↔ bus subscribers (this
 //! process). Scans are checked beam by beam against what the emulator was fed.
 
+use smokenav_hokuyo_emulator::pattern::{check_pattern_scan as check_scan, pattern};
 use smokenav_hokuyo_emulator::{BootState, DeviceConfig, Emulator, EmulatorConfig};
 use smokenav_platform_bus::{Bus, Subscriber, Waiter, topics};
 use smokenav_shared_types::laser::{BeamReading, LaserScan};
@@ -9,49 +10,6 @@ use smokenav_shared_types::{Health, HealthState};
 use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
 use std::f64::consts::TAU;
 use std::time::{Duration, Instant};
-
-/// Scan k as fed: beam i = 300 + (7·i + 13·k) mod 5000 mm, with sensor error codes
-/// 0 at beam 5 and 7 at beam 6. Beam 0 identifies k (mod 5000).
-fn pattern(k: u64, ranges: &mut [u16]) {
-    for (i, r) in ranges.iter_mut().enumerate() {
-        *r = match i {
-            5 => 0,
-            6 => 7,
-            _ => 300 + ((7 * i as u64 + 13 * k) % 5000) as u16,
-        };
-    }
-}
-
-/// Checks every beam and the PP-derived geometry of a published scan; returns k.
-fn check_scan(scan: &LaserScan) -> u64 {
-    assert_eq!(scan.count, 682, "URG-04LX PP: AMIN 44 .. AMAX 725");
-    assert_eq!(scan.header.frame_id.as_str(), "laser");
-    // Angles from PP: (44 − AFRT 384)·2π/ARES 1024, increment 2π/1024.
-    assert!((f64::from(scan.angle_min) - (-340.0 * TAU / 1024.0)).abs() < 1e-6);
-    assert!((f64::from(scan.angle_increment) - TAU / 1024.0).abs() < 1e-7);
-    assert!((f64::from(scan.angle_max()) - (341.0 * TAU / 1024.0)).abs() < 1e-5);
-    // 600 rpm: 100 ms per scan, 97.66 µs per step; DMIN 20 mm, DMAX 5600 mm.
-    assert!((scan.scan_time - 0.1).abs() < 1e-6);
-    assert!((f64::from(scan.time_increment) - 0.1 / 1024.0).abs() < 1e-9);
-    assert_eq!((scan.range_min, scan.range_max), (0.02, 5.6));
-    let b0 = match scan.beam(0) {
-        BeamReading::Range(r) => (r * 1000.0).round() as u64,
-        other => panic!("beam 0 is {other:?}"),
-    };
-    // 13·k ≡ b0 − 300 (mod 5000) and 13⁻¹ ≡ 3077 (mod 5000).
-    let k = ((b0 - 300) * 3077) % 5000;
-    let mut fed = vec![0u16; 682];
-    pattern(k, &mut fed);
-    for (i, &mm) in fed.iter().enumerate() {
-        let want = match mm {
-            0 => BeamReading::SensorCode(0),
-            7 => BeamReading::SensorCode(7),
-            mm => BeamReading::Range(f32::from(mm) / 1000.0),
-        };
-        assert_eq!(scan.beam(i), want, "scan {k} beam {i}");
-    }
-    k
-}
 
 struct Rig {
     dir: tempfile::TempDir,

@@ -179,9 +179,12 @@ impl HealthReporter {
         self.health.deadline_misses += 1;
     }
 
-    /// Records an error for `status` and the log.
+    /// Records an error for `status` and the log (logged once while it stays the last error).
     pub fn error(&mut self, msg: &str) {
-        tracing::warn!("{msg}");
+        let last = self.health.last_error.as_str();
+        if last.is_empty() || !msg.starts_with(last) {
+            tracing::warn!("{msg}");
+        }
         self.health.last_error.set(msg);
     }
 

@@ -73,9 +73,8 @@ pub struct Reconnect {
     down_since_ns: u64,
     retry_at_ns: u64,
     delay: Duration,
+    /// Why the link is (or last was) down.
     reason: String,
-    /// The last error this helper put into health, to clear it once the link is back.
-    reported: Option<String>,
     counters: LinkCounters,
 }
 
@@ -93,7 +92,6 @@ impl Reconnect {
             retry_at_ns: now_ns,
             delay: policy.first_retry,
             reason: "not connected yet".into(),
-            reported: None,
             counters: LinkCounters::default(),
         }
     }
@@ -179,29 +177,25 @@ impl Reconnect {
     }
 
     /// Shows the link in health: the counters always; while down the state
-    /// and `what: reason; reconnecting` as the last error (logged once per
-    /// new reason); once back, clears that error unless the driver set another.
-    pub fn report(&mut self, h: &mut HealthReporter, what: &str, now_ns: u64) {
+    /// and `what: reason; reconnecting` as the last error; once back, clears
+    /// that error unless the driver has set another since.
+    pub fn report(&self, h: &mut HealthReporter, what: &str, now_ns: u64) {
         let c = self.counters;
         h.set_metric("link_up", f64::from(u8::from(self.up)));
         h.set_metric("port_opens", c.opens as f64);
         h.set_metric("reconnects", c.reconnects() as f64);
         h.set_metric("connect_failures", c.failures as f64);
         h.set_metric("device_losses", c.losses as f64);
+        let msg = format!("{what}: {}; reconnecting", self.reason);
         match self.state(now_ns) {
             Some(state) => {
                 h.set_state(state);
-                let msg = format!("{what}: {}; reconnecting", self.reason);
-                if self.reported.as_deref() != Some(msg.as_str()) {
-                    h.error(&msg);
-                    self.reported = Some(msg);
-                }
+                h.error(&msg);
             }
             None => {
-                if let Some(msg) = self.reported.take()
-                    && msg.starts_with(h.health().last_error.as_str())
-                    && !h.health().last_error.as_str().is_empty()
-                {
+                // `last_error` is a fixed-size copy: ours may be cut short.
+                let last = h.health().last_error.as_str();
+                if !last.is_empty() && msg.starts_with(last) {
                     h.clear_error();
                 }
             }

@@ -234,6 +234,19 @@ pub enum Reading {
 }
 
 impl Geometry {
+    /// The URG-04LX, as its PP reply states it (firmware 3.1.00): 682 steps of
+    /// 2π/1024 from step 44 to 725, step 384 straight ahead, 600 rpm, ranges
+    /// 20–5600 mm. The one place this model's geometry is written down.
+    pub const URG_04LX: Geometry = Geometry {
+        dmin_mm: 20,
+        dmax_mm: 5600,
+        ares: 1024,
+        amin: 44,
+        amax: 725,
+        afrt: 384,
+        scan_rpm: 600,
+    };
+
     /// Checks the relations every sensor satisfies (AMIN ≤ AFRT ≤ AMAX < ARES, …).
     pub fn validate(&self) -> Result<(), String> {
         if self.ares == 0 || self.ares > 1 << 16 {
@@ -314,15 +327,7 @@ mod tests {
     use super::*;
 
     fn urg04lx() -> Geometry {
-        Geometry {
-            dmin_mm: 20,
-            dmax_mm: 5600,
-            ares: 1024,
-            amin: 44,
-            amax: 725,
-            afrt: 384,
-            scan_rpm: 600,
-        }
+        Geometry::URG_04LX
     }
 
     #[test]

@@ -1,5 +1,5 @@
-//! Decodes every real capture in `tests/vectors/` (copied byte-exact from
-//! shared/reference/scip/vectors/) and rejects the damaged one.
+//! Decodes every real capture in `tests/vectors/` (byte-exact copies of
+//! real sensor traffic) and rejects the damaged one.
 //!
 //! Expected numbers were worked out by hand from the capture text and checked
 //! with an independent decoder (strip checksums, join, 3 chars per value).
@@ -36,18 +36,7 @@ fn wiki_vv_pp_ii_capture_decodes_all_three_replies() {
 
     let pp = SensorSpec::from_reply(&parse_reply(&f[1]).unwrap()).unwrap();
     assert_eq!(pp.model, "URG-04LX(Hokuyo Automatic Co.,Ltd.)");
-    assert_eq!(
-        pp.geometry,
-        Geometry {
-            dmin_mm: 20,
-            dmax_mm: 5600,
-            ares: 1024,
-            amin: 44,
-            amax: 725,
-            afrt: 384,
-            scan_rpm: 600
-        }
-    );
+    assert_eq!(pp.geometry, Geometry::URG_04LX);
     assert_eq!(pp.family(), ModelFamily::Urg04lx);
     assert!(!pp.family().supports_intensity());
 
@@ -86,15 +75,7 @@ fn ug01_gd_full_scan_decodes_682_ranges_and_codes_0_6_7() {
     assert_eq!(r[21], 3505);
     assert_eq!(r[42], 961);
 
-    let g = Geometry {
-        dmin_mm: 20,
-        dmax_mm: 5600,
-        ares: 1024,
-        amin: 44,
-        amax: 725,
-        afrt: 384,
-        scan_rpm: 600,
-    };
+    let g = Geometry::URG_04LX;
     let count_code = |c| {
         r.iter()
             .filter(|&&v| g.classify(v) == Reading::Code(c))

@@ -1,9 +1,9 @@
 //! One connection to a sensor: robust handshake, identification, clock calibration.
 //!
 //! Start-up work allocates freely (it runs once per connection); the streaming
-//! hot path lives in [`crate::stream`].
+//! hot path is [`crate::driver::stream`] around [`crate::core`].
 
-use crate::port::{Port, PortSpec};
+use crate::link::{Port, PortSpec};
 use smokenav_hokuyo_codec::{
     ClockSync, Command, DecodeError, FrameSplitter, OffsetEstimate, ParamError, Request,
     SensorSpec, SensorState, Status, StatusKind, TimeMode, TimeSample, VersionInfo, parse_reply,

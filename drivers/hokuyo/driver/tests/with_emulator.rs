@@ -7,48 +7,12 @@ use smokenav_hokuyo_driver::{
     Driver, DriverConfig, DriverEvent, DriverSink, PortSpec, ScanSink, Session, StreamConfig,
     StreamCounters,
 };
+use smokenav_hokuyo_emulator::pattern::{check_pattern_scan as check_scan, pattern};
 use smokenav_hokuyo_emulator::{BootState, DeviceConfig, Emulator, EmulatorConfig, Link, Model};
-use smokenav_shared_types::laser::{BeamReading, LaserScan};
+use smokenav_shared_types::laser::LaserScan;
 use smokenav_shared_types::{Clock, MonotonicClock};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-/// Scan k: beam i = 300 + (7·i + 13·k) mod 5000 mm, except codes at i = 5 (0) and
-/// 6 (7), so every beam of every scan is predictable and beam 0 identifies k.
-fn pattern(k: u64, ranges: &mut [u16]) {
-    for (i, r) in ranges.iter_mut().enumerate() {
-        *r = match i {
-            5 => 0,
-            6 => 7,
-            _ => 300 + ((7 * i as u64 + 13 * k) % 5000) as u16,
-        };
-    }
-}
-
-/// Checks every beam of a published scan against the pattern; returns k mod 5000.
-fn check_scan(scan: &LaserScan) -> u64 {
-    assert_eq!(scan.count, 682);
-    let b0 = match scan.beam(0) {
-        BeamReading::Range(r) => (r * 1000.0).round() as u64,
-        other => panic!("beam 0 {other:?}"),
-    };
-    // 13·k ≡ b0 − 300 (mod 5000) and 13⁻¹ ≡ 3077 (mod 5000).
-    let k = ((b0 - 300) * 3077) % 5000;
-    let mut expected = vec![0u16; 682];
-    pattern(k, &mut expected);
-    for (i, &mm) in expected.iter().enumerate() {
-        let want = match mm {
-            0 => BeamReading::SensorCode(0),
-            7 => BeamReading::SensorCode(7),
-            mm => BeamReading::Range(f32::from(mm) / 1000.0),
-        };
-        assert_eq!(scan.beam(i), want, "scan {k} beam {i}");
-    }
-    // Angles from PP: step 44 at (44 − 384)·2π/1024, steps 2π/1024 apart.
-    assert!((f64::from(scan.angle_min) - (-340.0 * std::f64::consts::TAU / 1024.0)).abs() < 1e-6);
-    assert!((f64::from(scan.angle_increment) - std::f64::consts::TAU / 1024.0).abs() < 1e-7);
-    k
-}
 
 type Until = Box<dyn FnMut(&Collect, &StreamCounters) -> bool>;
 
@@ -254,7 +218,7 @@ fn one_percent_corrupted_lines_lose_only_the_damaged_scans() {
         counted >= damaged && counted <= emu.stats().scans_damaged,
         "{counted} counted, {damaged} damaged"
     );
-    assert_eq!(drv.counters.reconnects, 0);
+    assert_eq!(drv.link().counters().reconnects(), 0);
 }
 
 #[test]
@@ -293,7 +257,7 @@ fn unplug_and_replug_resumes_within_a_second_of_the_return() {
         took < Duration::from_secs(1),
         "resumed {took:?} after the device returned"
     );
-    assert_eq!(drv.counters.reconnects, 1);
+    assert_eq!(drv.link().counters().reconnects(), 1);
     // The replugged 04LX came back in SCIP 1.1 and was switched again.
     assert!(
         sink.events.last().unwrap().contains("from_scip11: true"),
@@ -365,4 +329,26 @@ fn calibration_offset_matches_the_emulated_sensor_clock() {
         predicted - before as i64
     );
     assert!(est.round_trip_ns < 20_000_000);
+}
+
+#[test]
+fn absent_sensor_is_retried_with_a_growing_back_off() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("urg");
+    let mut drv = Driver::new(
+        DriverConfig {
+            retry_delay: Duration::from_millis(200),
+            ..config(&missing.to_string_lossy())
+        },
+        Arc::new(MonotonicClock),
+    );
+    let mut sink = Collect::new(Duration::from_millis(1300), |_, _| false);
+    drv.run(&mut sink);
+    // Attempts at 0, 0.2, 0.6 and 1.1 s (waits of 200, 400, 500 ms): a fixed
+    // 200 ms retry would have made 7.
+    let link = drv.link();
+    assert!(!link.is_up());
+    assert_eq!(link.counters().failures, 4, "{:?}", link.counters());
+    assert!(link.reason().unwrap().contains("no such device"));
+    assert!(sink.scans.is_empty());
 }

@@ -11,9 +11,11 @@
 //!
 //! [`Device`] is the protocol state machine with no I/O; [`Emulator`] runs it on a
 //! thread that waits on the port with `poll` until the next scan is due.
+//! [`pattern`] is a test scan source with its checker.
 
 pub mod device;
 pub mod model;
+pub mod pattern;
 mod transport;
 
 pub use device::{

@@ -1,8 +1,8 @@
 //! What each emulated model says about itself.
 //!
-//! URG-04LX strings are the real ones from a firmware 3.1.00 device
-//! (shared/reference/scip/vectors/A_wiki_vv_pp_ii.txt). The UTM-30LX-EW PP is the
-//! real one (I_utm30lxew_pp.txt); its VV and II were not captured and are
+//! URG-04LX strings are the real ones from a firmware 3.1.00 device (its PP
+//! geometry is the codec's [`Geometry::URG_04LX`]). The UTM-30LX-EW PP is the
+//! real one from a captured reply; its VV and II were not captured and are
 //! plausible stand-ins, marked below.
 
 use smokenav_hokuyo_codec::Geometry;
@@ -43,15 +43,7 @@ impl Model {
                     ("SERI", "H0614967"),
                 ],
                 modl: "URG-04LX(Hokuyo Automatic Co.,Ltd.)",
-                geometry: Geometry {
-                    dmin_mm: 20,
-                    dmax_mm: 5600,
-                    ares: 1024,
-                    amin: 44,
-                    amax: 725,
-                    afrt: 384,
-                    scan_rpm: 600,
-                },
+                geometry: Geometry::URG_04LX,
                 boots_scip11: true,
                 supports_me: false,
                 bauds: &[19_200, 57_600, 115_200],

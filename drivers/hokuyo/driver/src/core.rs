@@ -1,11 +1,16 @@
-//! The streaming hot path: bytes → frames → scans → published `LaserScan`s.
-//! After start-up nothing here allocates: fixed buffers, reused scan.
+//! The pure part of the driver: SCIP frames in, `LaserScan`s out.
+//!
+//! What is streamed ([`streamed_range`]), how a frame of the stream is told
+//! apart from the rest ([`classify_frame`]) and how raw values become a
+//! `LaserScan` ([`ScanConverter`]): no port, no bus, no clock (stamps come
+//! in as arguments). The simulator's fast path uses the same converter, so
+//! its scans follow these rules too. Nothing here allocates after start-up.
 
-use crate::session::{SensorInfo, Session, SessionError, use_intensity};
 use smokenav_hokuyo_codec::{
-    ClockSync, Command, DecodeError, Geometry, ModelFamily, Reading, Request, ScanHeader,
-    StatusKind, StepRange, SyncStats, parse_reply,
+    ClockSync, Command, DecodeError, Geometry, Reading, ScanEcho, ScanHeader, Status, StatusKind,
+    StepRange, SyncStats, parse_reply,
 };
+use smokenav_platform_runtime::{HealthReporter, Report};
 use smokenav_shared_types::Header;
 use smokenav_shared_types::laser::{BeamReading, LaserScan, MAX_BEAMS};
 use std::time::Duration;
@@ -49,30 +54,47 @@ pub struct StreamCounters {
     pub sensor_errors: u64,
     /// Bytes the frame splitter dropped (oversized garbage).
     pub dropped_bytes: u64,
-    /// Successful connections after the first.
-    pub reconnects: u64,
-    /// Attempts to open or set up the sensor that failed.
-    pub connect_failures: u64,
     /// Whether a sensor is connected and streaming.
     pub connected: bool,
     /// Sensor-clock synchronisation state.
     pub sync: SyncStats,
 }
 
-/// Where scans go, and how the loop learns it should stop.
-pub trait ScanSink {
-    /// Publishes one scan; `received_ns` is when its last byte was read.
-    fn publish(&mut self, scan: &LaserScan, received_ns: u64);
-    /// Called after every read (at least every 100 ms): health upkeep; true = stop.
-    fn idle(&mut self, counters: &StreamCounters) -> bool;
+impl Report for StreamCounters {
+    fn report(&self, h: &mut HealthReporter) {
+        h.set_metric("scans", self.scans_published as f64);
+        h.set_metric("checksum_errors", self.checksum_errors as f64);
+        h.set_metric("damaged_frames", self.damaged_frames as f64);
+        h.set_metric("stale_frames", self.stale_frames as f64);
+        h.set_metric("sensor_errors", self.sensor_errors as f64);
+        h.set_metric("dropped_bytes", self.dropped_bytes as f64);
+        h.set_metric("connected", f64::from(u8::from(self.connected)));
+        h.set_metric(
+            "clock_calibrated",
+            f64::from(u8::from(self.sync.calibrated)),
+        );
+        h.set_metric("clock_drift_ppm", self.sync.drift_ppm);
+        h.set_metric("clock_resets", self.sync.resets as f64);
+        h.set_metric("clock_wraps", self.sync.wraps as f64);
+    }
+}
+
+/// The steps the driver streams: every measurable one (AMIN..=AMAX), one
+/// value per step.
+pub fn streamed_range(g: &Geometry) -> StepRange {
+    StepRange {
+        start: g.amin as u16,
+        end: g.amax as u16,
+        cluster: 1,
+    }
 }
 
 /// Turns decoded raw values into a `LaserScan` in place.
 pub struct ScanConverter {
     frame_id: String,
     seq: u64,
-    pub(crate) ranges: Box<[u32; MAX_BEAMS]>,
-    pub(crate) intensities: Box<[u32; MAX_BEAMS]>,
+    ranges: Box<[u32; MAX_BEAMS]>,
+    intensities: Box<[u32; MAX_BEAMS]>,
     scan: Box<LaserScan>,
 }
 
@@ -85,6 +107,16 @@ impl ScanConverter {
             intensities: Box::new([0; MAX_BEAMS]),
             scan: Box::default(),
         }
+    }
+
+    /// The raw buffers a scan is decoded into: (ranges, intensities).
+    pub fn buffers(&mut self) -> (&mut [u32], &mut [u32]) {
+        (&mut self.ranges[..], &mut self.intensities[..])
+    }
+
+    /// The last converted scan.
+    pub fn scan(&self) -> &LaserScan {
+        &self.scan
     }
 
     /// Fills the scan from the raw values of `h`, geometry from PP, `stamp_ns` for
@@ -122,117 +154,42 @@ impl ScanConverter {
         }
         &self.scan
     }
-}
 
-/// Starts MD (or ME) over the full measurable range and publishes scans until the
-/// sink says stop (`Ok`) or the link fails (`Err`: the caller reconnects).
-pub fn stream(
-    session: &mut Session,
-    info: &SensorInfo,
-    cfg: &StreamConfig,
-    sync: &mut ClockSync,
-    conv: &mut ScanConverter,
-    counters: &mut StreamCounters,
-    sink: &mut dyn ScanSink,
-) -> Result<(), SessionError> {
-    let g = info.spec.geometry;
-    let command = if use_intensity(cfg.intensity, &info.spec) {
-        Command::Me
-    } else {
-        Command::Md
-    };
-    let req = Request::Stream {
-        command,
-        range: StepRange {
-            start: g.amin as u16,
-            end: g.amax as u16,
-            cluster: 1,
-        },
-        interval: cfg.skip_scans.min(9),
-        count: 0,
-    };
-    let ack = parse_reply(session.transact(&req, Duration::from_secs(1))?)?;
-    if !ack.status.is_ok() {
-        let (c, st) = (ack.echo.command, ack.status);
-        return Err(SessionError::Status {
-            command: c,
-            status: st,
-            meaning: st.meaning(c),
-        });
-    }
-    // Data echoes match the request on their first 13 characters.
-    let mut head = [0u8; 13];
-    head.copy_from_slice(ack.echo.line.get(..13).unwrap_or(&[0; 13]));
-    tracing::info!(model = %info.spec.model, %command, "streaming");
-
-    let clock = session.clock.clone();
-    let stall_ns = cfg.stall_timeout.as_nanos() as u64;
-    let mut last_scan = clock.now_ns();
-    let mut consecutive_errors = 0u32;
-    let mut seen_dropped = session.splitter.stats().discarded_bytes;
-    loop {
-        if sink.idle(counters) {
-            return Ok(());
-        }
-        let now = clock.now_ns();
-        if now.saturating_sub(last_scan) > stall_ns {
-            return Err(SessionError::Stalled(cfg.stall_timeout));
-        }
-        let wait = Duration::from_nanos((last_scan + stall_ns).saturating_sub(now))
-            .min(Duration::from_millis(100));
-        let n = session.port.read_timeout(session.splitter.spare(), wait)?;
-        let received_ns = clock.now_ns();
-        session.splitter.commit(n);
-        while let Some(frame) = session.splitter.next_frame() {
-            let outcome = handle_frame(frame, &head, &g, cfg.skip_scans, sync, conv, received_ns);
-            match outcome {
-                Frame::Scan => {
-                    consecutive_errors = 0;
-                    last_scan = received_ns;
-                    counters.scans_published += 1;
-                    counters.sync = sync.stats();
-                    sink.publish(&conv.scan, received_ns);
-                }
-                Frame::Checksum => {
-                    consecutive_errors += 1;
-                    counters.checksum_errors += 1;
-                }
-                Frame::Damaged => {
-                    consecutive_errors += 1;
-                    counters.damaged_frames += 1;
-                }
-                Frame::Other => counters.stale_frames += 1,
-                Frame::SensorError(kind, status) => {
-                    counters.sensor_errors += 1;
-                    if kind == StatusKind::HardwareFault {
-                        return Err(SessionError::Hardware {
-                            command,
-                            status,
-                            meaning: status.meaning(command),
-                        });
-                    }
-                    tracing::warn!("sensor status {status}: {}", status.meaning(command));
-                }
-            }
-        }
-        let dropped = session.splitter.stats().discarded_bytes;
-        counters.dropped_bytes += dropped - seen_dropped;
-        seen_dropped = dropped;
-        if consecutive_errors >= cfg.max_consecutive_errors {
-            return Err(SessionError::TooManyErrors(consecutive_errors));
-        }
+    /// [`ScanConverter::convert`] for an MD scan of the [`streamed_range`]
+    /// whose ranges the caller wrote into [`ScanConverter::buffers`] (no
+    /// SCIP frame: the simulator's fast path).
+    pub fn convert_streamed(&mut self, g: &Geometry, skip: u8, stamp_ns: u64) -> &LaserScan {
+        let range = streamed_range(g);
+        let h = ScanHeader {
+            command: Command::Md,
+            echo: ScanEcho {
+                range,
+                interval: skip,
+                remaining: 0,
+            },
+            timestamp: 0,
+            count: range.value_count(),
+        };
+        self.convert(&h, g, skip, stamp_ns)
     }
 }
 
-enum Frame {
+/// What one frame of the stream was.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Frame {
+    /// A scan, converted (see [`ScanConverter::scan`]).
     Scan,
     Checksum,
     Damaged,
+    /// Not part of our stream (a late reply, another request's echo).
     Other,
-    SensorError(StatusKind, smokenav_hokuyo_codec::Status),
+    SensorError(StatusKind, Status),
 }
 
-fn handle_frame(
+/// Decodes one frame of the stream started with the echo `head` (its first
+/// 13 characters), converting a scan in `conv` stamped through `sync` at
+/// `received_ns` (when its last byte was read).
+pub fn classify_frame(
     frame: &[u8],
     head: &[u8; 13],
     g: &Geometry,
@@ -265,11 +222,6 @@ fn handle_frame(
     }
 }
 
-/// The model family from PP, for logs.
-pub fn family(info: &SensorInfo) -> ModelFamily {
-    info.spec.family()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -277,15 +229,7 @@ mod tests {
 
     #[test]
     fn converter_keeps_codes_apart_and_stamps_the_first_beam() {
-        let g = Geometry {
-            dmin_mm: 20,
-            dmax_mm: 5600,
-            ares: 1024,
-            amin: 44,
-            amax: 725,
-            afrt: 384,
-            scan_rpm: 600,
-        };
+        let g = Geometry::URG_04LX;
         let values: Vec<u32> = (0..682)
             .map(|i| match i {
                 0 => 7,
@@ -301,9 +245,10 @@ mod tests {
             .data(3, values)
             .end();
         let mut conv = ScanConverter::new("laser");
+        let (ranges, intensities) = conv.buffers();
         let h = parse_reply(&frame)
             .unwrap()
-            .decode_scan(&mut conv.ranges[..], &mut conv.intensities[..])
+            .decode_scan(ranges, intensities)
             .unwrap();
         let s = *conv.convert(&h, &g, 1, 1_000_000_000);
         assert_eq!(s.count, 682);
@@ -316,5 +261,49 @@ mod tests {
         assert!((s.scan_time - 0.2).abs() < 1e-6);
         assert_eq!(s.header.frame_id.as_str(), "laser");
         assert_eq!(conv.convert(&h, &g, 1, 0).header.seq, 1);
+    }
+
+    #[test]
+    fn values_without_a_frame_convert_as_the_streamed_md_scan_does() {
+        let g = Geometry::URG_04LX;
+        let values: Vec<u32> = (0..682).map(|i| if i == 9 { 3 } else { 400 + i }).collect();
+        let mut frame = Vec::new();
+        ReplyWriter::new(&mut frame)
+            .echo(b"MD0044072500000")
+            .status(*b"99")
+            .time(0)
+            .data(3, values.iter().copied())
+            .end();
+        let mut from_frame = ScanConverter::new("laser");
+        let (r, i) = from_frame.buffers();
+        let h = parse_reply(&frame).unwrap().decode_scan(r, i).unwrap();
+        let a = *from_frame.convert(&h, &g, 0, 5_000);
+        let mut direct = ScanConverter::new("laser");
+        for (slot, v) in direct.buffers().0.iter_mut().zip(&values) {
+            *slot = *v;
+        }
+        let b = *direct.convert_streamed(&g, 0, 5_000);
+        assert_eq!(a.header, b.header);
+        assert_eq!(
+            (
+                a.angle_min,
+                a.angle_increment,
+                a.time_increment,
+                a.scan_time
+            ),
+            (
+                b.angle_min,
+                b.angle_increment,
+                b.time_increment,
+                b.scan_time
+            )
+        );
+        assert_eq!(
+            (a.count, a.range_min, a.range_max),
+            (b.count, b.range_min, b.range_max)
+        );
+        for k in 0..682 {
+            assert_eq!(a.beam(k), b.beam(k), "beam {k}");
+        }
     }
 }
