@@ -38,6 +38,53 @@ pub enum BaseEmulator {
     },
 }
 
+/// The ARCOS controller a profile's Pioneer is emulated as: its sonar count,
+/// every transducer in every SIP (as AMRISim sends them), the profile's range cap.
+pub fn pioneer_config(profile: &RobotConfig) -> pioneer::RobotConfig {
+    let max_mm = (profile.sonar.max_range_m * 1000.0)
+        .round()
+        .clamp(1.0, f64::from(u16::MAX)) as u16;
+    pioneer::RobotConfig {
+        sonar_count: profile.sonar.count.min(16),
+        sonar_mode: pioneer::SonarMode::All,
+        sonar_max_mm: max_mm,
+        ..pioneer::RobotConfig::default()
+    }
+}
+
+/// The world's odometry pose as the controller's (mm).
+pub fn pioneer_pose(pose: &Pose2) -> pioneer::Pose {
+    pioneer::Pose::new(pose.x * 1000.0, pose.y * 1000.0, pose.theta)
+}
+
+/// A ping as the range a Pioneer transducer reports, mm (no echo: the cap).
+pub fn pioneer_sonar_mm(range_m: f64, saturated: bool, max_mm: u16) -> u16 {
+    if saturated || !range_m.is_finite() {
+        max_mm
+    } else {
+        (range_m * 1000.0).round().clamp(1.0, f64::from(max_mm)) as u16
+    }
+}
+
+/// The Scout's drive (track, `vm` argument order) from its profile.
+pub fn scout_drive(profile: &RobotConfig) -> Result<scout::DiffDrive, BaseError> {
+    let opts = profile.base.scout.as_ref().ok_or(BaseError::ScoutOptions)?;
+    let order = match opts.wheel_order {
+        CfgWheelOrder::RightLeft => scout::WheelOrder::RightLeft,
+        CfgWheelOrder::LeftRight => scout::WheelOrder::LeftRight,
+    };
+    Ok(scout::DiffDrive::new(opts.track_m, order))
+}
+
+/// A ping as the range the Scout emulator is fed, m (NaN: no echo).
+pub fn scout_sonar_m(range_m: f64, saturated: bool) -> f64 {
+    if saturated {
+        f64::NAN
+    } else {
+        range_m.min(SONAR_MAX_RANGE_M)
+    }
+}
+
 impl BaseEmulator {
     /// Starts the emulator of `profile`'s platform behind the symlink `link`.
     pub fn start(
@@ -48,15 +95,8 @@ impl BaseEmulator {
     ) -> Result<Self, BaseError> {
         match profile.robot.platform {
             Platform::Pioneer => {
-                let max_mm = (profile.sonar.max_range_m * 1000.0)
-                    .round()
-                    .clamp(1.0, f64::from(u16::MAX)) as u16;
-                let cfg = pioneer::RobotConfig {
-                    sonar_count: profile.sonar.count.min(16),
-                    sonar_mode: pioneer::SonarMode::All,
-                    sonar_max_mm: max_mm,
-                    ..pioneer::RobotConfig::default()
-                };
+                let cfg = pioneer_config(profile);
+                let max_mm = cfg.sonar_max_mm;
                 let emu = pioneer::Emulator::pty_with_clock(link, cfg, clock)?;
                 let handle = emu.handle();
                 // The world integrates the motion (with its odometry errors); the controller only reports it.
@@ -68,12 +108,7 @@ impl BaseEmulator {
                 })
             }
             Platform::Scout => {
-                let opts = profile.base.scout.as_ref().ok_or(BaseError::ScoutOptions)?;
-                let order = match opts.wheel_order {
-                    CfgWheelOrder::RightLeft => scout::WheelOrder::RightLeft,
-                    CfgWheelOrder::LeftRight => scout::WheelOrder::LeftRight,
-                };
-                let drive = scout::DiffDrive::new(opts.track_m, order);
+                let drive = scout_drive(profile)?;
                 let cfg = scout::EmulatorConfig {
                     link_path: link.to_owned(),
                     drive,
@@ -118,11 +153,7 @@ impl BaseEmulator {
     /// The controller's odometry pose (the world's odometry frame).
     pub fn set_odometry(&mut self, pose: &Pose2) {
         match self {
-            BaseEmulator::Pioneer { handle, .. } => handle.set_pose(pioneer::Pose::new(
-                pose.x * 1000.0,
-                pose.y * 1000.0,
-                pose.theta,
-            )),
+            BaseEmulator::Pioneer { handle, .. } => handle.set_pose(pioneer_pose(pose)),
             BaseEmulator::Scout { emu, .. } => {
                 emu.set_pose(scout::Pose::new(pose.x, pose.y, pose.theta))
             }
@@ -133,21 +164,15 @@ impl BaseEmulator {
     pub fn set_sonar(&mut self, index: u8, range_m: f64, saturated: bool) {
         match self {
             BaseEmulator::Pioneer { handle, max_mm, .. } => {
-                let mm = if saturated || !range_m.is_finite() {
-                    *max_mm
-                } else {
-                    (range_m * 1000.0).round().clamp(1.0, f64::from(*max_mm)) as u16
-                };
-                handle.set_sonar_range(usize::from(index), mm);
+                handle.set_sonar_range(
+                    usize::from(index),
+                    pioneer_sonar_mm(range_m, saturated, *max_mm),
+                );
             }
             BaseEmulator::Scout { emu, ranges, .. } => {
                 if let Some(r) = ranges.get_mut(usize::from(index)) {
                     // NaN and ≥ 255 in read as "no echo" on the wire.
-                    *r = if saturated {
-                        f64::NAN
-                    } else {
-                        range_m.min(SONAR_MAX_RANGE_M)
-                    };
+                    *r = scout_sonar_m(range_m, saturated);
                     emu.set_sonar_m(ranges);
                 }
             }

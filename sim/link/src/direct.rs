@@ -2,15 +2,18 @@
 //! emulators, PTYs or driver processes: for recordings made as fast as the CPU
 //! allows (`smokenav-lab demo --fast`) and for tests of what comes after the drivers.
 //!
-//! What each driver does to its device's data is reproduced here:
-//! * laser: the URG-04LX's millimetres classified against DMIN/DMAX (values
-//!   below DMIN are error codes), angles and timing from the PP geometry,
-//!   stamped at the first beam as the Hokuyo driver does;
-//! * base: one odometry message and one sonar ring per controller cycle
-//!   (the world's odometry rate), the sonar ranges in the device's own units
-//!   (whole inches on the Scout, millimetres on the Pioneer) and classified
-//!   as the drivers do (no echo ⇒ saturated at the maximum, below the minimum
-//!   ⇒ invalid);
+//! Simulation replaces the device, never the driver: each world sample is put
+//! into the device's own units the way its emulator does, and the drivers'
+//! own pure cores turn it into messages, so no conversion rule exists twice:
+//! * laser: the frame's millimetres through the Hokuyo driver's
+//!   [`ScanConverter`] with the URG-04LX's PP geometry ([`Geometry::URG_04LX`]),
+//!   stamped at the first beam as the driver does;
+//! * Scout: a state reply in the robot's units (1/10 in, 1/10°, whole-inch
+//!   sonar bytes) through the codec's [`DiffDrive::state_si`] and the Scout
+//!   driver's `odometry` and `sonar_ring`;
+//! * Pioneer: the emulated ARCOS controller's SIP for the world's pose and
+//!   pings, through the driver's odometry integrator, `messages::odometry`
+//!   and its `SonarAssembler`;
 //! * smoke: the ADC counts through the smoke driver's own signal chain
 //!   (`smokenav_smoke_driver::core::DriverCore`: baseline, filter, level, trend,
 //!   state) at its publishing rate.
@@ -18,36 +21,39 @@
 //! Stamps are `t0_ns` + sim time. Each message comes with the time a driver
 //! would have published it (a scan only once its sweep is complete).
 
-use smokenav_hokuyo_codec::{Geometry, Reading};
+use crate::base::{pioneer_config, pioneer_pose, pioneer_sonar_mm, scout_drive, scout_sonar_m};
+use smokenav_hokuyo_codec::Geometry;
+use smokenav_hokuyo_driver::{DriverConfig as LaserConfig, ScanConverter};
+use smokenav_pioneer_codec::{Command as ArcosCommand, OdometryIntegrator, PacketBuf};
+use smokenav_pioneer_driver::messages::{self, SonarAssembler, SonarGeometry};
+use smokenav_pioneer_emulator::ArcosRobot;
 use smokenav_platform_config::{Platform, RobotConfig};
-use smokenav_scout_codec::units::{SONAR_MAX_RANGE_M, SONAR_NO_ECHO, sonar_byte};
-use smokenav_shared_types::{
-    BeamReading, Header, LaserScan, MAX_SONARS, Odometry, OdometryFlags, SmokeReading,
-    SonarReading, SonarRing, SonarStatus,
+use smokenav_scout_codec::units::{
+    CPU_VOLTAGE_RANGE, MOTOR_VOLTAGE_RANGE, m_to_tenth_inches, rad_to_heading, sonar_byte,
+    voltage_raw,
 };
+use smokenav_scout_codec::{Battery, DiffDrive, MotorStatus, StateReply, WheelSpeeds};
+use smokenav_shared_types::{Header, LaserScan, MAX_SONARS, Odometry, SmokeReading, SonarRing};
 use smokenav_sim_world::{LaserFrame, OdometrySample, SmokeSample, SonarSample, StepOutput};
 use smokenav_smoke_driver::core::DriverCore;
 use smokenav_smoke_driver::link::LinkEvent;
 use smokenav_smoke_driver::settings::Settings;
 use smokenav_smoke_emulator::AdcScale;
 
-/// The URG-04LX as its PP reply describes it.
-pub const URG_04LX: Geometry = Geometry {
-    dmin_mm: 20,
-    dmax_mm: 5600,
-    ares: 1024,
-    amin: 44,
-    amax: 725,
-    afrt: 384,
-    scan_rpm: 600,
-};
-
-const METRES_PER_INCH: f64 = 0.0254;
+/// Sonar frame id, as both base drivers stamp their rings.
+const SONAR_FRAME: &str = "base_link";
+/// Battery of the emulated bases (the Scout model's defaults).
+const SCOUT_CPU_V: f64 = 11.5;
+const SCOUT_MOTOR_V: f64 = 12.3;
 
 #[derive(Debug, thiserror::Error)]
 pub enum DirectError {
     #[error("[smoke] section: {0}")]
     Smoke(String),
+    #[error(transparent)]
+    Base(#[from] crate::base::BaseError),
+    #[error("Pioneer controller: {0}")]
+    Pioneer(String),
 }
 
 /// One message as a driver would publish it.
@@ -79,21 +85,35 @@ impl DirectMessage {
     }
 }
 
+/// The base as its driver sees it.
+enum Base {
+    Scout {
+        drive: DiffDrive,
+        /// Latest ping per transducer as the emulator is fed it, m (NaN: no echo).
+        sonar_m: [f64; MAX_SONARS],
+        odom_frame: String,
+        sonar_min_m: f32,
+        sonar_max_m: f32,
+        first: bool,
+    },
+    Pioneer {
+        robot: Box<ArcosRobot>,
+        max_mm: u16,
+        odometry: OdometryIntegrator,
+        sonar: SonarAssembler,
+        odom_frame: String,
+    },
+}
+
 /// Converts the world's output into driver messages.
 pub struct DirectDrivers {
     t0_ns: u64,
-    platform: Platform,
-    laser_frame: String,
-    odom_frame: String,
+    laser: ScanConverter,
     geometry: Geometry,
-    sonar_indices: Vec<u8>,
-    sonar_min_m: f32,
-    sonar_max_m: f32,
-    /// Latest ping per transducer, in device units (Scout: inches, Pioneer: mm; 0 = none yet).
-    latest: [Option<SonarSample>; MAX_SONARS],
+    skip_scans: u8,
+    base: Base,
     smoke: DriverCore,
     adc: AdcScale,
-    laser_seq: u64,
     odom_seq: u64,
     sonar_seq: u64,
     smoke_seq: u64,
@@ -112,30 +132,55 @@ impl DirectDrivers {
             stamp_ns: t0_ns,
             device: "simulated".into(),
         });
-        let mut sonar_indices: Vec<u8> = profile
-            .sonar
-            .transducers
-            .iter()
-            .map(|t| t.index)
-            .filter(|&i| usize::from(i) < MAX_SONARS)
-            .collect();
-        sonar_indices.sort_unstable();
+        let base = match profile.robot.platform {
+            Platform::Scout => Base::Scout {
+                drive: scout_drive(profile)?,
+                sonar_m: [f64::NAN; MAX_SONARS],
+                odom_frame: profile.base.odom_frame.clone(),
+                sonar_min_m: profile.sonar.min_range_m as f32,
+                sonar_max_m: smokenav_scout_codec::units::SONAR_MAX_RANGE_M as f32,
+                first: true,
+            },
+            Platform::Pioneer => {
+                let cfg = pioneer_config(profile);
+                let max_mm = cfg.sonar_max_mm;
+                let mut robot =
+                    ArcosRobot::new(cfg).map_err(|e| DirectError::Pioneer(e.to_string()))?;
+                // Connected, streaming, motors on: where the driver's handshake leaves it.
+                robot.open_stale_session();
+                robot.set_external_motion(true);
+                let mut enable = PacketBuf::new();
+                ArcosCommand::Enable(true)
+                    .encode(&mut enable)
+                    .map_err(|e| DirectError::Pioneer(e.to_string()))?;
+                robot.on_packet(enable.payload(), 0, &mut |_| {});
+                for i in 0..usize::from(profile.sonar.count) {
+                    robot.set_sonar_range(i, max_mm);
+                }
+                let params = *robot.params();
+                let geometry = SonarGeometry {
+                    indices: profile.sonar.transducers.iter().map(|t| t.index).collect(),
+                    max_range_m: profile.sonar.max_range_m as f32,
+                    min_range_m: profile.sonar.min_range_m as f32,
+                };
+                Base::Pioneer {
+                    robot: Box::new(robot),
+                    max_mm,
+                    odometry: OdometryIntegrator::new(params),
+                    sonar: SonarAssembler::new(geometry, params.range_conv),
+                    odom_frame: profile.base.odom_frame.clone(),
+                }
+            }
+        };
+        let laser_cfg = LaserConfig::from_section(&profile.laser, None);
         Ok(Self {
             t0_ns,
-            platform: profile.robot.platform,
-            laser_frame: profile.laser.frame_id.clone(),
-            odom_frame: profile.base.odom_frame.clone(),
-            geometry: URG_04LX,
-            sonar_indices,
-            sonar_min_m: profile.sonar.min_range_m as f32,
-            sonar_max_m: match profile.robot.platform {
-                Platform::Scout => SONAR_MAX_RANGE_M as f32,
-                Platform::Pioneer => profile.sonar.max_range_m as f32,
-            },
-            latest: [None; MAX_SONARS],
+            laser: ScanConverter::new(&laser_cfg.frame_id),
+            geometry: Geometry::URG_04LX,
+            skip_scans: laser_cfg.stream.skip_scans,
+            base,
             smoke,
             adc: settings.adc,
-            laser_seq: 0,
             odom_seq: 0,
             sonar_seq: 0,
             smoke_seq: 0,
@@ -162,17 +207,15 @@ impl DirectDrivers {
         events.sort_unstable();
         for &(t, kind, i) in &events {
             match kind {
-                0 => {
-                    let s = out.sonar[i];
-                    if let Some(slot) = self.latest.get_mut(usize::from(s.index)) {
-                        *slot = Some(s);
-                    }
-                }
+                0 => self.ping(&out.sonar[i]),
                 1 => {
-                    let o = out.odometry[i];
-                    emit(self.t0_ns + t, DirectMessage::Odometry(self.odometry(&o)));
-                    let ring = self.sonar_ring(o.t_ns);
-                    emit(self.t0_ns + t, DirectMessage::Sonar(Box::new(ring)));
+                    let (odom, ring) = self.base_cycle(&out.odometry[i]);
+                    if let Some(o) = odom {
+                        emit(self.t0_ns + t, DirectMessage::Odometry(o));
+                    }
+                    if let Some(r) = ring {
+                        emit(self.t0_ns + t, DirectMessage::Sonar(Box::new(r)));
+                    }
                 }
                 2 => {
                     if let Some(r) = self.smoke(&out.smoke[i]) {
@@ -187,101 +230,113 @@ impl DirectDrivers {
         }
         self.events = events;
     }
-
     /// The Hokuyo driver's `LaserScan` for one frame.
     pub fn laser(&mut self, f: &LaserFrame) -> Box<LaserScan> {
-        let g = &self.geometry;
-        let mut s: Box<LaserScan> = Box::default();
-        // Step s of the frame was measured at t + s · step time; stamp the first beam.
-        let first =
-            self.t0_ns + f.t_ns + (f64::from(g.amin) * g.step_time_s() * 1e9).round() as u64;
-        s.header = Header::new(first, self.laser_seq, &self.laser_frame);
-        self.laser_seq += 1;
-        s.angle_min = g.step_angle(g.amin) as f32;
-        s.angle_increment = g.step_rad() as f32;
-        s.time_increment = g.step_time_s() as f32;
-        s.scan_time = g.scan_period_s() as f32;
-        s.range_min = g.dmin_mm as f32 / 1000.0;
-        s.range_max = g.dmax_mm as f32 / 1000.0;
-        let n = f.ranges_mm.len().min(g.step_count());
-        s.count = n as u32;
-        for (i, &mm) in f.ranges_mm.iter().take(n).enumerate() {
-            let reading = match g.classify(u32::from(mm)) {
-                Reading::Range(mm) => BeamReading::Range(mm as f32 / 1000.0),
-                Reading::BeyondMax(_) => BeamReading::BeyondMax,
-                Reading::Code(c) => BeamReading::SensorCode(c as u16),
-            };
-            s.set_beam(i, reading);
+        let g = self.geometry;
+        for (slot, &mm) in self.laser.buffers().0.iter_mut().zip(f.ranges_mm.iter()) {
+            *slot = u32::from(mm);
         }
-        s
+        // The frame starts at step 0; the sensor stamps the rear of its sweep.
+        let rear_to_step0 = (g.time_from_rear_s(0) * 1e9).round() as u64;
+        let rear = (self.t0_ns + f.t_ns).saturating_sub(rear_to_step0);
+        Box::new(*self.laser.convert_streamed(&g, self.skip_scans, rear))
     }
 
-    fn odometry(&mut self, o: &OdometrySample) -> Odometry {
-        // The controllers report in their own units: the Scout in 1/10 in and 1/10°,
-        // the Pioneer in mm and 1/4096 of a turn.
-        let (lin, ang) = match self.platform {
-            Platform::Scout => (METRES_PER_INCH / 10.0, 0.1f64.to_radians()),
-            Platform::Pioneer => (0.001, std::f64::consts::TAU / 4096.0),
-        };
-        let q = |v: f64, step: f64| (v / step).round() * step;
-        let mut flags = OdometryFlags::MOTORS_ENABLED;
-        if o.stalled {
-            flags |= OdometryFlags::LEFT_STALL | OdometryFlags::RIGHT_STALL;
+    /// One ping reaches the device (it reports the latest per transducer).
+    fn ping(&mut self, s: &SonarSample) {
+        match &mut self.base {
+            Base::Scout { sonar_m, .. } => {
+                if let Some(slot) = sonar_m.get_mut(usize::from(s.index)) {
+                    *slot = scout_sonar_m(s.range_m, s.saturated);
+                }
+            }
+            Base::Pioneer { robot, max_mm, .. } => robot.set_sonar_range(
+                usize::from(s.index),
+                pioneer_sonar_mm(s.range_m, s.saturated, *max_mm),
+            ),
         }
-        let msg = Odometry {
-            header: Header::new(self.t0_ns + o.t_ns, self.odom_seq, &self.odom_frame),
-            x: q(o.pose.x, lin),
-            y: q(o.pose.y, lin),
-            theta: smokenav_shared_types::odom::normalize_angle(q(o.pose.theta, ang)),
-            linear: o.linear_mps,
-            angular: o.angular_rps,
-            flags,
-            bumpers: 0,
-            battery_v: 0.0,
-            _reserved: 0,
-        };
-        self.odom_seq += 1;
-        msg
     }
 
-    fn sonar_ring(&mut self, t_ns: u64) -> SonarRing {
-        let mut ring = SonarRing {
-            header: Header::new(self.t0_ns + t_ns, self.sonar_seq, "base_link"),
-            max_range: self.sonar_max_m,
-            ..Default::default()
+    /// One controller cycle at the world's odometry sample: what the base
+    /// reports, through its driver's conversion.
+    fn base_cycle(&mut self, o: &OdometrySample) -> (Option<Odometry>, Option<SonarRing>) {
+        let stamp = self.t0_ns + o.t_ns;
+        let (odom, ring) = match &mut self.base {
+            Base::Scout {
+                drive,
+                sonar_m,
+                odom_frame,
+                sonar_min_m,
+                sonar_max_m,
+                first,
+            } => {
+                let wheels = WheelSpeeds {
+                    left: o.left_mps,
+                    right: o.right_mps,
+                };
+                let mut sonar_in = [0u8; 16];
+                for (b, m) in sonar_in.iter_mut().zip(sonar_m.iter()) {
+                    *b = sonar_byte(*m);
+                }
+                let reply = StateReply {
+                    sonar_in,
+                    x: m_to_tenth_inches(o.pose.x),
+                    y: m_to_tenth_inches(o.pose.y),
+                    heading: rad_to_heading(o.pose.theta),
+                    velocity: drive.vm_args(wheels),
+                    motor: MotorStatus::new(
+                        wheels.left != 0.0,
+                        wheels.right != 0.0,
+                        Battery::High,
+                        false,
+                        false,
+                        false,
+                    ),
+                    cpu_voltage_raw: voltage_raw(SCOUT_CPU_V, CPU_VOLTAGE_RANGE),
+                    motor_voltage_raw: voltage_raw(SCOUT_MOTOR_V, MOTOR_VOLTAGE_RANGE),
+                    ..Default::default()
+                };
+                let si = drive.state_si(&reply);
+                let reset = std::mem::take(first);
+                let odom = smokenav_scout_driver::core::odometry(
+                    &si,
+                    Header::new(stamp, self.odom_seq, odom_frame),
+                    reset,
+                );
+                let ring = smokenav_scout_driver::core::sonar_ring(
+                    &si,
+                    Header::new(stamp, self.sonar_seq, SONAR_FRAME),
+                    *sonar_min_m,
+                    *sonar_max_m,
+                );
+                (Some(odom), Some(ring))
+            }
+            Base::Pioneer {
+                robot,
+                odometry,
+                sonar,
+                odom_frame,
+                ..
+            } => {
+                robot.set_pose(pioneer_pose(&o.pose));
+                let sip = robot.sip();
+                let est = odometry.update(&sip);
+                let odom =
+                    messages::odometry(&est, &sip, stamp, self.odom_seq, odom_frame, est.baseline);
+                let mut ring = None;
+                sonar.add(sip.sonars.as_slice(), stamp, &mut |mut r: SonarRing| {
+                    r.header = Header::new(r.header.stamp_ns, 0, SONAR_FRAME);
+                    ring = Some(r);
+                });
+                if let Some(r) = &mut ring {
+                    r.header.seq = self.sonar_seq;
+                }
+                (Some(odom), ring)
+            }
         };
-        self.sonar_seq += 1;
-        for &index in &self.sonar_indices {
-            let ping = self.latest.get(usize::from(index)).copied().flatten();
-            let reading = match (self.platform, ping) {
-                (_, None) => SonarReading::new(index, self.sonar_max_m, SonarStatus::Saturated),
-                (Platform::Scout, Some(p)) => {
-                    let byte = if p.saturated {
-                        SONAR_NO_ECHO
-                    } else {
-                        sonar_byte(p.range_m)
-                    };
-                    if byte == SONAR_NO_ECHO {
-                        SonarReading::new(index, self.sonar_max_m, SonarStatus::Saturated)
-                    } else {
-                        let m = (f64::from(byte) * METRES_PER_INCH) as f32;
-                        classify(index, m, self.sonar_min_m, self.sonar_max_m)
-                    }
-                }
-                (Platform::Pioneer, Some(p)) => {
-                    let mm = (p.range_m * 1000.0).round();
-                    if p.saturated || mm >= f64::from(self.sonar_max_m) * 1000.0 {
-                        SonarReading::new(index, self.sonar_max_m, SonarStatus::Saturated)
-                    } else if mm <= 0.0 {
-                        SonarReading::new(index, 0.0, SonarStatus::Invalid)
-                    } else {
-                        SonarReading::new(index, (mm / 1000.0) as f32, SonarStatus::Valid)
-                    }
-                }
-            };
-            ring.push(reading);
-        }
-        ring
+        self.odom_seq += u64::from(odom.is_some());
+        self.sonar_seq += u64::from(ring.is_some());
+        (odom, ring)
     }
 
     fn smoke(&mut self, s: &SmokeSample) -> Option<SmokeReading> {
@@ -300,20 +355,10 @@ impl DirectDrivers {
     }
 }
 
-/// The Scout driver's rule: below the Polaroid's minimum a byte is invalid, at the cap saturated.
-fn classify(index: u8, m: f32, min: f32, max: f32) -> SonarReading {
-    if m >= max {
-        SonarReading::new(index, max, SonarStatus::Saturated)
-    } else if m < min {
-        SonarReading::new(index, m, SonarStatus::Invalid)
-    } else {
-        SonarReading::new(index, m, SonarStatus::Valid)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use smokenav_shared_types::SonarStatus;
     use smokenav_sim_world::{Scenario, World};
     use std::time::Duration;
 
@@ -366,7 +411,7 @@ mod tests {
         // Scout ranges are whole inches.
         let last = rings.last().unwrap();
         for r in last.readings().iter().filter_map(|r| r.valid_range()) {
-            let inches = f64::from(r) / METRES_PER_INCH;
+            let inches = f64::from(r) / 0.0254;
             assert!((inches - inches.round()).abs() < 1e-3, "{r}");
         }
     }

@@ -186,15 +186,7 @@ mod tests {
     use smokenav_sim_world::laser::URG_STEPS;
 
     fn urg() -> Geometry {
-        Geometry {
-            dmin_mm: 20,
-            dmax_mm: 5600,
-            ares: 1024,
-            amin: 44,
-            amax: 725,
-            afrt: 384,
-            scan_rpm: 600,
-        }
+        Geometry::URG_04LX
     }
 
     fn frame(t_ms: u64, mm: u16) -> LaserFrame {
