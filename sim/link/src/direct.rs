@@ -100,7 +100,7 @@ enum Base {
         robot: Box<ArcosRobot>,
         max_mm: u16,
         odometry: OdometryIntegrator,
-        sonar: SonarAssembler,
+        sonar: Box<SonarAssembler>,
         odom_frame: String,
     },
 }
@@ -167,7 +167,7 @@ impl DirectDrivers {
                     robot: Box::new(robot),
                     max_mm,
                     odometry: OdometryIntegrator::new(params),
-                    sonar: SonarAssembler::new(geometry, params.range_conv),
+                    sonar: Box::new(SonarAssembler::new(geometry, params.range_conv)),
                     odom_frame: profile.base.odom_frame.clone(),
                 }
             }
