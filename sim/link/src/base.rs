@@ -4,7 +4,7 @@
 //! happens; and read back: the velocity the driver commands.
 
 use smokenav_pioneer_emulator as pioneer;
-use smokenav_platform_config::{Platform, RobotConfig, WheelOrder as CfgWheelOrder};
+use smokenav_platform_config::{Platform, RobotConfig};
 use smokenav_scout_codec::units::SONAR_MAX_RANGE_M;
 use smokenav_scout_emulator as scout;
 use smokenav_shared_types::Clock;
@@ -69,11 +69,7 @@ pub fn pioneer_sonar_mm(range_m: f64, saturated: bool, max_mm: u16) -> u16 {
 /// The Scout's drive (track, `vm` argument order) from its profile.
 pub fn scout_drive(profile: &RobotConfig) -> Result<scout::DiffDrive, BaseError> {
     let opts = profile.base.scout.as_ref().ok_or(BaseError::ScoutOptions)?;
-    let order = match opts.wheel_order {
-        CfgWheelOrder::RightLeft => scout::WheelOrder::RightLeft,
-        CfgWheelOrder::LeftRight => scout::WheelOrder::LeftRight,
-    };
-    Ok(scout::DiffDrive::new(opts.track_m, order))
+    Ok(scout::DiffDrive::new(opts.track_m, opts.wheel_order))
 }
 
 /// A ping as the range the Scout emulator is fed, m (NaN: no echo).

@@ -1,11 +1,11 @@
 //! The MQ303A alcohol sensor that seed 000 uses as a smoke (glycol vapour)
 //! detector, read through an ADC.
 //!
-//! The sensor itself is the smoke emulator's pure model
-//! (`smokenav_smoke_emulator::model::Mq303a`: datasheet power law, the
+//! The sensor itself is the smoke codec's pure model
+//! (`smokenav_smoke_codec::mq303a::Mq303a`: datasheet power law, the
 //! paper's divider whose output falls as concentration rises, fast rise and
-//! slow recovery, cold-heater warm-up), so the simulator and the emulator
-//! cannot disagree about it. This module adds what the world knows: the
+//! slow recovery, cold-heater warm-up), which the board emulator runs too,
+//! so the simulator and the emulator cannot disagree about it. This module adds what the world knows: the
 //! concentration at the robot, converted from the smoke field's g/m³ to the
 //! model's alcohol-equivalent ppm, and the ADC conversion with noise.
 //!
@@ -16,7 +16,7 @@
 //! fail to penetrate fog).
 
 use crate::rng::Rng;
-use smokenav_smoke_emulator::model::{Mq303a, SensorParams};
+use smokenav_smoke_codec::mq303a::{Mq303a, SensorParams};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mq303aParams {

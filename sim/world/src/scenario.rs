@@ -49,7 +49,7 @@ use crate::smoke::{Pulse, SmokeParams, SmokeSource};
 use crate::sonar::SonarParams;
 use serde::Deserialize;
 use smokenav_platform_config::{Platform, RobotConfig};
-use smokenav_smoke_emulator::model::SensorParams;
+use smokenav_smoke_codec::mq303a::SensorParams;
 use std::path::{Path, PathBuf};
 
 /// Scenarios shipped with the simulator: (name, text).

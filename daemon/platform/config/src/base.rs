@@ -104,14 +104,8 @@ fn pioneer_default_refresh() -> f64 {
     0.5
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum WheelOrder {
-    /// `vm(right, left, 0)`: Nomadic's own `scout_vm` macro.
-    RightLeft,
-    /// `vm(left, right, 0)`: CARMEN's scout_lib.
-    LeftRight,
-}
+/// Argument order of the Scout's `vm` command (the codec's own type).
+pub use smokenav_scout_codec::WheelOrder;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

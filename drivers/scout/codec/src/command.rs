@@ -1,66 +1,10 @@
 //! Requests from the host to the robot.
 
 use crate::PacketType;
+use crate::error::DecodeError;
 use crate::frame::{EncodeError, Frame, encode_frame};
 use crate::int::{decode_sm16, encode_sm16};
-use crate::reply::DecodeError;
-
-/// Number of sonars `conf_sn` can order.
-pub const ORDER_SLOTS: usize = 16;
-/// Ends the firing order list; as the first entry it disables all sonars.
-pub const ORDER_END: u8 = 255;
-
-/// A `conf_sn` firing order as sent: up to 16 sonar indices, then 255s.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SonarOrder([u8; ORDER_SLOTS]);
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum SonarOrderError {
-    #[error("a firing order has at most 16 entries, got {0}")]
-    TooLong(usize),
-    #[error("sonar index {0} is not 0–15")]
-    BadIndex(u8),
-}
-
-impl SonarOrder {
-    /// Every sonar disabled (`order[0] = 255`).
-    pub const DISABLED: SonarOrder = SonarOrder([ORDER_END; ORDER_SLOTS]);
-
-    /// An order firing `indices` in turn.
-    pub fn from_indices(indices: &[u8]) -> Result<Self, SonarOrderError> {
-        if indices.len() > ORDER_SLOTS {
-            return Err(SonarOrderError::TooLong(indices.len()));
-        }
-        let mut raw = [ORDER_END; ORDER_SLOTS];
-        for (slot, &i) in raw.iter_mut().zip(indices) {
-            if i as usize >= crate::SONARS {
-                return Err(SonarOrderError::BadIndex(i));
-            }
-            *slot = i;
-        }
-        Ok(Self(raw))
-    }
-
-    /// The order as on the wire; entries after the first 255 are ignored.
-    /// Fails on an index above 15 before the terminator.
-    pub fn from_raw(raw: [u8; ORDER_SLOTS]) -> Result<Self, SonarOrderError> {
-        for &i in raw.iter().take_while(|&&i| i != ORDER_END) {
-            if i as usize >= crate::SONARS {
-                return Err(SonarOrderError::BadIndex(i));
-            }
-        }
-        Ok(Self(raw))
-    }
-
-    pub fn raw(&self) -> [u8; ORDER_SLOTS] {
-        self.0
-    }
-
-    /// The sonar indices fired, in order.
-    pub fn indices(&self) -> impl Iterator<Item = u8> + '_ {
-        self.0.iter().copied().take_while(|&i| i != ORDER_END)
-    }
-}
+use crate::sonar::{ORDER_SLOTS, SonarOrder};
 
 /// The commands a Scout driver needs (and the emulator understands).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -195,6 +139,7 @@ impl Command {
 mod tests {
     use super::*;
     use crate::frame::{Direction, parse_frame};
+    use crate::sonar::SonarOrderError;
 
     fn bytes(cmd: Command) -> Vec<u8> {
         let mut out = [0u8; 32];
@@ -211,7 +156,7 @@ mod tests {
 
     #[test]
     fn notes_vectors_encode_byte_for_byte() {
-        // The vectors table of shared/reference/scout/NOTES.md.
+        // The vectors worked out from Ndirect.c for each command.
         assert_eq!(
             bytes(Command::GetState),
             [0x01, 0x02, 0x00, 0x07, 0x0A, 0x5C]

@@ -1,27 +1,31 @@
 //! Pure codec for the Nomadic direct serial protocol of the Nomad Scout (bytes in, typed values out, no I/O).
 //!
-//! Facts come from Nomadic's host library `Ndirect.c` (v2.6.13) as summarised in
-//! `shared/reference/scout/NOTES.md`:
+//! Facts come from Nomadic's host library `Ndirect.c` (v2.6.13):
 //! - [`frame`]: `01 | len_lo len_hi | type | data | chk | 5C` framing and an
 //!   incremental [`Splitter`] that resynchronises after garbage;
 //! - [`int`]: sign-magnitude 16-bit integers;
 //! - [`Command`]: the requests a Scout driver sends (gs, vm, st, conf_sn,
 //!   conf_tm, dp, da, zr, lp) and their decoding (for the emulator);
 //! - [`Reply`] / [`StateReply`]: NAK and the Scout's fixed-mask state packet;
+//! - [`SonarOrder`]: the `conf_sn` firing order; [`DecodeError`]: what did not decode;
 //! - [`units`]: conversions to SI and differential-drive kinematics.
 
 pub mod command;
+pub mod error;
 pub mod frame;
 pub mod int;
 pub mod reply;
+pub mod sonar;
 pub mod units;
 
-pub use command::{Command, SonarOrder, SonarOrderError};
+pub use command::Command;
+pub use error::DecodeError;
 pub use frame::{
     Direction, EncodeError, Frame, FrameError, MAX_FRAME, Splitter, SplitterStats, encode_frame,
     parse_frame,
 };
-pub use reply::{Battery, DecodeError, MotorStatus, Reply, SONARS, StateReply};
+pub use reply::{Battery, MotorStatus, Reply, SONARS, StateReply};
+pub use sonar::{SonarOrder, SonarOrderError};
 pub use units::{DiffDrive, SonarRange, StateSi, WheelOrder, WheelSpeeds};
 
 /// `len` of a Scout state reply: type + 42 data bytes + checksum.

@@ -1,7 +1,7 @@
 //! Replies from the robot: the Scout's state packet and NAK.
 
 use crate::PacketType;
-use crate::command::SonarOrderError;
+use crate::error::DecodeError;
 use crate::frame::{EncodeError, Frame, encode_frame};
 use crate::int::{decode_sm16, encode_sm16};
 
@@ -9,24 +9,6 @@ use crate::int::{decode_sm16, encode_sm16};
 pub const SONARS: usize = 16;
 /// Data bytes of a Scout state reply (after the type byte).
 pub const STATE_DATA_LEN: usize = 42;
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum DecodeError {
-    #[error("packet type {0} is not a Nomadic packet type")]
-    UnknownType(u8),
-    #[error("packet type {ptype} should carry {expected} data bytes, got {got}")]
-    WrongLength {
-        ptype: u8,
-        expected: usize,
-        got: usize,
-    },
-    #[error("command type {0} is not one this codec handles")]
-    UnsupportedCommand(u8),
-    #[error("reply type {0} is not a state packet or NAK")]
-    UnsupportedReply(u8),
-    #[error("bad conf_sn order: {0}")]
-    SonarOrder(SonarOrderError),
-}
 
 /// Battery level from motor-status bits 2–3.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -101,9 +101,16 @@ pub fn voltage_raw(v: f64, range: f64) -> u8 {
 /// `vm(left, right, 0)`. One setting covers both directions, as Nomadic's
 /// own headers are consistent with each other.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "kebab-case")
+)]
 pub enum WheelOrder {
+    /// `vm(right, left, 0)`: Nomadic's own `scout_vm` macro.
     #[default]
     RightLeft,
+    /// `vm(left, right, 0)`: CARMEN's scout_lib.
     LeftRight,
 }
 

@@ -8,9 +8,9 @@
 use anyhow::Context;
 use clap::Parser;
 use smokenav_platform_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
-use smokenav_platform_config::{RobotConfig, WheelOrder as ConfigWheelOrder};
+use smokenav_platform_config::RobotConfig;
 use smokenav_platform_runtime::{CommonArgs, Process};
-use smokenav_scout_codec::{DiffDrive, SonarOrder, WheelOrder};
+use smokenav_scout_codec::{DiffDrive, SonarOrder};
 use smokenav_scout_driver::link::reply_timeout;
 use smokenav_scout_driver::{CoreConfig, Link, LinkError, LinkStats, PortSpec, ScoutCore};
 use smokenav_shared_types::clock::monotonic_now_ns;
@@ -46,12 +46,8 @@ fn core_config(cfg: &RobotConfig) -> anyhow::Result<CoreConfig> {
         .scout
         .as_ref()
         .context("the profile has no [base.scout] table")?;
-    let order = match scout.wheel_order {
-        ConfigWheelOrder::RightLeft => WheelOrder::RightLeft,
-        ConfigWheelOrder::LeftRight => WheelOrder::LeftRight,
-    };
     Ok(CoreConfig {
-        drive: DiffDrive::new(scout.track_m, order),
+        drive: DiffDrive::new(scout.track_m, scout.wheel_order),
         cmd_timeout_ns: (cfg.base.cmd_timeout_s * 1e9) as u64,
         max_linear_mps: cfg.base.max_linear_mps,
         max_angular_rps: cfg.base.max_angular_dps.to_radians(),

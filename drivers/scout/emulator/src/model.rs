@@ -3,8 +3,8 @@
 //! Pure and lazy: time is passed in (ns of whatever clock the caller uses)
 //! and the model catches up on every call, so nothing needs a periodic tick.
 
-use smokenav_scout_codec::command::SonarOrder;
 use smokenav_scout_codec::reply::SONARS;
+use smokenav_scout_codec::sonar::SonarOrder;
 use smokenav_scout_codec::units::{
     self, CPU_VOLTAGE_RANGE, MOTOR_VOLTAGE_RANGE, SONAR_NO_ECHO, m_to_tenth_inches, rad_to_heading,
     voltage_raw, wrap_angle,

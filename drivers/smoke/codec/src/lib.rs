@@ -16,12 +16,15 @@
 //! * [`signal`]: low-pass filter, clean-air baseline, smoke level on the
 //!   paper's millivolt scale, [`trend`] with hysteresis, heater warm-up and
 //!   disconnected / saturated / stale detection, all driven by stamps;
-//! * [`decimate`]: thinning a fast board to the publishing rate.
+//! * [`decimate`]: thinning a fast board to the publishing rate;
+//! * [`mq303a`]: the sensor's own physical model (concentration in, output
+//!   voltage out), shared by the simulated world and the board emulator.
 
 pub mod adc;
 pub mod decimate;
 pub mod iio;
 pub mod line;
+pub mod mq303a;
 pub mod show;
 pub mod signal;
 pub mod splitter;
