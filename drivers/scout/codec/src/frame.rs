@@ -204,6 +204,18 @@ impl SplitterStats {
     }
 }
 
+/// Totals over several splitters (a driver opens a fresh one per link).
+impl std::ops::AddAssign for SplitterStats {
+    fn add_assign(&mut self, o: SplitterStats) {
+        self.frames += o.frames;
+        self.garbage_bytes += o.garbage_bytes;
+        self.checksum_errors += o.checksum_errors;
+        self.end_errors += o.end_errors;
+        self.length_errors += o.length_errors;
+        self.unknown_types += o.unknown_types;
+    }
+}
+
 const CAPACITY: usize = 2 * MAX_FRAME;
 
 /// Incremental packet splitter with a fixed buffer. Feed it bytes as they

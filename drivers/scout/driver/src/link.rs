@@ -74,6 +74,18 @@ pub struct LinkStats {
     pub dropped_bytes: u64,
 }
 
+impl std::ops::AddAssign for LinkStats {
+    fn add_assign(&mut self, o: LinkStats) {
+        self.requests += o.requests;
+        self.replies += o.replies;
+        self.timeouts += o.timeouts;
+        self.naks += o.naks;
+        self.stale_replies += o.stale_replies;
+        self.bad_replies += o.bad_replies;
+        self.dropped_bytes += o.dropped_bytes;
+    }
+}
+
 /// An open link plus the bytes-to-replies machinery.
 pub struct Link {
     port: Port,
