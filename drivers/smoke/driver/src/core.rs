@@ -5,6 +5,7 @@
 use crate::link::LinkEvent;
 use crate::settings::{FRAME_ID, Settings};
 use smokenav_platform_config::AdcBackend;
+use smokenav_platform_runtime::HealthReporter;
 use smokenav_shared_types::{Header, HealthState, SmokeReading, SmokeSensorState, SmokeTrend};
 use smokenav_smoke_codec::{RateDecimator, Reading, SensorState, SmokeProcessor, Trend};
 
@@ -178,6 +179,31 @@ impl DriverCore {
             self.processor.disconnect(now_ns)
         };
         Some(self.emit(r))
+    }
+
+    /// Shows the signal chain in health at `now_ns`: its state, counters and
+    /// the latest reading (the link's own counters are the link's report).
+    pub fn report(&self, h: &mut HealthReporter, now_ns: u64) {
+        let c = self.counters;
+        h.set_state(self.health_state(now_ns));
+        h.set_metric("parse_errors", c.parse_errors as f64);
+        h.set_metric("checksum_errors", c.checksum_errors as f64);
+        h.set_metric("overlong_lines", c.overlong_lines as f64);
+        h.set_metric("out_of_range", c.out_of_range as f64);
+        h.set_metric("samples", c.samples as f64);
+        h.set_metric(
+            "baseline_known",
+            f64::from(u8::from(self.baseline_mv().is_some())),
+        );
+        h.set_metric("baseline_mv", self.baseline_mv().unwrap_or(0.0));
+        h.set_metric("warmup_left_s", self.warmup_left_s(now_ns));
+        if let Some(r) = self.last_reading() {
+            let msg = to_message(r);
+            h.set_metric("sensor_state", f64::from(msg.state));
+            h.set_metric("trend", f64::from(msg.trend));
+            h.set_metric("level", r.level);
+            h.set_metric("raw_mv", r.raw_mv);
+        }
     }
 
     /// The process's health from the sensor's and the link's state.

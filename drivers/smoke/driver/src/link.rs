@@ -3,6 +3,7 @@
 //! busy loop), and appends what happened to a reusable event list.
 
 use crate::settings::Settings;
+use smokenav_platform_runtime::{Reconnect, ReconnectPolicy};
 use smokenav_shared_types::Clock;
 use smokenav_smoke_codec::iio::{
     IioCalibration, SHARED_OFFSET_ATTR, SHARED_SCALE_ATTR, offset_attr, parse_offset, parse_raw,
@@ -16,8 +17,16 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-/// How long to wait before reopening a device that failed to open.
+/// How long to wait before reopening a device that failed to open (it
+/// doubles to [`REOPEN_MAX`] while the device stays away).
 pub const REOPEN_PERIOD: Duration = Duration::from_millis(250);
+pub const REOPEN_MAX: Duration = Duration::from_secs(1);
+
+/// The smoke driver's reconnect policy: without its sensor it is in error at once
+/// (fusion would fuse without knowing the smoke).
+pub fn reconnect_policy() -> ReconnectPolicy {
+    ReconnectPolicy::new(REOPEN_PERIOD, REOPEN_MAX).with_error_after(Duration::ZERO)
+}
 
 /// Input that did not decode.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -109,6 +118,14 @@ impl Link {
         }
     }
 
+    /// The device's link: up or down, opens, failures, losses.
+    pub fn reconnect(&self) -> &Reconnect {
+        match self {
+            Link::Serial(l) => &l.reconnect,
+            Link::Iio(l) => &l.reconnect,
+        }
+    }
+
     pub fn describe(&self) -> String {
         match self {
             Link::Serial(l) => format!("serial {} at {} baud", l.path, l.baud),
@@ -124,7 +141,7 @@ pub struct SerialLink {
     adc: AdcScale,
     port: Option<serialport::TTYPort>,
     decoder: SerialDecoder,
-    retry_at: Option<Instant>,
+    reconnect: Reconnect,
     failing: bool,
     buf: [u8; 512],
 }
@@ -137,7 +154,7 @@ impl SerialLink {
             adc: s.adc,
             port: None,
             decoder: SerialDecoder::new(s.channel, s.checksum),
-            retry_at: None,
+            reconnect: Reconnect::new(reconnect_policy(), 0),
             failing: false,
             buf: [0; 512],
         }
@@ -157,13 +174,15 @@ impl SerialLink {
                 self.decoder.reset();
                 self.port = Some(port);
                 self.failing = false;
+                self.reconnect.opened(clock.now_ns());
                 out.push(LinkEvent::Connected {
                     stamp_ns: clock.now_ns(),
                     device: self.path.clone(),
                 });
             }
             Err(e) => {
-                self.retry_at = Some(Instant::now() + REOPEN_PERIOD);
+                self.reconnect
+                    .open_failed(clock.now_ns(), format!("cannot open {}: {e}", self.path));
                 if !self.failing {
                     self.failing = true;
                     out.push(LinkEvent::OpenFailed {
@@ -177,14 +196,12 @@ impl SerialLink {
 
     pub fn step(&mut self, max_wait: Duration, clock: &dyn Clock, out: &mut Vec<LinkEvent>) {
         if self.port.is_none() {
-            let now = Instant::now();
-            match self.retry_at {
-                Some(at) if at > now => {
-                    std::thread::sleep((at - now).min(max_wait));
-                    return;
-                }
-                _ => self.open(clock, out),
+            let wait = self.reconnect.wait(clock.now_ns());
+            if !wait.is_zero() {
+                std::thread::sleep(wait.min(max_wait));
+                return;
             }
+            self.open(clock, out);
         }
         let Some(port) = self.port.as_mut() else {
             return;
@@ -225,7 +242,8 @@ impl SerialLink {
         };
         if let Some(reason) = lost {
             self.port = None;
-            self.retry_at = Some(Instant::now() + REOPEN_PERIOD);
+            self.reconnect
+                .lost(clock.now_ns(), format!("{} lost: {reason}", self.path));
             out.push(LinkEvent::Lost {
                 stamp_ns: clock.now_ns(),
                 reason: format!("{} lost: {reason}", self.path),
@@ -243,6 +261,7 @@ pub struct IioLink {
     next_read: Option<Instant>,
     calibration: Option<IioCalibration>,
     raw_path: PathBuf,
+    reconnect: Reconnect,
     failing: bool,
 }
 
@@ -283,6 +302,7 @@ impl IioLink {
             period: Duration::from_secs_f64(1.0 / s.rate_hz),
             next_read: None,
             calibration: None,
+            reconnect: Reconnect::new(reconnect_policy(), 0),
             failing: false,
         }
     }
@@ -338,6 +358,7 @@ impl IioLink {
                 Ok(c) => {
                     self.calibration = Some(c);
                     self.failing = false;
+                    self.reconnect.opened(clock.now_ns());
                     tracing::info!(scale_mv = c.scale_mv, offset = c.offset, "IIO calibration");
                     out.push(LinkEvent::Connected {
                         stamp_ns: clock.now_ns(),
@@ -346,6 +367,7 @@ impl IioLink {
                     c
                 }
                 Err(reason) => {
+                    self.reconnect.open_failed(clock.now_ns(), &reason);
                     if !self.failing {
                         self.failing = true;
                         out.push(LinkEvent::OpenFailed {
@@ -365,10 +387,9 @@ impl IioLink {
         match read {
             Err(e) => {
                 self.calibration = None;
-                out.push(LinkEvent::Lost {
-                    stamp_ns,
-                    reason: format!("{} vanished: {e}", self.raw_path.display()),
-                });
+                let reason = format!("{} vanished: {e}", self.raw_path.display());
+                self.reconnect.lost(stamp_ns, &reason);
+                out.push(LinkEvent::Lost { stamp_ns, reason });
             }
             Ok(text) => out.push(match parse_raw(text) {
                 Err(e) => LinkEvent::Malformed {
@@ -392,5 +413,32 @@ pub fn policy_name(p: ChecksumPolicy) -> &'static str {
     match p {
         ChecksumPolicy::Optional => "optional",
         ChecksumPolicy::Required => "required",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use smokenav_shared_types::MonotonicClock;
+
+    #[test]
+    fn a_board_that_is_not_there_is_retried_with_a_growing_back_off() {
+        let dir = tempfile::tempdir().unwrap();
+        let port = dir.path().join("smoke-adc").to_string_lossy().into_owned();
+        let section = crate::settings::test_section(&port);
+        let settings = Settings::new(&section, None, Some(0.0)).unwrap();
+        let mut link = Link::new(&settings);
+        let clock = MonotonicClock;
+        let start = Instant::now();
+        let mut events = Vec::new();
+        while start.elapsed() < Duration::from_millis(2000) {
+            link.step(Duration::from_millis(50), &clock, &mut events);
+        }
+        // Attempts at 0, 0.25, 0.75 and 1.75 s (waits 250, 500, 1000 ms);
+        // a fixed 250 ms retry would have made 8. One event per outage.
+        assert_eq!(link.reconnect().counters().failures, 4);
+        assert_eq!(events.len(), 1, "{events:?}");
+        assert!(matches!(events[0], LinkEvent::OpenFailed { .. }));
+        assert!(!link.is_open());
     }
 }
