@@ -89,9 +89,9 @@ pub enum LinkEvent {
 
 /// Either back-end.
 pub enum Link {
-    /// Boxed: it carries its read buffer and line decoder inline.
+    /// Boxed: each carries its buffers and reconnect state inline.
     Serial(Box<SerialLink>),
-    Iio(IioLink),
+    Iio(Box<IioLink>),
 }
 
 impl Link {
@@ -100,7 +100,9 @@ impl Link {
             smokenav_platform_config::AdcBackend::Serial => {
                 Link::Serial(Box::new(SerialLink::new(settings)))
             }
-            smokenav_platform_config::AdcBackend::Iio => Link::Iio(IioLink::new(settings)),
+            smokenav_platform_config::AdcBackend::Iio => {
+                Link::Iio(Box::new(IioLink::new(settings)))
+            }
         }
     }
 
