@@ -5,12 +5,13 @@ use crate::geometry::{GeometryError, ScanShape, Section, Sections, SonarEcho, So
 use crate::v1::{self, LaserSectionStats, SmokeClassifier, SmokeState};
 use crate::v2::{FuzzyModel, LaserTrust};
 use smokenav_platform_config::fusion::{V1Params, V2Params};
-use smokenav_platform_config::{Method, RobotConfig};
+use smokenav_platform_config::{Method, RobotConfig, ScanLayout};
 use smokenav_shared_types::laser::{BEAM_BEYOND_MAX, BEAM_NO_RETURN};
 use smokenav_shared_types::{
     BeamReading, FixedStr, FusedScan, FusionMethod, Header, LaserScan, MAX_BEAMS, MAX_SONARS,
     SectionDecision, SectionSource, SmokeReading, SonarReading, SonarRing, SyncState,
 };
+use std::f64::consts::TAU;
 
 /// Why a cycle produced nothing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -19,6 +20,8 @@ pub enum StepError {
     NoInput,
     #[error("method laser-only needs a laser scan; only sonar arrived")]
     LaserRequired,
+    #[error("sonar only, and no scan layout yet: neither `[laser] scan` nor a laser scan gave one")]
+    NoLayout,
 }
 
 /// What one cycle decided, for health reporting.
@@ -47,15 +50,25 @@ struct Template {
 }
 
 impl Template {
-    fn urg_04lx() -> Self {
-        Self {
-            shape: ScanShape::urg_04lx(),
-            range_min: 0.02,
-            range_max: 5.6,
-            time_increment: 0.1 / 1024.0,
-            scan_time: 0.1,
-            frame_id: FixedStr::from_str_truncate("laser"),
-        }
+    /// The layout the laser's configuration states (the robot profile's
+    /// `[laser] scan`), computed as a driver computes it from the sensor's
+    /// own parameters; `None` if it gives no usable layout.
+    fn from_layout(l: &ScanLayout, frame_id: &str) -> Option<Self> {
+        let inc = TAU / f64::from(l.steps_per_turn.max(1));
+        let shape = ScanShape::new(
+            (f64::from(l.first_step) - f64::from(l.front_step)) * inc,
+            inc,
+            l.last_step.checked_sub(l.first_step)? as usize + 1,
+        )?;
+        let scan_time = 60.0 / f64::from(l.rpm.max(1));
+        Some(Self {
+            shape,
+            range_min: l.range_min_mm as f32 / 1000.0,
+            range_max: l.range_max_mm as f32 / 1000.0,
+            time_increment: (scan_time / f64::from(l.steps_per_turn.max(1))) as f32,
+            scan_time: scan_time as f32,
+            frame_id: FixedStr::from_str_truncate(frame_id),
+        })
     }
 }
 
@@ -68,7 +81,8 @@ pub struct FusionEngine {
     v1: V1Params,
     fuzzy: FuzzyModel,
     classifier: SmokeClassifier,
-    template: Template,
+    /// The layout sonar-only output takes: the last laser scan's, else the configured one.
+    template: Option<Template>,
     by_index: [Option<SonarReading>; MAX_SONARS],
     ring_max_range: f32,
     paint: Box<[f32; MAX_BEAMS]>,
@@ -89,7 +103,7 @@ impl FusionEngine {
             v1,
             fuzzy: FuzzyModel::new(v2),
             classifier: SmokeClassifier::default(),
-            template: Template::urg_04lx(),
+            template: None,
             by_index: [None; MAX_SONARS],
             ring_max_range: 0.0,
             paint: Box::new([f32::INFINITY; MAX_BEAMS]),
@@ -116,7 +130,11 @@ impl FusionEngine {
             cfg.fusion.v1.clone(),
             cfg.fusion.v2.clone(),
         );
-        e.template.frame_id = FixedStr::from_str_truncate(&cfg.laser.frame_id);
+        e.template = cfg
+            .laser
+            .scan
+            .as_ref()
+            .and_then(|l| Template::from_layout(l, &cfg.laser.frame_id));
         Ok(e)
     }
 
@@ -178,7 +196,8 @@ impl FusionEngine {
                 out,
             )),
             (None, Some(s)) if self.method != FusionMethod::LaserOnly => {
-                Ok(self.sonar_only(s, smoke_state, out))
+                let t = self.template.ok_or(StepError::NoLayout)?;
+                Ok(self.sonar_only(&t, s, smoke_state, out))
             }
             (None, Some(_)) => Err(StepError::LaserRequired),
             (None, None) => Err(StepError::NoInput),
@@ -237,14 +256,14 @@ impl FusionEngine {
             report.bad_layout = true;
             return report;
         };
-        self.template = Template {
+        self.template = Some(Template {
             shape,
             range_min: l.range_min,
             range_max: l.range_max,
             time_increment: l.time_increment,
             scan_time: l.scan_time,
             frame_id: l.header.frame_id,
-        };
+        });
         self.sections.update(&self.geometry, &shape);
         self.echo_painted = [false; MAX_SONARS];
         let n_sections = self.sections.as_slice().len();
@@ -486,11 +505,11 @@ impl FusionEngine {
     /// Algorithm 1 alone: the laser is silent.
     fn sonar_only(
         &mut self,
+        t: &Template,
         ring: &SonarRing,
         smoke_state: SmokeState,
         out: &mut FusedScan,
     ) -> StepReport {
-        let t = self.template;
         let n = t.shape.count;
         let scan = &mut out.scan;
         scan.header = Header {

@@ -317,16 +317,6 @@ impl ScanShape {
         })
     }
 
-    /// The Hokuyo URG-04LX as the seed paper used it: steps 44–725 of 1024 per turn.
-    pub fn urg_04lx() -> Self {
-        let inc = TAU / 1024.0;
-        Self {
-            angle_min: (44.0 - 384.0) * inc,
-            inc,
-            count: 682,
-        }
-    }
-
     pub fn angle(&self, i: usize) -> f64 {
         self.angle_min + i as f64 * self.inc
     }
@@ -757,7 +747,7 @@ mod tests {
             let shape = if full {
                 ScanShape::new(-PI, TAU / 1024.0, 1024).unwrap()
             } else {
-                ScanShape::urg_04lx()
+                crate::testkit::urg_04lx_shape()
             };
             let pose = g.pose(0).unwrap();
             let mut got = Vec::new();
@@ -776,7 +766,7 @@ mod tests {
         assert!(ScanShape::new(f64::NAN, 0.01, 10).is_none());
         assert!(ScanShape::new(0.0, 0.01, 0).is_none());
         assert!(ScanShape::new(0.0, 0.01, MAX_BEAMS + 1).is_none());
-        let u = ScanShape::urg_04lx();
+        let u = crate::testkit::urg_04lx_shape();
         assert!((u.angle(0) + 2.0862).abs() < 1e-3 && u.count == 682);
     }
 }

@@ -89,9 +89,20 @@ pub fn saturated_ring(geometry: &SonarGeometry, stamp_ns: u64, seq: u64) -> Sona
     ring
 }
 
+/// The layout of the seed paper's Hokuyo URG-04LX (steps 44–725 of 1024 per
+/// turn, step 384 ahead): the test scans' shape.
+pub fn urg_04lx_shape() -> ScanShape {
+    let inc = std::f64::consts::TAU / 1024.0;
+    ScanShape {
+        angle_min: (44.0 - 384.0) * inc,
+        inc,
+        count: 682,
+    }
+}
+
 /// A URG-04LX scan (682 beams, 0.352°) with `range(beam, angle)` per beam.
 pub fn urg_scan(stamp_ns: u64, seq: u64, range: impl Fn(usize, f64) -> f32) -> LaserScan {
-    let shape = ScanShape::urg_04lx();
+    let shape = urg_04lx_shape();
     let mut s = LaserScan {
         header: Header::new(stamp_ns, seq, "laser"),
         angle_min: shape.angle_min as f32,

@@ -27,6 +27,30 @@ pub struct LaserSection {
     /// Seconds without a scan before the driver treats the device as gone and reconnects.
     #[serde(default = "default_stall")]
     pub stall_timeout_s: f64,
+    /// The layout of the scans the laser publishes (its own parameters),
+    /// for consumers that need it before the first scan arrives (fusion's
+    /// sonar-only output). Without it they wait for a scan.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan: Option<ScanLayout>,
+}
+
+/// A rotating scanner's scan layout in its own units, as the sensor states
+/// it (a Hokuyo's PP reply: ARES, AMIN, AMAX, AFRT, DMIN, DMAX, SCAN).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScanLayout {
+    /// Steps in a full turn.
+    pub steps_per_turn: u32,
+    /// First and last step measured (one beam each).
+    pub first_step: u32,
+    pub last_step: u32,
+    /// The step pointing straight ahead (angle 0).
+    pub front_step: u32,
+    /// Shortest and longest range measured, mm.
+    pub range_min_mm: u32,
+    pub range_max_mm: u32,
+    /// Motor speed, revolutions per minute.
+    pub rpm: u32,
 }
 
 fn default_baud() -> u32 {
@@ -59,5 +83,29 @@ impl Validate for LaserSection {
             0.2,
             30.0,
         );
+        if let Some(l) = &self.scan {
+            let k = format!("{key}.scan");
+            if l.steps_per_turn == 0 {
+                v.fail(format!("{k}.steps_per_turn"), "must be at least 1");
+            }
+            if !(l.first_step <= l.last_step && l.last_step < l.steps_per_turn.max(1)) {
+                v.fail(
+                    format!("{k}.last_step"),
+                    format!(
+                        "expected first_step <= last_step < steps_per_turn, got {} .. {} of {}",
+                        l.first_step, l.last_step, l.steps_per_turn
+                    ),
+                );
+            }
+            if l.front_step >= l.steps_per_turn.max(1) {
+                v.fail(format!("{k}.front_step"), "must be below steps_per_turn");
+            }
+            if l.range_min_mm >= l.range_max_mm {
+                v.fail(format!("{k}.range_min_mm"), "must be below range_max_mm");
+            }
+            if l.rpm == 0 {
+                v.fail(format!("{k}.rpm"), "must be at least 1");
+            }
+        }
     }
 }

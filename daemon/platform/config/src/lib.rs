@@ -21,7 +21,7 @@ pub mod validate;
 pub use base::{BaseSection, PioneerOptions, ScoutOptions, WheelOrder};
 pub use common::MountPose;
 pub use fusion::{FusionSection, Method, SyncParams};
-pub use laser::LaserSection;
+pub use laser::{LaserSection, ScanLayout};
 pub use robot::{BusSection, Platform, RobotSection};
 pub use slam::SlamSection;
 pub use smoke::{AdcBackend, SmokeSection};

@@ -671,3 +671,54 @@ mod hostile_input {
         );
     }
 }
+
+#[test]
+fn before_any_scan_sonar_only_takes_the_configured_laser_layout_bit_for_bit() {
+    for name in ["pioneer-3dx.toml", "nomad-scout.toml"] {
+        let cfg = profile(name);
+        let mut e = FusionEngine::from_config(&cfg, Some(FusionMethod::V2)).unwrap();
+        let mut out = fused();
+        e.step(None, Some(&saturated_sonar(&e, 7)), None, &mut out)
+            .unwrap();
+        // `[laser] scan` is the URG-04LX's PP: the same layout its scans carry.
+        let urg = urg_scan(0, 0, |_, _| 1.0);
+        let s = &out.scan;
+        assert_eq!(s.len(), 682, "{name}");
+        assert_eq!(
+            (s.angle_min.to_bits(), s.angle_increment.to_bits()),
+            (urg.angle_min.to_bits(), urg.angle_increment.to_bits())
+        );
+        assert_eq!(
+            (s.range_min, s.range_max, s.scan_time, s.time_increment),
+            (
+                urg.range_min,
+                urg.range_max,
+                urg.scan_time,
+                urg.time_increment
+            )
+        );
+        assert_eq!(s.header.frame_id.as_str(), cfg.laser.frame_id);
+    }
+}
+
+#[test]
+fn without_a_configured_layout_sonar_only_waits_for_the_first_scan() {
+    let mut cfg = profile("pioneer-3dx.toml");
+    cfg.laser.scan = None;
+    let mut e = FusionEngine::from_config(&cfg, Some(FusionMethod::V2)).unwrap();
+    let mut out = fused();
+    let sonar = true_sonar(&e, 5);
+    assert_eq!(
+        e.step(None, Some(&sonar), None, &mut out),
+        Err(StepError::NoLayout)
+    );
+    // A 360-beam laser: its layout, not a URG's, shapes what follows.
+    let mut wide = clean_scan(1);
+    wide.angle_min = -std::f32::consts::PI;
+    wide.angle_increment = std::f32::consts::TAU / 360.0;
+    wide.count = 360;
+    e.step(Some(&wide), Some(&sonar), None, &mut out).unwrap();
+    e.step(None, Some(&sonar), None, &mut out).unwrap();
+    assert_eq!(out.scan.len(), 360);
+    assert_eq!(out.scan.angle_min, -std::f32::consts::PI);
+}
