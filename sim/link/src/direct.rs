@@ -158,6 +158,10 @@ impl DirectDrivers {
                     robot.set_sonar_range(i, max_mm);
                 }
                 let params = *robot.params();
+                // The driver connects before the world runs: its baseline is the idle robot's SIP.
+                robot.set_pose(pioneer_pose(&smokenav_sim_world::Pose2::default()));
+                let mut odometry = OdometryIntegrator::new(params);
+                odometry.update(&robot.sip());
                 let geometry = SonarGeometry {
                     indices: profile.sonar.transducers.iter().map(|t| t.index).collect(),
                     max_range_m: profile.sonar.max_range_m as f32,
@@ -166,7 +170,7 @@ impl DirectDrivers {
                 Base::Pioneer {
                     robot: Box::new(robot),
                     max_mm,
-                    odometry: OdometryIntegrator::new(params),
+                    odometry,
                     sonar: Box::new(SonarAssembler::new(geometry, params.range_conv)),
                     odom_frame: profile.base.odom_frame.clone(),
                 }
