@@ -5,10 +5,9 @@
 use smokenav_hokuyo_emulator::pattern::{check_pattern_scan as check_scan, pattern};
 use smokenav_hokuyo_emulator::{BootState, DeviceConfig, Emulator, EmulatorConfig};
 use smokenav_platform_bus::{Bus, Subscriber, Waiter, topics};
-use smokenav_shared_types::laser::{BeamReading, LaserScan};
+use smokenav_shared_types::laser::LaserScan;
 use smokenav_shared_types::{Health, HealthState};
 use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
-use std::f64::consts::TAU;
 use std::time::{Duration, Instant};
 
 struct Rig {
