@@ -7,11 +7,13 @@
 //! loop in [`crate::driver`] owns those.
 
 use crate::messages::{self, SonarAssembler, SonarCounters, SonarGeometry};
-use crate::motion::{MotionCounters, MotionGuard};
-use crate::session::{Session, SessionCounters, SessionEvent};
+use crate::motion::{MotionCounters, MotionGuard, MotionLimits};
+use crate::session::{Session, SessionConfig, SessionCounters, SessionEvent};
 use smokenav_pioneer_codec::{Command, Framer, FramerStats, OdometryIntegrator, PacketBuf, Sip};
+use smokenav_platform_config::RobotConfig;
 use smokenav_platform_runtime::{HealthReporter, Report};
 use smokenav_shared_types::{Header, Odometry, SonarRing};
+use std::time::Duration;
 
 /// Frame id of the sonar rings (the transducer poses are in the base frame).
 pub const SONAR_FRAME: &str = "base_link";
@@ -104,7 +106,41 @@ pub struct PioneerCore {
     packet: PacketBuf,
 }
 
+fn secs(s: f64) -> Duration {
+    Duration::from_secs_f64(s.max(0.0))
+}
+
 impl PioneerCore {
+    /// The core a robot profile describes: `[base]` (timeouts, limits,
+    /// `[base.pioneer]` options) and the `[sonar]` transducers it lists.
+    pub fn from_profile(cfg: &RobotConfig) -> Self {
+        let opts = cfg.base.pioneer.clone().unwrap_or_default();
+        let session = Session::new(SessionConfig {
+            sync_timeout: secs(opts.sync_timeout_s),
+            close_settle: Duration::from_millis(300),
+            link_timeout: secs(cfg.base.link_timeout_s),
+            refresh: secs(opts.refresh_s),
+            subclass_override: opts.subclass.clone(),
+            enable_motors: opts.enable_motors,
+            sonar: opts.sonar,
+            reset_odometry: opts.reset_odometry,
+            request_config: true,
+        });
+        let guard = MotionGuard::new(
+            secs(cfg.base.cmd_timeout_s),
+            MotionLimits {
+                max_linear_mps: cfg.base.max_linear_mps,
+                max_angular_dps: cfg.base.max_angular_dps,
+            },
+        );
+        let sonar = SonarGeometry {
+            indices: cfg.sonar.transducers.iter().map(|t| t.index).collect(),
+            max_range_m: cfg.sonar.max_range_m as f32,
+            min_range_m: cfg.sonar.min_range_m as f32,
+        };
+        Self::new(session, guard, sonar, &cfg.base.odom_frame)
+    }
+
     pub fn new(
         session: Session,
         guard: MotionGuard,

@@ -7,16 +7,13 @@
 
 use clap::Parser;
 use smokenav_pioneer_driver::link::{PortSpec, parse_port};
-use smokenav_pioneer_driver::messages::SonarGeometry;
-use smokenav_pioneer_driver::motion::{MotionGuard, MotionLimits};
-use smokenav_pioneer_driver::session::{Session, SessionConfig, SessionEvent};
+use smokenav_pioneer_driver::session::SessionEvent;
 use smokenav_pioneer_driver::{CoreCounters, Driver, DriverSink, Output, PioneerCore};
 use smokenav_platform_bus::{Publisher, Subscriber, topics};
 use smokenav_platform_runtime::{CommonArgs, Process, RateId, Reconnect, Report};
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::{HealthState, Odometry, SonarRing, VelocityCommand};
 use std::process::ExitCode;
-use std::time::Duration;
 
 #[derive(Parser)]
 #[command(
@@ -31,10 +28,6 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     smokenav_platform_runtime::main("pioneer", &args.common, run)
-}
-
-fn secs(s: f64) -> Duration {
-    Duration::from_secs_f64(s.max(0.0))
 }
 
 struct BusSink<'a> {
@@ -141,39 +134,15 @@ impl DriverSink for BusSink<'_> {
 }
 
 fn run(p: &mut Process) -> anyhow::Result<()> {
-    let cfg = p.config.clone();
+    let cfg = &p.config;
     let spec = parse_port(p.port(&cfg.base.port), cfg.base.baud)?;
-    let opts = cfg.base.pioneer.clone().unwrap_or_default();
-    let session = Session::new(SessionConfig {
-        sync_timeout: secs(opts.sync_timeout_s),
-        close_settle: Duration::from_millis(300),
-        link_timeout: secs(cfg.base.link_timeout_s),
-        refresh: secs(opts.refresh_s),
-        subclass_override: opts.subclass.clone(),
-        enable_motors: opts.enable_motors,
-        sonar: opts.sonar,
-        reset_odometry: opts.reset_odometry,
-        request_config: true,
-    });
-    let guard = MotionGuard::new(
-        secs(cfg.base.cmd_timeout_s),
-        MotionLimits {
-            max_linear_mps: cfg.base.max_linear_mps,
-            max_angular_dps: cfg.base.max_angular_dps,
-        },
-    );
-    let geometry = SonarGeometry {
-        indices: cfg.sonar.transducers.iter().map(|t| t.index).collect(),
-        max_range_m: cfg.sonar.max_range_m as f32,
-        min_range_m: cfg.sonar.min_range_m as f32,
-    };
-    let core = PioneerCore::new(session, guard, geometry, &cfg.base.odom_frame);
+    let core = PioneerCore::from_profile(cfg);
     p.status(&format!("connecting to {spec}"));
     let mut sink = BusSink {
         odom_pub: p.bus.publisher(topics::BASE_ODOM)?,
         sonar_pub: p.bus.publisher(topics::BASE_SONAR)?,
         cmd_sub: p.bus.subscriber(topics::BASE_CMD_VEL)?,
-        sip_rate: p.health.add_rate("sip_hz", Some(cfg.base.rate_hz)),
+        sip_rate: p.health.add_rate("sip_hz", Some(p.config.base.rate_hz)),
         spec: spec.clone(),
         ever_running: false,
         p,

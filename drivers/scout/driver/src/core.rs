@@ -28,7 +28,35 @@ pub struct CoreConfig {
     pub sonar_max_range_m: f32,
 }
 
+/// The robot profile has no usable `[base.scout]` table.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    #[error("the profile has no [base.scout] table")]
+    NoScoutTable,
+    #[error("base.scout.sonar_order: {0}")]
+    SonarOrder(#[from] smokenav_scout_codec::SonarOrderError),
+}
+
 impl CoreConfig {
+    /// From a robot profile: `[base]`, `[base.scout]` and `[sonar]`.
+    pub fn from_profile(cfg: &smokenav_platform_config::RobotConfig) -> Result<Self, ProfileError> {
+        let scout = cfg.base.scout.as_ref().ok_or(ProfileError::NoScoutTable)?;
+        Ok(CoreConfig {
+            drive: DiffDrive::new(scout.track_m, scout.wheel_order),
+            cmd_timeout_ns: (cfg.base.cmd_timeout_s * 1e9) as u64,
+            max_linear_mps: cfg.base.max_linear_mps,
+            max_angular_rps: cfg.base.max_angular_dps.to_radians(),
+            watchdog_s: scout.watchdog_s,
+            sonar_rate: scout.sonar_rate,
+            sonar_order: SonarOrder::from_indices(&scout.sonar_order)?,
+            zero_on_start: !scout.keep_odometry,
+            odom_frame: cfg.base.odom_frame.clone(),
+            sonar_frame: "base_link".into(),
+            sonar_min_range_m: cfg.sonar.min_range_m as f32,
+            sonar_max_range_m: cfg.sonar.max_range_m as f32,
+        })
+    }
+
     /// Defaults matching `config/nomad-scout.toml`.
     pub fn scout_defaults(drive: DiffDrive) -> Self {
         Self {

@@ -4,12 +4,10 @@
 //! `base/sonar` out, `base/cmd_vel` in) and health around
 //! [`smokenav_scout_driver::Driver`], which owns the port, the cycle and reconnects.
 
-use anyhow::Context;
 use clap::Parser;
 use smokenav_platform_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
-use smokenav_platform_config::RobotConfig;
 use smokenav_platform_runtime::{CommonArgs, Process, RateId, Report};
-use smokenav_scout_codec::{DiffDrive, SonarOrder, StateSi};
+use smokenav_scout_codec::StateSi;
 use smokenav_scout_driver::{
     CoreConfig, Driver, DriverConfig, DriverEvent, DriverSink, DriverStatus, PortSpec, ScoutCore,
 };
@@ -31,29 +29,6 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     smokenav_platform_runtime::main("scout", &args.common, run)
-}
-
-fn core_config(cfg: &RobotConfig) -> anyhow::Result<CoreConfig> {
-    let scout = cfg
-        .base
-        .scout
-        .as_ref()
-        .context("the profile has no [base.scout] table")?;
-    Ok(CoreConfig {
-        drive: DiffDrive::new(scout.track_m, scout.wheel_order),
-        cmd_timeout_ns: (cfg.base.cmd_timeout_s * 1e9) as u64,
-        max_linear_mps: cfg.base.max_linear_mps,
-        max_angular_rps: cfg.base.max_angular_dps.to_radians(),
-        watchdog_s: scout.watchdog_s,
-        sonar_rate: scout.sonar_rate,
-        sonar_order: SonarOrder::from_indices(&scout.sonar_order)
-            .context("base.scout.sonar_order")?,
-        zero_on_start: !scout.keep_odometry,
-        odom_frame: cfg.base.odom_frame.clone(),
-        sonar_frame: "base_link".into(),
-        sonar_min_range_m: cfg.sonar.min_range_m as f32,
-        sonar_max_range_m: cfg.sonar.max_range_m as f32,
-    })
 }
 
 struct BusSink<'a> {
@@ -139,7 +114,7 @@ impl DriverSink for BusSink<'_> {
 }
 
 fn run(p: &mut Process) -> anyhow::Result<()> {
-    let core = ScoutCore::new(core_config(&p.config)?);
+    let core = ScoutCore::new(CoreConfig::from_profile(&p.config)?);
     let base = &p.config.base;
     let rate_hz = base.rate_hz;
     let cfg = DriverConfig {
