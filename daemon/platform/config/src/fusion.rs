@@ -79,22 +79,13 @@
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Method {
-    #[serde(rename = "laser-only")]
-    LaserOnly,
-    #[serde(rename = "v1")]
-    V1,
-    #[serde(rename = "v2")]
-    V2,
-}
+pub use smokenav_shared_types::FusionMethod;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FusionSection {
     #[serde(default = "default_method")]
-    pub method: Method,
+    pub method: FusionMethod,
     /// Sonar readings beyond this are treated as saturated (the paper limited sonar to 2.5 m).
     #[serde(default = "default_cap")]
     pub sonar_cap_m: f64,
@@ -110,8 +101,8 @@ pub struct FusionSection {
     pub v2: V2Params,
 }
 
-fn default_method() -> Method {
-    Method::V2
+fn default_method() -> FusionMethod {
+    FusionMethod::V2
 }
 fn default_cap() -> f64 {
     2.5
@@ -450,7 +441,7 @@ mod tests {
     #[test]
     fn empty_section_has_the_papers_values() {
         let s = parse("").unwrap();
-        assert_eq!(s.method, Method::V2);
+        assert_eq!(s.method, FusionMethod::V2);
         assert_eq!(s.sonar_cap_m, 2.5);
         assert_eq!(s.section_range(), 2.5);
         assert_eq!(

@@ -20,7 +20,7 @@ pub mod validate;
 
 pub use base::{BaseSection, PioneerOptions, ScoutOptions, WheelOrder};
 pub use common::MountPose;
-pub use fusion::{FusionSection, Method, SyncParams};
+pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::LaserSection;
 pub use robot::{BusSection, Platform, RobotSection};
 pub use slam::SlamSection;

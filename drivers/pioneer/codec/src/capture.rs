@@ -19,14 +19,18 @@ use serde::Serialize;
 use serde_json::{Value, json};
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum Direction {
     /// Host to robot: commands.
+    #[cfg_attr(feature = "clap", value(name = "host"))]
     ToRobot,
     /// Robot to host: SYNC replies, SIPs, CONFIG.
+    #[cfg_attr(feature = "clap", value(name = "robot"))]
     FromRobot,
     /// Not marked: guessed per packet from its type and length.
     #[default]
+    #[cfg_attr(feature = "clap", value(name = "guess"))]
     Unknown,
 }
 
@@ -41,6 +45,7 @@ impl Direction {
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum CaptureFormat {
     /// Raw if the input contains `FA FB` as bytes, else hex text.
     #[default]
