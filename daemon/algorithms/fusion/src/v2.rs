@@ -7,8 +7,8 @@
 //!
 //! ## Inputs and membership functions
 //!
-//! Inputs: the section's sonar reading s_R[τ,t], the smoke level a_R[t] and
-//! the standard deviation σ(l_R[t]) of the scan's valid ranges.
+//! Inputs: the section's sonar reading s_R\[τ,t\], the smoke level a_R\[t\] and
+//! the standard deviation σ(l_R\[t\]) of the scan's valid ranges.
 //!
 //! The breakpoints of Fig. 14 are not in the text. The paper's rationale is:
 //! "the LRF readings can only be trusted when alcohol readings are below 20
