@@ -172,7 +172,7 @@ pub struct FusedScan {
     /// Sections in use (`<= MAX_SONARS`).
     pub section_count: u32,
     pub sections: [SectionDecision; MAX_SONARS],
-    /// Smoke level used for the decision (seed scale; see `SmokeReading::level`).
+    /// Smoke level used for the decision (the SmokeNav paper's mV scale; see `SmokeReading::level`).
     pub smoke_level: f32,
     /// Standard deviation of the valid laser ranges of the whole scan, m.
     pub laser_spread: f32,
@@ -221,7 +221,7 @@ impl FusedScan {
     }
 
     /// Share of sections where the sonar was used (alone or superimposed):
-    /// the seed paper's "sonar usage".
+    /// the SmokeNav paper's "sonar usage".
     pub fn sonar_usage(&self) -> f32 {
         let s = self.sections();
         if s.is_empty() {

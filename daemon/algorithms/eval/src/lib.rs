@@ -1,6 +1,7 @@
 //! Accuracy of maps and trajectories against ground truth (the simulator's,
-//! or a surveyed one): the k-nearest-neighbour map error of seed 000 in both
-//! directions, the pixel error of seed 004, and ATE/RPE for trajectories.
+//! or a surveyed one): the k-nearest-neighbour map error of SmokeNav (Santos et
+//! al. 2015) in both directions, the pixel error of SLAMfusion (Fernandes &
+//! Alexandre), and ATE/RPE for trajectories.
 //! Pure functions over loaded data plus loaders whose errors name the file;
 //! `smokenav eval` is the command-line front end.
 

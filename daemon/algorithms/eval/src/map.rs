@@ -1,13 +1,13 @@
 //! Map accuracy against a ground-truth map.
 //!
-//! * k-nearest-neighbour error (seed 000, Sec. 3 and Table 4, after Santos et
+//! * k-nearest-neighbour error (SmokeNav (Santos et al. 2015), Sec. 3 and Table 4, after Santos et
 //!   al. 2013): after a best-fit alignment, for each occupied ground-truth
 //!   cell the distance to the nearest occupied cell of the estimate (walls
 //!   missed or misplaced), and — so phantom walls, e.g. smoke mapped as an
 //!   obstacle, are penalised too — for each occupied estimated cell the
 //!   distance to the nearest occupied ground-truth cell. Reported in metres
-//!   and in cells of the ground truth (the seed's tables are in pixels).
-//! * Pixel error (seed 004): with cells normalised to −1 unknown, 0 free, 1
+//!   and in cells of the ground truth (the paper's tables are in pixels).
+//! * Pixel error (SLAMfusion (Fernandes & Alexandre)): with cells normalised to −1 unknown, 0 free, 1
 //!   occupied (occupancy/100 in between), Error = (Σ (T − M)²)^½ over the
 //!   ground-truth grid, and the same as a root mean square per cell.
 //!
@@ -113,7 +113,7 @@ pub struct MapReport {
     pub knn_error_m: f64,
     /// The same in ground-truth cells (pixels).
     pub knn_error_cells: f64,
-    /// Seed 004's error: (Σ (T − M)²)^½ over the ground-truth grid.
+    /// SLAMfusion's pixel error: (Σ (T − M)²)^½ over the ground-truth grid.
     pub pixel_error: f64,
     /// Per-cell root mean square of T − M.
     pub pixel_rms: f64,
@@ -395,7 +395,7 @@ pub fn evaluate_maps(
     );
     let knn_error_m = (truth_to_map.mean_m + map_to_truth.mean_m) / 2.0;
 
-    // Seed 004's pixel error over the ground-truth grid, the estimate sampled at each aligned cell centre.
+    // SLAMfusion's pixel error over the ground-truth grid, the estimate sampled at each aligned cell centre.
     let mut sum2 = 0.0;
     for y in 0..truth.height {
         for x in 0..truth.width {
@@ -499,7 +499,7 @@ mod tests {
                 r.truth_to_map
             );
             assert!((r.knn_error_cells - k as f64 * 31.0 / n).abs() < 1e-6);
-            // Seed 004: 31 cells went occupied → free and 31 free → occupied, each (1 − 0)² = 1.
+            // SLAMfusion's error: 31 cells went occupied → free and 31 free → occupied, each (1 − 0)² = 1.
             assert!(
                 (r.pixel_error - 62f64.sqrt()).abs() < 1e-9,
                 "k = {k}: {}",

@@ -116,7 +116,7 @@ pub fn smoky_scan(stamp_ns: u64, seq: u64) -> LaserScan {
     })
 }
 
-/// A ready smoke-sensor reading at `level` (seed scale).
+/// A ready smoke-sensor reading at `level` (the SmokeNav paper's mV scale).
 pub fn smoke_reading(stamp_ns: u64, seq: u64, level: f32, trend: SmokeTrend) -> SmokeReading {
     SmokeReading {
         header: Header::new(stamp_ns, seq, "smoke"),

@@ -220,7 +220,7 @@ pub struct V2Params {
     pub rho_threshold: f64,
     /// μ Confident over the section's sonar range, m.
     pub confident: PiShape,
-    /// μ Alcoholized over the smoke level (seed scale, see `SmokeReading::level`).
+    /// μ Alcoholized over the smoke level (the SmokeNav paper's mV scale, see `SmokeReading::level`).
     pub alcoholized: PiShape,
     /// μ Dense over the standard deviation of the scan's valid ranges, m.
     pub dense: PiShape,

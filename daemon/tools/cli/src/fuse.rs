@@ -15,7 +15,7 @@ use smokenav_shared_types::FusionMethod;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// Used when no `--config` is given: the seed paper's first platform.
+/// Used when no `--config` is given: the first platform of SmokeNav (Santos et al. 2015).
 const DEFAULT_PROFILE: &str = include_str!("../../../../config/pioneer-3dx.toml");
 const DEFAULT_PROFILE_NAME: &str = "config/pioneer-3dx.toml (built in)";
 

@@ -1,5 +1,5 @@
-//! Decodes every real capture in `tests/vectors/` (copied byte-exact from
-//! shared/reference/scip/vectors/) and rejects the damaged one.
+//! Decodes every real capture in `tests/vectors/` (SCIP 2.0 exchanges,
+//! byte-exact) and rejects the damaged one.
 //!
 //! Expected numbers were worked out by hand from the capture text and checked
 //! with an independent decoder (strip checksums, join, 3 chars per value).
