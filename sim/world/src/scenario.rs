@@ -48,7 +48,7 @@ use crate::robot::{DriveParams, OdometryErrors};
 use crate::smoke::{Pulse, SmokeParams, SmokeSource};
 use crate::sonar::SonarParams;
 use serde::Deserialize;
-use smokenav_platform_config::{Platform, RobotConfig};
+use smokenav_platform_config::{BUILTIN_PROFILES, Platform, RobotConfig};
 use smokenav_smoke_emulator::model::SensorParams;
 use std::path::{Path, PathBuf};
 
@@ -64,18 +64,6 @@ pub const BUILTIN_SCENARIOS: [(&str, &str); 4] = [
         include_str!("../../scenarios/r32-dense-crossing.toml"),
     ),
     ("corridor", include_str!("../../scenarios/corridor.toml")),
-];
-
-/// Robot profiles shipped in `config/`: (name, text).
-pub const BUILTIN_PROFILES: [(&str, &str); 2] = [
-    (
-        "pioneer-3dx",
-        include_str!("../../../config/pioneer-3dx.toml"),
-    ),
-    (
-        "nomad-scout",
-        include_str!("../../../config/nomad-scout.toml"),
-    ),
 ];
 
 /// Most smoke sources, patches, waypoints or pulses a file may list.
@@ -382,9 +370,10 @@ impl Scenario {
         let duration_s = check("duration_s", f.duration_s, 0.001, MAX_DURATION_S)?;
 
         // Robot profile: bundled name or a path.
-        let profile = match BUILTIN_PROFILES.iter().find(|(n, _)| *n == f.robot) {
-            Some((n, text)) => RobotConfig::parse(text, Path::new(&format!("config/{n}.toml")))?,
-            None => RobotConfig::load(&dir.join(&f.robot))?,
+        let profile = if BUILTIN_PROFILES.iter().any(|(n, _)| *n == f.robot) {
+            RobotConfig::builtin(&f.robot)?
+        } else {
+            RobotConfig::load(&dir.join(&f.robot))?
         };
         let platform = profile.robot.platform;
 

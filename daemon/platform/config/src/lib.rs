@@ -32,6 +32,18 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+/// The robot profiles shipped in `config/`: (name, text).
+pub const BUILTIN_PROFILES: [(&str, &str); 2] = [
+    (
+        "pioneer-3dx",
+        include_str!("../../../../config/pioneer-3dx.toml"),
+    ),
+    (
+        "nomad-scout",
+        include_str!("../../../../config/nomad-scout.toml"),
+    ),
+];
+
 /// Environment variable that overrides `robot.instance`.
 pub const INSTANCE_ENV: &str = "SMOKENAV_INSTANCE";
 /// Environment variable that overrides `bus.root_path`.
@@ -99,6 +111,9 @@ pub enum ConfigError {
     /// Values are well-formed but not acceptable.
     #[error("{}", InvalidDisplay(file, issues))]
     Invalid { file: PathBuf, issues: Vec<Issue> },
+    /// [`RobotConfig::builtin`] was asked for a profile that is not shipped.
+    #[error("no shipped robot profile is called {name:?} (have: {known})")]
+    UnknownBuiltin { name: String, known: String },
 }
 
 struct InvalidDisplay<'a>(&'a PathBuf, &'a [Issue]);
@@ -119,7 +134,7 @@ impl ConfigError {
     /// The keys this error is about (for tests and tools).
     pub fn keys(&self) -> Vec<&str> {
         match self {
-            ConfigError::Io { .. } => vec![],
+            ConfigError::Io { .. } | ConfigError::UnknownBuiltin { .. } => vec![],
             ConfigError::Parse { key, .. } => vec![key.as_str()],
             ConfigError::Invalid { issues, .. } => issues.iter().map(|i| i.key.as_str()).collect(),
         }
@@ -136,6 +151,20 @@ impl RobotConfig {
         let mut cfg = Self::parse(&text, path)?;
         cfg.apply_env();
         Ok(cfg)
+    }
+
+    /// A profile shipped in `config/` by name (see [`BUILTIN_PROFILES`]),
+    /// parsed and validated. The environment overrides are not applied: the
+    /// caller decides (see [`Self::apply_env`]).
+    pub fn builtin(name: &str) -> Result<Self, ConfigError> {
+        let (name, text) = BUILTIN_PROFILES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .ok_or_else(|| ConfigError::UnknownBuiltin {
+                name: name.to_owned(),
+                known: BUILTIN_PROFILES.map(|(n, _)| n).join(", "),
+            })?;
+        Self::parse(text, Path::new(&format!("config/{name}.toml")))
     }
 
     /// Parses and validates `text`; `file` is only used in messages.

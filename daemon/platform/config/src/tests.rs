@@ -26,6 +26,20 @@ fn shipped_profiles_are_valid() {
 }
 
 #[test]
+fn builtin_profiles_are_the_shipped_files() {
+    for (name, _) in BUILTIN_PROFILES {
+        let file = profile(&format!("{name}.toml"));
+        let shipped = RobotConfig::parse(&std::fs::read_to_string(&file).unwrap(), &file).unwrap();
+        assert_eq!(RobotConfig::builtin(name).unwrap(), shipped);
+    }
+    let err = RobotConfig::builtin("pioneer-2").unwrap_err().to_string();
+    assert!(
+        err.contains("pioneer-2") && err.contains("pioneer-3dx, nomad-scout"),
+        "{err}"
+    );
+}
+
+#[test]
 fn pioneer_sonar_poses_are_arias() {
     let cfg = parse(&pioneer_text()).unwrap();
     let s3 = cfg.sonar.transducer(3).unwrap();

@@ -13,11 +13,10 @@ use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_platform_config::RobotConfig;
 use smokenav_shared_types::FusionMethod;
 use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Used when no `--config` is given: the first platform of SmokeNav (Santos et al. 2015).
-const DEFAULT_PROFILE: &str = include_str!("../../../../config/pioneer-3dx.toml");
-const DEFAULT_PROFILE_NAME: &str = "config/pioneer-3dx.toml (built in)";
+const DEFAULT_PROFILE: &str = "pioneer-3dx";
 
 #[derive(Debug, Args)]
 pub struct FuseArgs {
@@ -34,8 +33,7 @@ pub fn run(args: FuseArgs) -> anyhow::Result<()> {
     let cfg = match &args.config {
         Some(path) => RobotConfig::load(path)
             .with_context(|| format!("invalid robot profile {}", path.display()))?,
-        None => RobotConfig::parse(DEFAULT_PROFILE, Path::new(DEFAULT_PROFILE_NAME))
-            .context("the built-in profile is invalid")?,
+        None => RobotConfig::builtin(DEFAULT_PROFILE).context("the built-in profile is invalid")?,
     };
     let mut pipeline = FusionPipeline::from_config(&cfg, Some(args.method))
         .context("the profile's sonar geometry is unusable")?;
