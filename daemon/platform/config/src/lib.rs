@@ -26,7 +26,7 @@ pub use robot::{BusSection, Platform, RobotSection};
 pub use slam::SlamSection;
 pub use smoke::{AdcBackend, SmokeSection};
 pub use sonar::{SonarSection, Transducer};
-pub use validate::{Issue, Validate, Validator};
+pub use validate::{Issue, Validate, Validator, key_line};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -101,9 +101,10 @@ pub enum ConfigError {
         error: std::io::Error,
     },
     /// The TOML is malformed, a key is unknown or a value has the wrong type.
-    #[error("{file}:{line}: key `{key}`: {reason}")]
+    #[error("{}: key `{key}`: {reason}", At(file, *line))]
     Parse {
         file: PathBuf,
+        /// 1-based; 0 when neither toml nor the key path locate it.
         line: usize,
         key: String,
         reason: String,
@@ -116,6 +117,18 @@ pub enum ConfigError {
     UnknownBuiltin { name: String, known: String },
 }
 
+/// `file:line`, or `file` when the line is unknown (0).
+struct At<'a>(&'a Path, usize);
+
+impl fmt::Display for At<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.1 {
+            0 => write!(f, "{}", self.0.display()),
+            line => write!(f, "{}:{line}", self.0.display()),
+        }
+    }
+}
+
 struct InvalidDisplay<'a>(&'a PathBuf, &'a [Issue]);
 
 impl fmt::Display for InvalidDisplay<'_> {
@@ -124,7 +137,7 @@ impl fmt::Display for InvalidDisplay<'_> {
             if i > 0 {
                 writeln!(f)?;
             }
-            write!(f, "{}: {}", self.0.display(), issue)?;
+            write!(f, "{}: {}", At(self.0, issue.line.unwrap_or(0)), issue)?;
         }
         Ok(())
     }
@@ -170,16 +183,8 @@ impl RobotConfig {
     /// Parses and validates `text`; `file` is only used in messages.
     pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
         let cfg: RobotConfig = parse_toml(text, file)?;
-        let mut v = Validator::default();
-        cfg.validate("", &mut v);
-        if v.issues.is_empty() {
-            Ok(cfg)
-        } else {
-            Err(ConfigError::Invalid {
-                file: file.to_owned(),
-                issues: v.issues,
-            })
-        }
+        check(&cfg, text, file)?;
+        Ok(cfg)
     }
 
     /// `SMOKENAV_INSTANCE` and `SMOKENAV_IOX2_ROOT` override the file.
@@ -202,6 +207,21 @@ impl RobotConfig {
     }
 }
 
+/// Validates `value` (read from the TOML `text` of `file`): every issue, each
+/// with its key path and line.
+pub fn check(value: &impl Validate, text: &str, file: &Path) -> Result<(), ConfigError> {
+    let mut v = Validator::default();
+    value.validate("", &mut v);
+    if v.issues.is_empty() {
+        return Ok(());
+    }
+    v.locate(text);
+    Err(ConfigError::Invalid {
+        file: file.to_owned(),
+        issues: v.issues,
+    })
+}
+
 /// Deserialises any config-like TOML strictly, reporting the key path and line.
 pub fn parse_toml<T: serde::de::DeserializeOwned>(
     text: &str,
@@ -218,7 +238,8 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(
 fn toml_error(text: &str, file: &Path, key: String, e: &toml::de::Error) -> ConfigError {
     let line = e
         .span()
-        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
+        .map(|s| validate::line_of(text, s.start))
+        .or_else(|| validate::key_line(text, &key))
         .unwrap_or(0);
     let key = if key.is_empty() || key == "." {
         "(document)".to_owned()

@@ -83,6 +83,83 @@ fn negative_rate_names_file_key_and_reason() {
     assert!(msg.contains("-10"), "{msg}");
 }
 
+/// 1-based line of the first line of `text` starting with `prefix` (after indentation).
+fn line_starting(text: &str, prefix: &str) -> usize {
+    text.lines()
+        .position(|l| l.trim_start().starts_with(prefix))
+        .unwrap_or_else(|| panic!("no line starts with {prefix:?}"))
+        + 1
+}
+
+#[test]
+fn invalid_value_names_its_line() {
+    let text = pioneer_text().replace("cone_deg = 15.0", "cone_deg = 0.0");
+    let err = parse(&text).unwrap_err();
+    let ConfigError::Invalid { issues, .. } = &err else {
+        panic!("expected invalid values, got {err:?}")
+    };
+    let line = line_starting(&text, "cone_deg = 0.0");
+    assert_eq!(issues[0].line, Some(line));
+    assert!(
+        err.to_string().starts_with(&format!(
+            "config/test-robot.toml:{line}: key `sonar.cone_deg`: "
+        )),
+        "{err}"
+    );
+}
+
+#[test]
+fn invalid_array_element_names_the_elements_line() {
+    let text = pioneer_text().replace(
+        "{ index = 5, x = 0.148, y = -0.078, yaw_deg = -30.0 }",
+        "{ index = 5, x = 0.148, y = -0.078, yaw_deg = -390.0 }",
+    );
+    let err = parse(&text).unwrap_err();
+    assert_eq!(err.keys(), vec!["sonar.transducers[5].yaw_deg"], "{err}");
+    let line = line_starting(&text, "{ index = 5,");
+    assert!(
+        err.to_string()
+            .starts_with(&format!("config/test-robot.toml:{line}: ")),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_default_that_no_longer_fits_names_its_tables_line() {
+    // The inter-message bounds keep their default 0.05 s, now above the timeout.
+    let text = pioneer_text().replace(
+        "[fusion]\nmethod = \"v2\"\nsonar_cap_m = 2.5\n",
+        "[fusion]\nmethod = \"v2\"\nsonar_cap_m = 2.5\n\n[fusion.sync]\ntimeout_s = 0.04\n",
+    );
+    let err = parse(&text).unwrap_err();
+    let ConfigError::Invalid { issues, .. } = &err else {
+        panic!("expected invalid values, got {err:?}")
+    };
+    let laser = issues
+        .iter()
+        .find(|i| i.key == "fusion.sync.laser_min_period_s")
+        .unwrap_or_else(|| panic!("{err}"));
+    assert_eq!(laser.line, Some(line_starting(&text, "[fusion.sync]")));
+}
+
+#[test]
+fn key_line_follows_tables_arrays_and_inline_tables() {
+    let text = "a = 1\n[b]\nc = [\n  { d = 2 },\n  { d = 3, e = 4 },\n]\n[b.f]\ng = 5\n";
+    assert_eq!(key_line(text, "a"), Some(1));
+    assert_eq!(key_line(text, "b"), Some(2));
+    assert_eq!(key_line(text, "b.c"), Some(3));
+    assert_eq!(key_line(text, "b.c[1].e"), Some(5));
+    assert_eq!(
+        key_line(text, "b.c[9].e"),
+        Some(3),
+        "missing element: its array"
+    );
+    assert_eq!(key_line(text, "b.f.g"), Some(8));
+    assert_eq!(key_line(text, "b.f.h"), Some(7), "missing key: its table");
+    assert_eq!(key_line(text, "z"), None);
+    assert_eq!(key_line("not toml [", "a"), None);
+}
+
 #[test]
 fn missing_sonar_pose_names_the_index() {
     let text = pioneer_text().replace(
