@@ -2,11 +2,13 @@
 //!
 //! Parsing is strict: unknown keys are rejected (a typo must not silently fall
 //! back to a default on a robot), and every value is validated. Errors name
-//! the file, the key and the reason:
+//! the file, the line, the key and the reason, every problem at once:
 //!
 //! ```text
-//! config/pioneer-3dx.toml: key `laser.stall_timeout_s`: must be within [0.2, 30], got -1
+//! config/pioneer-3dx.toml:12: key `laser.stall_timeout_s`: must be within [0.2, 30], got -1
 //! ```
+//!
+//! The shipped profiles are built in ([`RobotConfig::builtin`]).
 
 pub mod base;
 pub mod common;
