@@ -26,7 +26,8 @@
 //! - [`engine`]: `FusionEngine::step(laser, sonar, smoke, &mut FusedScan)`.
 //! - [`pipeline`]: synchroniser + engine, as the process and `smokenav fuse` run them.
 //! - [`offline`]: `fuse_jsonl`, the same over `topic echo --json` lines.
-//! - [`testkit`]: constructed rooms, scans, rings and smoke readings for tests and benchmarks.
+//! - `testkit` (feature `testkit`, for tests and benchmarks): constructed rooms,
+//!   scans, rings and smoke readings.
 //!
 //! Parameters (every threshold and membership breakpoint, with the paper's
 //! values as defaults) are the `[fusion]` table of the robot profile; its
@@ -39,6 +40,7 @@ pub mod geometry;
 pub mod offline;
 pub mod pipeline;
 pub mod sync;
+#[cfg(any(test, feature = "testkit"))]
 pub mod testkit;
 pub mod v1;
 pub mod v2;
