@@ -6,7 +6,9 @@
 //! - SIGTERM/SIGINT as a [`Shutdown`] flag;
 //! - systemd `READY=1`, `STATUS=` and `WATCHDOG=1` (sd-notify; no-ops outside systemd);
 //! - [`HealthReporter`]: periodic `Health` on `health/<role>` with rates,
-//!   counters, the last error and latency percentiles.
+//!   counters, the last error and latency percentiles;
+//! - [`launch`]: starting and stopping a smokenav process from another
+//!   program (the lab's supervisor, the end-to-end tests).
 //!
 //! A process looks like:
 //!
@@ -35,6 +37,7 @@
 
 mod args;
 mod health;
+pub mod launch;
 mod logging;
 mod process;
 mod shutdown;
