@@ -48,11 +48,14 @@ pub fn evaluate_map_files(
     evaluate_maps(&t, &e, opts).map_err(|source| {
         // Name the file the problem is in.
         let path = match &source {
-            MapMetricError::NoWalls { which, .. } | MapMetricError::Geometry { which, .. }
+            MapMetricError::NoWalls { which, .. }
+            | MapMetricError::Geometry { which, .. }
+            | MapMetricError::TooManyWalls { which, .. }
                 if *which == "estimated" =>
             {
                 estimate.to_owned()
             }
+            MapMetricError::Incomparable { .. } => estimate.to_owned(),
             _ => truth.to_owned(),
         };
         EvalError::MapMetric { path, source }
