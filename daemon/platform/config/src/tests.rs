@@ -224,3 +224,120 @@ fn unreadable_file_names_the_path() {
     let err = RobotConfig::load(Path::new("/nonexistent/robot.toml")).unwrap_err();
     assert!(err.to_string().contains("/nonexistent/robot.toml"));
 }
+
+mod props {
+    //! Profiles from the outside world: whatever the text, `parse` returns a
+    //! profile or a typed error that names a key, and never panics.
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Values a hand-edited or damaged file may hold where a number, string,
+    /// flag, table or array was expected.
+    fn value() -> impl Strategy<Value = String> {
+        prop_oneof![
+            any::<f64>().prop_map(|v| format!("{v:?}")),
+            any::<i64>().prop_map(|v| v.to_string()),
+            Just("nan".to_owned()),
+            Just("-inf".to_owned()),
+            Just("1e309".to_owned()),
+            Just("18446744073709551616".to_owned()),
+            "\"[^\"\\\\]{0,12}\"".prop_map(|s| s),
+            any::<bool>().prop_map(|b| b.to_string()),
+            Just("[]".to_owned()),
+            Just("{}".to_owned()),
+            Just("[1, \"a\", true]".to_owned()),
+            Just("{ a = 1 }".to_owned()),
+        ]
+    }
+
+    /// The shipped profile with the value of its `line`-th `key = value` line replaced.
+    fn mutated(text: &str, line: usize, new: &str) -> String {
+        let assignments: Vec<usize> = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim_start().starts_with('#') && l.contains(" = "))
+            .map(|(i, _)| i)
+            .collect();
+        let target = assignments[line % assignments.len()];
+        text.lines()
+            .enumerate()
+            .map(|(i, l)| match l.split_once(" = ") {
+                Some((k, _)) if i == target && !l.trim_start().starts_with('{') => {
+                    format!("{k} = {new}")
+                }
+                _ => l.to_owned(),
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    fn outcome_names_a_key(r: &Result<RobotConfig, ConfigError>) -> Result<(), TestCaseError> {
+        if let Err(e) = r {
+            prop_assert!(!e.keys().is_empty(), "no key in {e:?}");
+            prop_assert!(e.keys().iter().all(|k| !k.is_empty()), "{e:?}");
+        }
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1500))]
+
+        #[test]
+        fn a_mutated_value_gives_a_profile_or_an_error_naming_a_key(
+            shipped in 0usize..2,
+            line in 0usize..1000,
+            new in value(),
+        ) {
+            let text = BUILTIN_PROFILES[shipped].1;
+            let r = parse(&mutated(text, line, &new));
+            outcome_names_a_key(&r)?;
+        }
+
+        #[test]
+        fn arbitrary_text_gives_a_profile_or_an_error_naming_a_key(text in "\\PC{0,300}") {
+            outcome_names_a_key(&parse(&text))?;
+        }
+
+        #[test]
+        fn damaged_bytes_give_a_profile_or_an_error_naming_a_key(
+            shipped in 0usize..2,
+            at in 0usize..4000,
+            cut in 0usize..40,
+            insert in "[\\[\\]{}=\"#.,\n a-z0-9]{0,8}",
+        ) {
+            let text = BUILTIN_PROFILES[shipped].1;
+            let mut s: Vec<char> = text.chars().collect();
+            let at = at % s.len();
+            let cut = cut.min(s.len() - at);
+            s.splice(at..at + cut, insert.chars());
+            outcome_names_a_key(&parse(&s.into_iter().collect::<String>()))?;
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        /// Whatever valid profile a mutation produced, `to_toml` writes it so
+        /// that it loads back the same.
+        #[test]
+        fn a_valid_profile_round_trips_through_to_toml(
+            shipped in 0usize..2,
+            line in 0usize..1000,
+            new in value(),
+        ) {
+            let text = BUILTIN_PROFILES[shipped].1;
+            if let Ok(cfg) = parse(&mutated(text, line, &new)) {
+                let back = parse(&cfg.to_toml()).map_err(|e| TestCaseError::fail(e.to_string()))?;
+                prop_assert_eq!(back, cfg);
+            }
+        }
+    }
+
+    #[test]
+    fn shipped_profiles_round_trip_through_to_toml() {
+        for (name, _) in BUILTIN_PROFILES {
+            let cfg = RobotConfig::builtin(name).unwrap();
+            assert_eq!(parse(&cfg.to_toml()).unwrap(), cfg, "{name}");
+        }
+    }
+}
