@@ -107,9 +107,6 @@ pub fn hex(bytes: &[u8]) -> String {
 }
 
 #[cfg(test)]
-mod capture_tests;
-
-#[cfg(test)]
 mod fuzz_tests {
     use super::*;
     use proptest::prelude::*;
