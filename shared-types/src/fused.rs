@@ -51,15 +51,21 @@ impl SectionSource {
     }
 }
 
-/// The fusion method that produced a scan.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// A fusion method: what `[fusion] method` selects, what `--method` takes,
+/// and what a [`FusedScan`] says produced it. Its names (`laser-only`, `v1`,
+/// `v2`) are the same in the profile, on the command line and in JSON. Both
+/// methods are those of SmokeNav (Santos et al. 2015).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 #[repr(u8)]
 pub enum FusionMethod {
+    /// The laser scan untouched.
     #[default]
     LaserOnly = 0,
-    /// Seed 000, Algorithm 2: the heuristic.
+    /// SmokeNav v1, the heuristic (Algorithm 2).
     V1 = 1,
-    /// Seed 000, Algorithm 3: the fuzzy-logic version.
+    /// SmokeNav v2, the fuzzy model (Algorithm 3).
     V2 = 2,
 }
 
@@ -166,7 +172,7 @@ pub struct FusedScan {
     /// Sections in use (`<= MAX_SONARS`).
     pub section_count: u32,
     pub sections: [SectionDecision; MAX_SONARS],
-    /// Smoke level used for the decision (seed scale; see `SmokeReading::level`).
+    /// Smoke level used for the decision (the SmokeNav paper's mV scale; see `SmokeReading::level`).
     pub smoke_level: f32,
     /// Standard deviation of the valid laser ranges of the whole scan, m.
     pub laser_spread: f32,
@@ -215,7 +221,7 @@ impl FusedScan {
     }
 
     /// Share of sections where the sonar was used (alone or superimposed):
-    /// the seed paper's "sonar usage".
+    /// the SmokeNav paper's "sonar usage".
     pub fn sonar_usage(&self) -> f32 {
         let s = self.sections();
         if s.is_empty() {
@@ -226,5 +232,22 @@ impl FusedScan {
             .filter(|d| matches!(d.source(), SectionSource::Sonar | SectionSource::Both))
             .count();
         used as f32 / s.len() as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fusion_method_has_one_name_in_every_form() {
+        for m in [FusionMethod::LaserOnly, FusionMethod::V1, FusionMethod::V2] {
+            let json = serde_json::to_string(&m).unwrap();
+            assert_eq!(json, format!("\"{}\"", m.as_str()));
+            assert_eq!(serde_json::from_str::<FusionMethod>(&json).unwrap(), m);
+            assert_eq!(FusionMethod::parse(m.as_str()), Some(m));
+            assert_eq!(FusionMethod::from_u8(m as u8), m);
+        }
+        assert!(serde_json::from_str::<FusionMethod>("\"v3\"").is_err());
     }
 }

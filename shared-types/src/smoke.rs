@@ -77,7 +77,7 @@ pub struct SmokeReading {
     /// Raw ADC counts behind `raw_mv`.
     pub raw_counts: u32,
     /// Smoke concentration index derived from the filtered signal, on the
-    /// seed paper's scale: mV the output moved from its clean-air baseline
+    /// SmokeNav paper's scale: mV the output moved from its clean-air baseline
     /// (for the MQ303A, the drop below it). 0 is clean air; SmokeNav v1
     /// thresholds 130/200/240; v2 treats "below 20" as clean.
     pub level: f32,

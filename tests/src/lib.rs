@@ -131,7 +131,8 @@ pub struct Child {
 }
 
 impl Child {
-    /// Spawns `program` with `args`, `SMOKENAV_INSTANCE=instance` and `RUST_LOG=info`.
+    /// Spawns `program` with `args` as [`smokenav_platform_runtime::launch::command`]
+    /// prepares it (`SMOKENAV_INSTANCE=instance`, `RUST_LOG`, no `NOTIFY_SOCKET`).
     pub fn spawn(program: &Path, args: &[&str], instance: &str) -> anyhow::Result<Self> {
         Self::spawn_env(program, args, instance, &[])
     }
@@ -142,17 +143,8 @@ impl Child {
         instance: &str,
         env: &[(&str, &str)],
     ) -> anyhow::Result<Self> {
-        let mut cmd = Command::new(program);
-        cmd.args(args)
-            .env("SMOKENAV_INSTANCE", instance)
-            .env(
-                "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
-            )
-            .env_remove("NOTIFY_SOCKET")
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped());
+        let mut cmd = smokenav_platform_runtime::launch::command(program, instance);
+        cmd.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
         for (k, v) in env {
             cmd.env(k, v);
         }

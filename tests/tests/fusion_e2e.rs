@@ -8,11 +8,12 @@ use smokenav_algorithms_fusion::offline::fuse_jsonl;
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_fusion::testkit::{Room, smoke_reading, smoky_scan};
 use smokenav_platform_bus::{Bus, Publisher, Subscriber, Waiter, topics};
-use smokenav_platform_config::{Method, RobotConfig};
+use smokenav_platform_config::RobotConfig;
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::record::{FusedScanRecord, Message, TopicRecord};
 use smokenav_shared_types::{
-    FusedScan, Health, HealthState, LaserScan, SmokeReading, SmokeTrend, SonarRing, SyncState,
+    FusedScan, FusionMethod, Health, HealthState, LaserScan, SmokeReading, SmokeTrend, SonarRing,
+    SyncState,
 };
 use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
 use std::path::PathBuf;
@@ -44,7 +45,7 @@ fn record(topic: &str, message: Message) -> String {
 }
 
 impl Rig {
-    fn start(test: &str, method: Method) -> Rig {
+    fn start(test: &str, method: FusionMethod) -> Rig {
         let dir = tempfile::tempdir().unwrap();
         let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
             c.fusion.method = method;
@@ -177,7 +178,7 @@ fn bits(s: &LaserScan) -> (Vec<u32>, Vec<u16>) {
 
 #[test]
 fn dense_smoke_sections_use_the_sonar_and_a_replay_gives_the_same_scans() {
-    let mut rig = Rig::start("fusion_e2e_v2", Method::V2);
+    let mut rig = Rig::start("fusion_e2e_v2", FusionMethod::V2);
     let smoky = |k: u64| (10..20).contains(&k);
     let (sent, got) = rig.run(30, smoky, true);
     assert_eq!(got.len(), sent.len(), "one fused scan per laser scan");
@@ -269,7 +270,7 @@ fn dense_smoke_sections_use_the_sonar_and_a_replay_gives_the_same_scans() {
 
 #[test]
 fn silent_sonar_degrades_to_the_laser_alone_and_health_says_so() {
-    let mut rig = Rig::start("fusion_e2e_silent", Method::V1);
+    let mut rig = Rig::start("fusion_e2e_silent", FusionMethod::V1);
     let (sent, got) = rig.run(15, |_| true, false);
     // Held until the sonar has been silent for the 0.5 s timeout, then every
     // scan goes out as the laser alone, untouched despite the dense smoke.

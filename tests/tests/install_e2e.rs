@@ -267,7 +267,7 @@ fn assert_units_point_into_the_install(dest: &Path, binaries: &BTreeSet<String>)
                 assert!(binaries.contains(b), "{name}: {b}");
                 started.insert(b.to_owned());
             } else {
-                // A system command (the runtime unit's /bin/true), not ours.
+                // A system command (the rundir unit's /bin/true), not ours.
                 assert!(
                     !cmd.contains("smokenav"),
                     "{name}: {cmd} is outside the install prefix /usr/local/bin"
@@ -419,4 +419,37 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
 
     let calls = std::fs::read_to_string(work.path().join("calls.log")).unwrap_or_default();
     assert!(calls.is_empty(), "DESTDIR mode ran host commands:\n{calls}");
+}
+
+/// Every smokenav unit a unit or the target refers to is shipped, and the one
+/// that creates the shared runtime directory is named for it (not for the
+/// runtime crate).
+#[test]
+fn unit_references_resolve_and_the_rundir_unit_creates_the_runtime_directory() {
+    let shipped: BTreeSet<String> = units()
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    let mut creators = Vec::new();
+    for unit in units() {
+        let text = std::fs::read_to_string(&unit).unwrap();
+        for (key, value) in text.lines().filter_map(|l| l.trim().split_once('=')) {
+            if key == "RuntimeDirectory" {
+                creators.push(unit.file_name().unwrap().to_string_lossy().into_owned());
+            }
+            if matches!(key, "Requires" | "After" | "Wants" | "BindsTo" | "PartOf") {
+                for name in value
+                    .split_whitespace()
+                    .filter(|n| n.starts_with("smokenav"))
+                {
+                    assert!(
+                        shipped.contains(name),
+                        "{}: {key}={name} is not shipped in systemd/",
+                        unit.display()
+                    );
+                }
+            }
+        }
+    }
+    assert_eq!(creators, ["smokenav-rundir.service"]);
 }

@@ -335,7 +335,7 @@ fn pioneer_in_the_corridor_streams_through_its_driver() {
     // Along the corridor's axis (+x) at 0.3 m/s.
     let o = &odom.last();
     assert!(o.x > 1.2 && o.y.abs() < 0.2, "{o:?}");
-    // Seed 000, Fig. 5: the ±90° sonars see the walls, the oblique ones saturate.
+    // SmokeNav (Santos et al. 2015), Fig. 5: the ±90° sonars see the walls, the oblique ones saturate.
     let ring = &sonar.last();
     assert_eq!(ring.len(), 8);
     assert_eq!(ring.by_index(0).unwrap().status(), SonarStatus::Valid);

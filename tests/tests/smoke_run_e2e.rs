@@ -16,9 +16,9 @@
 //!   trajectory error after the best rigid alignment).
 
 use smokenav_platform_bus::{Bus, Subscriber, Waiter, topics};
-use smokenav_platform_config::Method;
 use smokenav_shared_types::{
-    BeamReading, FusedScan, Health, HealthState, LaserScan, PoseEstimate, SectionSource, SyncState,
+    BeamReading, FusedScan, FusionMethod, Health, HealthState, LaserScan, PoseEstimate,
+    SectionSource, SyncState,
 };
 use smokenav_sim_link::{SimLink, SimLinkConfig, TruthPublisher, TruthTrack, Until};
 use smokenav_sim_world::Scenario;
@@ -98,7 +98,7 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
     let mut link = SimLink::start(SimLinkConfig::new(scenario, dir.path().join("dev"))).unwrap();
     let instance = unique_instance("smoke_run");
     let mut profile = link.driver_profile(Some(&instance));
-    profile.fusion.method = Method::V2;
+    profile.fusion.method = FusionMethod::V2;
     let profile_path = dir.path().join("robot.toml");
     std::fs::write(&profile_path, profile.to_toml()).unwrap();
     let cfg = profile_path.to_string_lossy().into_owned();

@@ -4,7 +4,7 @@
 //!
 //! - `smokenav-lab sim SCENARIO`: the smoky world feeds the device emulators
 //!   on PTYs; run the real drivers against them.
-//! - `smokenav-lab demo`: the seed paper's smoke experiment end to end (what
+//! - `smokenav-lab demo`: the smoke experiment of SmokeNav (Santos et al. 2015) end to end (what
 //!   `./demo` runs).
 
 use clap::{Parser, Subcommand};
@@ -27,7 +27,7 @@ struct Cli {
 enum Command {
     /// Run a scenario: the smoky world feeds emulated devices on PTYs for the real drivers.
     Sim(sim::SimArgs),
-    /// The seed paper's smoke experiment end to end: live run, then laser-only vs SmokeNav v1 vs v2.
+    /// The SmokeNav paper's smoke experiment end to end: live run, then laser-only vs SmokeNav v1 vs v2.
     Demo(demo::DemoArgs),
 }
 

@@ -433,7 +433,7 @@ mod tests {
             .unwrap();
         assert_eq!(ring.len(), 8);
         assert_eq!(ring.max_range, 5.0);
-        // In the corridor the ±90° sonars see the walls; the oblique ones saturate (seed 000, Fig. 5).
+        // In the corridor the ±90° sonars see the walls; the oblique ones saturate (SmokeNav (Santos et al. 2015), Fig. 5).
         assert_eq!(ring.by_index(0).unwrap().status(), SonarStatus::Valid);
         assert_eq!(ring.by_index(7).unwrap().status(), SonarStatus::Valid);
     }

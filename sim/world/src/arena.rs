@@ -2,7 +2,7 @@
 //! grid so rays and clearance queries only look at nearby walls.
 //!
 //! Arenas come from three places: the bundled vector files (mirroring the
-//! seed paper's MRL and R3.2 arenas and a plain corridor), a user's vector
+//! SmokeNav paper's MRL and R3.2 arenas and a plain corridor), a user's vector
 //! file, or a ROS `map_server` map (PGM/PNG + YAML), whose occupied pixels
 //! are traced into wall segments.
 
@@ -27,11 +27,11 @@ const INDEX_CELL_M: f64 = 0.25;
 /// The bundled arenas.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BuiltinArena {
-    /// Seed 000 Fig. 1/7a: the MRL arena, 4.57 × 4.04 m, used to tune sonar-only mapping.
+    /// SmokeNav (Santos et al. 2015) Fig. 1/7a: the MRL arena, 4.57 × 4.04 m, used to tune sonar-only mapping.
     Mrl,
-    /// Seed 000 Fig. 10/15: the R3.2 classroom arena, 13.63 × 9.87 m, with obstacles.
+    /// SmokeNav Fig. 10/15: the R3.2 classroom arena, 13.63 × 9.87 m, with obstacles.
     R32,
-    /// Seed 000 Fig. 5/6: a plain corridor, where the Pioneer's oblique sonars see nothing.
+    /// SmokeNav Fig. 5/6: a plain corridor, where the Pioneer's oblique sonars see nothing.
     Corridor,
 }
 

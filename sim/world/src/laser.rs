@@ -1,6 +1,6 @@
 //! The Hokuyo URG-04LX in smoke.
 //!
-//! Geometry from the sensor's own `PP` reply (shared/reference/scip): ARES
+//! Geometry from the sensor's own `PP` reply (SCIP 2.0): ARES
 //! 1024 steps per turn, measured steps AMIN 44 … AMAX 725 (682 beams,
 //! −119.5° … +119.9°), AFRT 384 straight ahead, 0.3515625° per step, counter-
 //! clockwise; DMIN 20 mm, DMAX 5600 mm; SCAN 600 rpm, so 100 ms per turn and
@@ -22,15 +22,15 @@
 //!   which grows with optical depth from 0 in clean air to 1 in dense smoke.
 //!   A caught beam reads the centroid of the smoke's return, just inside the
 //!   smoke front; so dense smoke gives short, tightly clustered readings that
-//!   look like a wall, as seed 000 reports ("when the smoke density is very
+//!   look like a wall, as SmokeNav (Santos et al. 2015) reports ("when the smoke density is very
 //!   high, from the LRF standpoint, it forms an almost indistinguishable
 //!   obstacle"; "the standard deviation of the LRF readings significantly
 //!   drops when affected by the smoke", Figs. 4 and 13). In light smoke some
 //!   beams read the smoke and most the wall, and the per-beam patchiness of
-//!   real smoke varies the odds: noisy readings biased short (seed 001,
+//!   real smoke varies the odds: noisy readings biased short (Sevcik & Oh 2007,
 //!   Fig. 7: fog widens and, when heavy, shifts the range distribution).
 //! * Noise: clean air ±10 mm below 1 m and ±1 % beyond (URG-04LX data sheet;
-//!   seed 001 Fig. 4 confirms ±1 % at 2 m), taken as 2σ; it grows as the
+//!   Sevcik & Oh 2007 Fig. 4 confirms ±1 % at 2 m), taken as 2σ; it grows as the
 //!   returned power falls. No wall within DMAX reads error code 0 ("possibly
 //!   ≥ 22 m, nothing in range"); too weak a return reads code 1 ("low intensity").
 
@@ -299,7 +299,7 @@ mod tests {
         assert!((mean - 2000.0).abs() < 1.0, "{mean}");
         assert!(
             within as f64 > 0.9 * n as f64,
-            "seed 001 Fig. 4: most within ±1 %: {within}/{n}"
+            "Sevcik & Oh 2007 Fig. 4: most within ±1 %: {within}/{n}"
         );
     }
 

@@ -1,4 +1,4 @@
-//! The MQ303A alcohol sensor that seed 000 uses as a smoke (glycol vapour)
+//! The MQ303A alcohol sensor that SmokeNav (Santos et al. 2015) uses as a smoke (glycol vapour)
 //! detector, read through an ADC.
 //!
 //! The sensor itself is the smoke codec's pure model
@@ -10,9 +10,9 @@
 //! model's alcohol-equivalent ppm, and the ADC conversion with noise.
 //!
 //! Concentration scale: `ppm_per_gpm3` = 60 maps the field onto the sensor so
-//! that seed 000's SmokeNav v1 thresholds land where the laser breaks down:
+//! that the paper's SmokeNav v1 thresholds land where the laser breaks down:
 //! the model drops ~240 mV (SMOKE_MAX_DOWN) at 10 ppm, i.e. at ≈ 0.16 g/m³,
-//! an extinction of ≈ 1.4 /m (visibility ≈ 2 m, where seed 001 saw the URG
+//! an extinction of ≈ 1.4 /m (visibility ≈ 2 m, where Sevcik & Oh 2007 saw the URG
 //! fail to penetrate fog).
 
 use crate::rng::Rng;

@@ -48,7 +48,9 @@ use crate::robot::{DriveParams, OdometryErrors};
 use crate::smoke::{Pulse, SmokeParams, SmokeSource};
 use crate::sonar::SonarParams;
 use serde::Deserialize;
-use smokenav_platform_config::{Platform, RobotConfig};
+use smokenav_platform_config::{
+    BUILTIN_PROFILES, ConfigError, Platform, RobotConfig, Validate, Validator,
+};
 use smokenav_smoke_codec::mq303a::SensorParams;
 use std::path::{Path, PathBuf};
 
@@ -64,18 +66,6 @@ pub const BUILTIN_SCENARIOS: [(&str, &str); 4] = [
         include_str!("../../scenarios/r32-dense-crossing.toml"),
     ),
     ("corridor", include_str!("../../scenarios/corridor.toml")),
-];
-
-/// Robot profiles shipped in `config/`: (name, text).
-pub const BUILTIN_PROFILES: [(&str, &str); 2] = [
-    (
-        "pioneer-3dx",
-        include_str!("../../../config/pioneer-3dx.toml"),
-    ),
-    (
-        "nomad-scout",
-        include_str!("../../../config/nomad-scout.toml"),
-    ),
 ];
 
 /// Most smoke sources, patches, waypoints or pulses a file may list.
@@ -351,316 +341,121 @@ impl Scenario {
     }
 
     /// Parses and checks `text`; relative paths resolve against `file`'s directory.
+    ///
+    /// Every value problem is reported at once, each with its line and key
+    /// (as a robot profile's are); the robot profile and the arena are loaded
+    /// first, since the values are checked against them.
     pub fn parse(text: &str, file: &Path) -> Result<Self, SimError> {
         let f: ScenarioFile = smokenav_platform_config::parse_toml(text, file)?;
         let dir = file.parent().unwrap_or_else(|| Path::new("."));
-        let invalid = |key: &str, reason: String| SimError::Invalid {
-            file: file.to_owned(),
-            key: key.to_owned(),
-            reason,
+        let invalid = |v: Validator| -> SimError {
+            let mut v = v;
+            v.locate(text);
+            SimError::Config(ConfigError::Invalid {
+                file: file.to_owned(),
+                issues: v.issues,
+            })
         };
-        let check = |key: &str, v: f64, lo: f64, hi: f64| -> Result<f64, SimError> {
-            if v.is_finite() && v >= lo && v <= hi {
-                Ok(v)
-            } else {
-                Err(invalid(
-                    key,
-                    format!("must be within [{lo}, {hi}], got {v}"),
-                ))
-            }
-        };
-        let opt =
-            |key: &str, v: Option<f64>, default: f64, lo: f64, hi: f64| -> Result<f64, SimError> {
-                match v {
-                    Some(v) => check(key, v, lo, hi),
-                    None => Ok(default),
-                }
-            };
-        if f.name.trim().is_empty() {
-            return Err(invalid("name", "must not be empty".into()));
-        }
-        let duration_s = check("duration_s", f.duration_s, 0.001, MAX_DURATION_S)?;
 
         // Robot profile: bundled name or a path.
-        let profile = match BUILTIN_PROFILES.iter().find(|(n, _)| *n == f.robot) {
-            Some((n, text)) => RobotConfig::parse(text, Path::new(&format!("config/{n}.toml")))?,
-            None => RobotConfig::load(&dir.join(&f.robot))?,
+        let profile = if BUILTIN_PROFILES.iter().any(|(n, _)| *n == f.robot) {
+            RobotConfig::builtin(&f.robot)?
+        } else {
+            RobotConfig::load(&dir.join(&f.robot))?
         };
-        let platform = profile.robot.platform;
+
+        // Values, table by table.
+        let mut v = Validator::default();
+        f.validate(&profile, &mut v);
+        if !v.issues.is_empty() {
+            return Err(invalid(v));
+        }
 
         let arena_source = match &f.arena {
-            ArenaFile::Builtin(name) => {
-                ArenaSource::Builtin(BuiltinArena::from_name(name).ok_or_else(|| {
-                    invalid(
-                        "arena.builtin",
-                        format!(
-                            "unknown arena {name:?} (have: {})",
-                            BuiltinArena::ALL.map(|a| a.name()).join(", ")
-                        ),
-                    )
-                })?)
-            }
+            ArenaFile::Builtin(name) => ArenaSource::Builtin(
+                BuiltinArena::from_name(name).expect("checked by ScenarioFile::validate"),
+            ),
             ArenaFile::Map(p) => ArenaSource::MapServer(dir.join(p)),
             ArenaFile::Vector(p) => ArenaSource::Vector(dir.join(p)),
         };
         let arena = arena_source.load()?;
+        let platform = profile.robot.platform;
 
         // Motion.
-        // The Scout's track is in its profile; the P3-DX's drive wheels are about 33 cm apart (measure yours).
-        let track_default = profile.base.scout.as_ref().map_or(0.33, |s| s.track_m);
-        let drive = DriveParams {
-            track_m: opt("motion.track_m", f.motion.track_m, track_default, 0.05, 2.0)?,
-            radius_m: profile.robot.radius_m,
-            max_linear_mps: profile.base.max_linear_mps,
-            max_angular_rps: profile.base.max_angular_dps.to_radians(),
-            accel_mps2: opt("motion.accel_mps2", f.motion.accel_mps2, 0.3, 0.01, 10.0)?,
-            angular_accel_rps2: opt(
-                "motion.angular_accel_dps2",
-                f.motion.angular_accel_dps2,
-                100.0,
-                1.0,
-                2000.0,
-            )?
-            .to_radians(),
-        };
+        let drive = f.motion.drive(&profile);
         let o = &f.odometry;
         let odometry = OdometryErrors {
-            scale_left: check("odometry.scale_left", o.scale_left, -0.5, 0.5)?,
-            scale_right: check("odometry.scale_right", o.scale_right, -0.5, 0.5)?,
-            track_error: check("odometry.track_error", o.track_error, -0.5, 0.5)?,
-            heading_drift_rad_per_m: check(
-                "odometry.heading_drift_deg_per_m",
-                o.heading_drift_deg_per_m,
-                -45.0,
-                45.0,
-            )?
-            .to_radians(),
-            slip_per_sqrt_m: check("odometry.slip_per_sqrt_m", o.slip_per_sqrt_m, 0.0, 1.0)?,
+            scale_left: o.scale_left,
+            scale_right: o.scale_right,
+            track_error: o.track_error,
+            heading_drift_rad_per_m: o.heading_drift_deg_per_m.to_radians(),
+            slip_per_sqrt_m: o.slip_per_sqrt_m,
         };
+        let start = Pose2::new(f.start.x, f.start.y, f.start.heading_deg.to_radians());
+        let route = f.route.as_ref().map(|rf| Route {
+            waypoints: rf.waypoints.iter().map(|p| Vec2::new(p[0], p[1])).collect(),
+            speed_mps: rf.speed_mps,
+            lookahead_m: rf.lookahead_m,
+            looped: rf.looped,
+        });
+        let smoke = f.smoke.params();
+        let sources: Vec<SmokeSource> = f.smoke.source.iter().map(SourceFile::source).collect();
+        let patches: Vec<Patch> = f
+            .smoke
+            .patch
+            .iter()
+            .map(|p| Patch {
+                center: Vec2::new(p.center[0], p.center[1]),
+                radius_m: p.radius_m,
+                density_gpm3: p.density_gpm3,
+            })
+            .collect();
 
-        // Start and route: the footprint must fit.
-        let start = Pose2::new(
-            check("start.x", f.start.x, -1e4, 1e4)?,
-            check("start.y", f.start.y, -1e4, 1e4)?,
-            check("start.heading_deg", f.start.heading_deg, -360.0, 360.0)?.to_radians(),
-        );
-        let r = drive.radius_m;
-        let fits = |p: Vec2| arena.clearance(p, r) >= r;
-        if !fits(start.position()) {
-            return Err(invalid(
-                "start",
-                format!(
-                    "the robot (radius {r} m) at ({}, {}) overlaps a wall",
-                    start.x, start.y
-                ),
-            ));
-        }
-        let route = match &f.route {
-            None => None,
-            Some(rf) => {
-                if rf.waypoints.is_empty() || rf.waypoints.len() > MAX_ITEMS {
-                    return Err(invalid(
-                        "route.waypoints",
-                        format!("needs 1–{MAX_ITEMS} points, got {}", rf.waypoints.len()),
-                    ));
-                }
-                let speed = check("route.speed_mps", rf.speed_mps, 0.01, drive.max_linear_mps)?;
-                let look = check("route.lookahead_m", rf.lookahead_m, 0.05, 10.0)?;
-                let wps: Vec<Vec2> = rf.waypoints.iter().map(|p| Vec2::new(p[0], p[1])).collect();
-                let mut prev = start.position();
-                for (i, &w) in wps.iter().enumerate() {
-                    if !w.is_finite() {
-                        return Err(invalid(
-                            &format!("route.waypoints[{i}]"),
-                            "not a finite point".into(),
-                        ));
-                    }
-                    let len = (w - prev).norm();
-                    let n = (len / 0.05).ceil().max(1.0) as usize;
-                    for k in 0..=n {
-                        let p = prev + (w - prev) * (k as f64 / n as f64);
-                        if !fits(p) {
-                            return Err(invalid(
-                                &format!("route.waypoints[{i}]"),
-                                format!(
-                                    "the leg to ({}, {}) passes ({:.2}, {:.2}), where the robot (radius {r} m) would touch a wall",
-                                    w.x, w.y, p.x, p.y
-                                ),
-                            ));
-                        }
-                    }
-                    prev = w;
-                }
-                Some(Route {
-                    waypoints: wps,
-                    speed_mps: speed,
-                    lookahead_m: look,
-                    looped: rf.looped,
-                })
-            }
-        };
-
-        // Smoke.
-        let d = SmokeParams::default();
-        let s = &f.smoke;
-        let wind = s.wind_mps.unwrap_or([0.0, 0.0]);
-        let smoke = SmokeParams {
-            cell_m: opt("smoke.cell_m", s.cell_m, d.cell_m, 0.02, 1.0)?,
-            diffusion_m2ps: opt(
-                "smoke.diffusion_m2ps",
-                s.diffusion_m2ps,
-                d.diffusion_m2ps,
-                0.0,
-                1.0,
-            )?,
-            decay_per_s: opt("smoke.decay_per_s", s.decay_per_s, d.decay_per_s, 0.0, 10.0)?,
-            wind_mps: Vec2::new(
-                check("smoke.wind_mps", wind[0], -5.0, 5.0)?,
-                check("smoke.wind_mps", wind[1], -5.0, 5.0)?,
-            ),
-            layer_height_m: opt(
-                "smoke.layer_height_m",
-                s.layer_height_m,
-                d.layer_height_m,
-                0.1,
-                20.0,
-            )?,
-            mass_extinction_m2pg: opt(
-                "smoke.mass_extinction_m2pg",
-                s.mass_extinction_m2pg,
-                d.mass_extinction_m2pg,
-                0.0,
-                100.0,
-            )?,
-        };
+        // Where things are in this arena: the footprint must fit, sources sit in open air.
+        let mut v = Validator::default();
+        check_placement(&arena, drive.radius_m, start, route.as_ref(), &mut v);
         let (lo, hi) = arena.bounds();
         let cells = ((hi.x - lo.x) / smoke.cell_m) * ((hi.y - lo.y) / smoke.cell_m);
         if cells > 16e6 {
-            return Err(invalid(
+            v.fail(
                 "smoke.cell_m",
-                format!("{:.0} cells over this arena; use larger cells", cells),
-            ));
+                format!("{cells:.0} cells over this arena; use larger cells"),
+            );
+        } else if let Err(i) = crate::smoke::SmokeField::new(&arena, smoke.clone(), sources.clone())
+        {
+            v.fail(
+                format!("smoke.source[{i}].position"),
+                "is inside a wall or outside the arena",
+            );
         }
-        if s.source.len() > MAX_ITEMS || s.patch.len() > MAX_ITEMS {
-            return Err(invalid(
-                "smoke",
-                format!("at most {MAX_ITEMS} sources and patches"),
-            ));
-        }
-        let mut sources = Vec::new();
-        for (i, src) in s.source.iter().enumerate() {
-            let key = format!("smoke.source[{i}]");
-            if src.schedule.len() > MAX_ITEMS {
-                return Err(invalid(
-                    &format!("{key}.schedule"),
-                    "too many pulses".into(),
-                ));
-            }
-            let mut schedule = Vec::new();
-            for (j, p) in src.schedule.iter().enumerate() {
-                let k = format!("{key}.schedule[{j}]");
-                schedule.push(Pulse {
-                    start_s: check(&format!("{k}.start_s"), p.start_s, 0.0, MAX_DURATION_S)?,
-                    duration_s: check(
-                        &format!("{k}.duration_s"),
-                        p.duration_s,
-                        0.0,
-                        MAX_DURATION_S,
-                    )?,
-                    rate_gps: check(&format!("{k}.rate_gps"), p.rate_gps, 0.0, 1000.0)?,
-                });
-            }
-            sources.push(SmokeSource {
-                position: Vec2::new(
-                    check(&format!("{key}.position"), src.position[0], -1e4, 1e4)?,
-                    check(&format!("{key}.position"), src.position[1], -1e4, 1e4)?,
-                ),
-                radius_m: check(&format!("{key}.radius_m"), src.radius_m, 0.0, 20.0)?,
-                schedule,
-            });
-        }
-        let mut patches = Vec::new();
-        for (i, p) in s.patch.iter().enumerate() {
-            let key = format!("smoke.patch[{i}]");
-            patches.push(Patch {
-                center: Vec2::new(
-                    check(&format!("{key}.center"), p.center[0], -1e4, 1e4)?,
-                    check(&format!("{key}.center"), p.center[1], -1e4, 1e4)?,
-                ),
-                radius_m: check(&format!("{key}.radius_m"), p.radius_m, 0.0, 100.0)?,
-                density_gpm3: check(&format!("{key}.density_gpm3"), p.density_gpm3, 0.0, 100.0)?,
-            });
-        }
-        // A source must sit in open air: try building the field once.
-        if let Err(i) = crate::smoke::SmokeField::new(&arena, smoke.clone(), sources.clone()) {
-            return Err(invalid(
-                &format!("smoke.source[{i}].position"),
-                "is inside a wall or outside the arena".into(),
-            ));
+        if !v.issues.is_empty() {
+            return Err(invalid(v));
         }
 
-        // Laser.
-        let ld = LaserParams::default();
         let l = &f.laser;
+        let ld = LaserParams::default();
         let laser = LaserParams {
-            lidar_ratio_sr: opt(
-                "laser.lidar_ratio_sr",
-                l.lidar_ratio_sr,
-                ld.lidar_ratio_sr,
-                1.0,
-                1000.0,
-            )?,
-            wall_reflectance: opt(
-                "laser.wall_reflectance",
-                l.wall_reflectance,
-                ld.wall_reflectance,
-                0.01,
-                1.0,
-            )?,
-            min_return: opt("laser.min_return", l.min_return, ld.min_return, 0.0, 1.0)?,
-            patchiness: opt("laser.patchiness", l.patchiness, ld.patchiness, 0.0, 3.0)?,
+            lidar_ratio_sr: l.lidar_ratio_sr.unwrap_or(ld.lidar_ratio_sr),
+            wall_reflectance: l.wall_reflectance.unwrap_or(ld.wall_reflectance),
+            min_return: l.min_return.unwrap_or(ld.min_return),
+            patchiness: l.patchiness.unwrap_or(ld.patchiness),
             ..ld
         };
         let m = profile.laser.mount;
         let laser_mount = Pose2::new(m.x, m.y, m.yaw_deg.to_radians());
 
         // Sonar: geometry from the profile, behaviour by platform unless overridden.
-        let sd = match platform {
-            Platform::Pioneer => SonarParams::pioneer(),
-            Platform::Scout => SonarParams::scout(),
-        };
+        let sd = sonar_defaults(platform);
         let so = &f.sonar;
         let sonar = SonarParams {
             cone_deg: profile.sonar.cone_deg,
             min_range_m: profile.sonar.min_range_m,
             max_range_m: profile.sonar.max_range_m,
-            critical_angle_deg: opt(
-                "sonar.critical_angle_deg",
-                so.critical_angle_deg,
-                sd.critical_angle_deg,
-                0.0,
-                90.0,
-            )?,
-            rays: match so.rays {
-                Some(n) if (1..=101).contains(&n) => n,
-                Some(n) => return Err(invalid("sonar.rays", format!("must be 1–101, got {n}"))),
-                None => sd.rays,
-            },
-            noise_frac: opt("sonar.noise_frac", so.noise_frac, sd.noise_frac, 0.0, 0.5)?,
-            dropout_prob: opt(
-                "sonar.dropout_prob",
-                so.dropout_prob,
-                sd.dropout_prob,
-                0.0,
-                1.0,
-            )?,
-            crosstalk_prob: opt(
-                "sonar.crosstalk_prob",
-                so.crosstalk_prob,
-                sd.crosstalk_prob,
-                0.0,
-                1.0,
-            )?,
+            critical_angle_deg: so.critical_angle_deg.unwrap_or(sd.critical_angle_deg),
+            rays: so.rays.unwrap_or(sd.rays),
+            noise_frac: so.noise_frac.unwrap_or(sd.noise_frac),
+            dropout_prob: so.dropout_prob.unwrap_or(sd.dropout_prob),
+            crosstalk_prob: so.crosstalk_prob.unwrap_or(sd.crosstalk_prob),
         };
         let sonar_mounts: Vec<SonarMount> = (0..profile.sonar.count)
             .filter_map(|i| profile.sonar.transducer(i))
@@ -669,64 +464,22 @@ impl Scenario {
                 pose: Pose2::new(t.x, t.y, t.yaw_deg.to_radians()),
             })
             .collect();
-        // Pioneer: ARCOS polls one disc per array every 40 ms, in order 1…8 (Pioneer 3
-        // operations manual, "Polling Rate"). Scout: conf_sn rate × 4 ms in the configured order.
-        let (interval_default, order) = match &profile.base.scout {
-            Some(s) => (
-                s.sonar_rate as f64 * 0.004,
-                s.sonar_order
-                    .iter()
-                    .copied()
-                    .filter(|&i| i < profile.sonar.count)
-                    .collect(),
-            ),
-            None => (0.040, (0..profile.sonar.count).collect::<Vec<u8>>()),
-        };
-        let sonar_interval_s = opt(
-            "sonar.interval_s",
-            so.interval_s,
-            interval_default.max(0.004),
-            0.002,
-            10.0,
-        )?;
+        let (interval_default, order) = sonar_timing(&profile);
+        let sonar_interval_s = so.interval_s.unwrap_or(interval_default);
 
         let md = Mq303aParams::default();
         let ss = &f.smoke_sensor;
         let smoke_sensor = Mq303aParams {
             sensor: SensorParams {
                 supply_mv: profile.smoke.vref_mv,
-                tau_rise_s: opt(
-                    "smoke_sensor.rise_tau_s",
-                    ss.rise_tau_s,
-                    md.sensor.tau_rise_s,
-                    0.0,
-                    600.0,
-                )?,
-                tau_fall_s: opt(
-                    "smoke_sensor.fall_tau_s",
-                    ss.fall_tau_s,
-                    md.sensor.tau_fall_s,
-                    0.0,
-                    3600.0,
-                )?,
+                tau_rise_s: ss.rise_tau_s.unwrap_or(md.sensor.tau_rise_s),
+                tau_fall_s: ss.fall_tau_s.unwrap_or(md.sensor.tau_fall_s),
                 // The driver waits the profile's warm-up; a cold sensor settles over the same time.
                 warmup_s: profile.smoke.warmup_s,
                 ..md.sensor
             },
-            ppm_per_gpm3: opt(
-                "smoke_sensor.ppm_per_gpm3",
-                ss.ppm_per_gpm3,
-                md.ppm_per_gpm3,
-                0.0,
-                1e6,
-            )?,
-            noise_mv: opt(
-                "smoke_sensor.noise_mv",
-                ss.noise_mv,
-                md.noise_mv,
-                0.0,
-                1000.0,
-            )?,
+            ppm_per_gpm3: ss.ppm_per_gpm3.unwrap_or(md.ppm_per_gpm3),
+            noise_mv: ss.noise_mv.unwrap_or(md.noise_mv),
             cold_start: ss.cold_start,
         };
 
@@ -734,7 +487,7 @@ impl Scenario {
             name: f.name,
             description: f.description,
             seed: f.seed,
-            duration_s,
+            duration_s: f.duration_s,
             file: file.to_owned(),
             arena,
             arena_source,
@@ -756,16 +509,351 @@ impl Scenario {
             smoke_rate_hz: profile.smoke.rate_hz,
             adc_vref_mv: profile.smoke.vref_mv,
             adc_bits: profile.smoke.adc_bits,
-            truth_rate_hz: opt("truth.rate_hz", f.truth.rate_hz, 10.0, 0.1, 1000.0)?,
-            truth_map_resolution_m: opt(
-                "truth.map_resolution_m",
-                f.truth.map_resolution_m,
-                0.05,
-                0.005,
-                1.0,
-            )?,
+            truth_rate_hz: f.truth.rate_hz.unwrap_or(DEFAULT_TRUTH_RATE_HZ),
+            truth_map_resolution_m: f
+                .truth
+                .map_resolution_m
+                .unwrap_or(DEFAULT_TRUTH_RESOLUTION_M),
             profile,
         })
+    }
+}
+
+/// Ground-truth rate when `[truth] rate_hz` is not given, Hz.
+const DEFAULT_TRUTH_RATE_HZ: f64 = 10.0;
+/// Ground-truth map cell when `[truth] map_resolution_m` is not given, m.
+const DEFAULT_TRUTH_RESOLUTION_M: f64 = 0.05;
+
+fn sonar_defaults(platform: Platform) -> SonarParams {
+    match platform {
+        Platform::Pioneer => SonarParams::pioneer(),
+        Platform::Scout => SonarParams::scout(),
+    }
+}
+
+/// The ring's default ping interval and firing order. Pioneer: ARCOS polls
+/// one disc per array every 40 ms, in order 1…8 (Pioneer 3 operations manual,
+/// "Polling Rate"). Scout: conf_sn rate × 4 ms in the configured order.
+fn sonar_timing(profile: &RobotConfig) -> (f64, Vec<u8>) {
+    let (interval, order) = match &profile.base.scout {
+        Some(s) => (
+            s.sonar_rate as f64 * 0.004,
+            s.sonar_order
+                .iter()
+                .copied()
+                .filter(|&i| i < profile.sonar.count)
+                .collect(),
+        ),
+        None => (0.040, (0..profile.sonar.count).collect::<Vec<u8>>()),
+    };
+    (interval.max(0.004), order)
+}
+
+/// An optional value must lie within `[lo, hi]` when given.
+fn within(v: &mut Validator, key: &str, value: Option<f64>, lo: f64, hi: f64) {
+    if let Some(x) = value {
+        v.within(key, x, lo, hi);
+    }
+}
+
+/// A point's coordinates, each within ±`limit`.
+fn point(v: &mut Validator, key: &str, p: [f64; 2], limit: f64) {
+    for c in p {
+        v.within(key, c, -limit, limit);
+    }
+}
+
+/// The robot (radius `r`) must fit at the start and along every leg of the route.
+fn check_placement(arena: &Arena, r: f64, start: Pose2, route: Option<&Route>, v: &mut Validator) {
+    let fits = |p: Vec2| arena.clearance(p, r) >= r;
+    if !fits(start.position()) {
+        v.fail(
+            "start",
+            format!(
+                "the robot (radius {r} m) at ({}, {}) overlaps a wall",
+                start.x, start.y
+            ),
+        );
+    }
+    let Some(route) = route else { return };
+    let mut prev = start.position();
+    for (i, &w) in route.waypoints.iter().enumerate() {
+        let len = (w - prev).norm();
+        let n = (len / 0.05).ceil().max(1.0) as usize;
+        if let Some(p) = (0..=n)
+            .map(|k| prev + (w - prev) * (k as f64 / n as f64))
+            .find(|&p| !fits(p))
+        {
+            v.fail(
+                format!("route.waypoints[{i}]"),
+                format!(
+                    "the leg to ({}, {}) passes ({:.2}, {:.2}), where the robot (radius {r} m) would touch a wall",
+                    w.x, w.y, p.x, p.y
+                ),
+            );
+        }
+        prev = w;
+    }
+}
+
+impl ScenarioFile {
+    /// Checks every value against its range (and the robot `profile`'s limits).
+    fn validate(&self, profile: &RobotConfig, v: &mut Validator) {
+        v.non_empty("name", &self.name);
+        v.within("duration_s", self.duration_s, 0.001, MAX_DURATION_S);
+        if let ArenaFile::Builtin(name) = &self.arena
+            && BuiltinArena::from_name(name).is_none()
+        {
+            v.fail(
+                "arena.builtin",
+                format!(
+                    "unknown arena {name:?} (have: {})",
+                    BuiltinArena::ALL.map(|a| a.name()).join(", ")
+                ),
+            );
+        }
+        self.start.validate("start", v);
+        if let Some(route) = &self.route {
+            route.validate(profile.base.max_linear_mps, v);
+        }
+        self.motion.validate("motion", v);
+        self.odometry.validate("odometry", v);
+        self.smoke.validate("smoke", v);
+        self.laser.validate("laser", v);
+        self.sonar.validate("sonar", v);
+        self.smoke_sensor.validate("smoke_sensor", v);
+        self.truth.validate("truth", v);
+    }
+}
+
+impl Validate for StartFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        v.within(&format!("{key}.x"), self.x, -1e4, 1e4);
+        v.within(&format!("{key}.y"), self.y, -1e4, 1e4);
+        v.within(
+            &format!("{key}.heading_deg"),
+            self.heading_deg,
+            -360.0,
+            360.0,
+        );
+    }
+}
+
+impl RouteFile {
+    fn validate(&self, max_speed_mps: f64, v: &mut Validator) {
+        if self.waypoints.is_empty() || self.waypoints.len() > MAX_ITEMS {
+            v.fail(
+                "route.waypoints",
+                format!("needs 1–{MAX_ITEMS} points, got {}", self.waypoints.len()),
+            );
+        }
+        v.within("route.speed_mps", self.speed_mps, 0.01, max_speed_mps);
+        v.within("route.lookahead_m", self.lookahead_m, 0.05, 10.0);
+        for (i, w) in self.waypoints.iter().enumerate().take(MAX_ITEMS) {
+            if !w.iter().all(|c| c.is_finite()) {
+                v.fail(format!("route.waypoints[{i}]"), "not a finite point");
+            } else {
+                // Legs are walked in 5 cm steps: far-off points would take forever.
+                point(v, &format!("route.waypoints[{i}]"), *w, 1e4);
+            }
+        }
+    }
+}
+
+impl MotionFile {
+    /// The drive, with the profile's geometry and limits.
+    fn drive(&self, profile: &RobotConfig) -> DriveParams {
+        DriveParams {
+            track_m: self.track_m.unwrap_or_else(|| default_track(profile)),
+            radius_m: profile.robot.radius_m,
+            max_linear_mps: profile.base.max_linear_mps,
+            max_angular_rps: profile.base.max_angular_dps.to_radians(),
+            accel_mps2: self.accel_mps2.unwrap_or(0.3),
+            angular_accel_rps2: self.angular_accel_dps2.unwrap_or(100.0).to_radians(),
+        }
+    }
+}
+
+/// The Scout's track is in its profile; the P3-DX's drive wheels are about 33 cm apart (measure yours).
+fn default_track(profile: &RobotConfig) -> f64 {
+    profile.base.scout.as_ref().map_or(0.33, |s| s.track_m)
+}
+
+impl Validate for MotionFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        within(v, &format!("{key}.track_m"), self.track_m, 0.05, 2.0);
+        within(v, &format!("{key}.accel_mps2"), self.accel_mps2, 0.01, 10.0);
+        within(
+            v,
+            &format!("{key}.angular_accel_dps2"),
+            self.angular_accel_dps2,
+            1.0,
+            2000.0,
+        );
+    }
+}
+
+impl Validate for OdometryFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        v.within(&format!("{key}.scale_left"), self.scale_left, -0.5, 0.5);
+        v.within(&format!("{key}.scale_right"), self.scale_right, -0.5, 0.5);
+        v.within(&format!("{key}.track_error"), self.track_error, -0.5, 0.5);
+        v.within(
+            &format!("{key}.heading_drift_deg_per_m"),
+            self.heading_drift_deg_per_m,
+            -45.0,
+            45.0,
+        );
+        v.within(
+            &format!("{key}.slip_per_sqrt_m"),
+            self.slip_per_sqrt_m,
+            0.0,
+            1.0,
+        );
+    }
+}
+
+impl SmokeFile {
+    /// The field's parameters: the file's values over the model's defaults.
+    fn params(&self) -> SmokeParams {
+        let d = SmokeParams::default();
+        let wind = self.wind_mps.unwrap_or([0.0, 0.0]);
+        SmokeParams {
+            cell_m: self.cell_m.unwrap_or(d.cell_m),
+            diffusion_m2ps: self.diffusion_m2ps.unwrap_or(d.diffusion_m2ps),
+            decay_per_s: self.decay_per_s.unwrap_or(d.decay_per_s),
+            wind_mps: Vec2::new(wind[0], wind[1]),
+            layer_height_m: self.layer_height_m.unwrap_or(d.layer_height_m),
+            mass_extinction_m2pg: self.mass_extinction_m2pg.unwrap_or(d.mass_extinction_m2pg),
+        }
+    }
+}
+
+impl Validate for SmokeFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        let k = |name: &str| format!("{key}.{name}");
+        within(v, &k("cell_m"), self.cell_m, 0.02, 1.0);
+        within(v, &k("diffusion_m2ps"), self.diffusion_m2ps, 0.0, 1.0);
+        within(v, &k("decay_per_s"), self.decay_per_s, 0.0, 10.0);
+        if let Some(w) = self.wind_mps {
+            point(v, &k("wind_mps"), w, 5.0);
+        }
+        within(v, &k("layer_height_m"), self.layer_height_m, 0.1, 20.0);
+        within(
+            v,
+            &k("mass_extinction_m2pg"),
+            self.mass_extinction_m2pg,
+            0.0,
+            100.0,
+        );
+        if self.source.len() > MAX_ITEMS || self.patch.len() > MAX_ITEMS {
+            v.fail(key, format!("at most {MAX_ITEMS} sources and patches"));
+            return;
+        }
+        for (i, src) in self.source.iter().enumerate() {
+            src.validate(&format!("{key}.source[{i}]"), v);
+        }
+        for (i, p) in self.patch.iter().enumerate() {
+            let k = format!("{key}.patch[{i}]");
+            point(v, &format!("{k}.center"), p.center, 1e4);
+            v.within(&format!("{k}.radius_m"), p.radius_m, 0.0, 100.0);
+            v.within(&format!("{k}.density_gpm3"), p.density_gpm3, 0.0, 100.0);
+        }
+    }
+}
+
+impl SourceFile {
+    fn source(&self) -> SmokeSource {
+        SmokeSource {
+            position: Vec2::new(self.position[0], self.position[1]),
+            radius_m: self.radius_m,
+            schedule: self
+                .schedule
+                .iter()
+                .map(|p| Pulse {
+                    start_s: p.start_s,
+                    duration_s: p.duration_s,
+                    rate_gps: p.rate_gps,
+                })
+                .collect(),
+        }
+    }
+}
+
+impl Validate for SourceFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        point(v, &format!("{key}.position"), self.position, 1e4);
+        v.within(&format!("{key}.radius_m"), self.radius_m, 0.0, 20.0);
+        if self.schedule.len() > MAX_ITEMS {
+            v.fail(format!("{key}.schedule"), "too many pulses");
+            return;
+        }
+        for (j, p) in self.schedule.iter().enumerate() {
+            let k = format!("{key}.schedule[{j}]");
+            v.within(&format!("{k}.start_s"), p.start_s, 0.0, MAX_DURATION_S);
+            v.within(
+                &format!("{k}.duration_s"),
+                p.duration_s,
+                0.0,
+                MAX_DURATION_S,
+            );
+            v.within(&format!("{k}.rate_gps"), p.rate_gps, 0.0, 1000.0);
+        }
+    }
+}
+
+impl Validate for LaserFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        let k = |name: &str| format!("{key}.{name}");
+        within(v, &k("lidar_ratio_sr"), self.lidar_ratio_sr, 1.0, 1000.0);
+        within(v, &k("wall_reflectance"), self.wall_reflectance, 0.01, 1.0);
+        within(v, &k("min_return"), self.min_return, 0.0, 1.0);
+        within(v, &k("patchiness"), self.patchiness, 0.0, 3.0);
+    }
+}
+
+impl Validate for SonarFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        let k = |name: &str| format!("{key}.{name}");
+        within(
+            v,
+            &k("critical_angle_deg"),
+            self.critical_angle_deg,
+            0.0,
+            90.0,
+        );
+        if let Some(n) = self.rays
+            && !(1..=101).contains(&n)
+        {
+            v.fail(k("rays"), format!("must be 1–101, got {n}"));
+        }
+        within(v, &k("noise_frac"), self.noise_frac, 0.0, 0.5);
+        within(v, &k("dropout_prob"), self.dropout_prob, 0.0, 1.0);
+        within(v, &k("crosstalk_prob"), self.crosstalk_prob, 0.0, 1.0);
+        within(v, &k("interval_s"), self.interval_s, 0.002, 10.0);
+    }
+}
+
+impl Validate for SmokeSensorFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        let k = |name: &str| format!("{key}.{name}");
+        within(v, &k("rise_tau_s"), self.rise_tau_s, 0.0, 600.0);
+        within(v, &k("fall_tau_s"), self.fall_tau_s, 0.0, 3600.0);
+        within(v, &k("ppm_per_gpm3"), self.ppm_per_gpm3, 0.0, 1e6);
+        within(v, &k("noise_mv"), self.noise_mv, 0.0, 1000.0);
+    }
+}
+
+impl Validate for TruthFile {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        within(v, &format!("{key}.rate_hz"), self.rate_hz, 0.1, 1000.0);
+        within(
+            v,
+            &format!("{key}.map_resolution_m"),
+            self.map_resolution_m,
+            0.005,
+            1.0,
+        );
     }
 }
 
@@ -845,12 +933,111 @@ mod tests {
     }
 
     #[test]
+    fn every_value_problem_is_listed_at_once_with_its_line() {
+        let text = MINIMAL.replace("duration_s = 10", "duration_s = -1")
+            + "[laser]\npatchiness = -1\n[sonar]\nrays = 0\n";
+        let e = Scenario::parse(&text, Path::new("bad.toml")).unwrap_err();
+        let SimError::Config(c) = &e else {
+            panic!("expected invalid values, got {e:?}")
+        };
+        assert_eq!(
+            c.keys(),
+            ["duration_s", "laser.patchiness", "sonar.rays"],
+            "{e}"
+        );
+        let line = |prefix: &str| text.lines().position(|l| l.starts_with(prefix)).unwrap() + 1;
+        let msg = e.to_string();
+        for (prefix, key) in [
+            ("duration_s", "duration_s"),
+            ("patchiness", "laser.patchiness"),
+            ("rays", "sonar.rays"),
+        ] {
+            let want = format!("bad.toml:{}: key `{key}`: ", line(prefix));
+            assert!(msg.contains(&want), "{want} in {msg}");
+        }
+    }
+
+    #[test]
+    fn placement_problems_are_listed_together() {
+        let text = MINIMAL.replace("x = 0.7", "x = 0.1")
+            + "[route]\nwaypoints = [[4.5, 0.7]]\n[[smoke.source]]\nposition = [1.5, 0.5]\nschedule = []\n";
+        let e = Scenario::parse(&text, Path::new("bad.toml")).unwrap_err();
+        let SimError::Config(c) = &e else {
+            panic!("expected invalid values, got {e:?}")
+        };
+        assert_eq!(
+            c.keys(),
+            ["start", "route.waypoints[0]", "smoke.source[0].position"],
+            "{e}"
+        );
+    }
+
+    #[test]
     fn missing_map_file_is_named() {
         let text = MINIMAL.replace("builtin = \"mrl\"", "map = \"nowhere.yaml\"");
         let e = Scenario::parse(&text, Path::new("/tmp/x/s.toml"))
             .unwrap_err()
             .to_string();
         assert!(e.contains("nowhere.yaml"), "{e}");
+    }
+
+    /// A scenario error says where: a key, or the file it could not use.
+    fn names_a_key_or_file(e: &SimError) -> bool {
+        match e {
+            SimError::Config(c) => !c.keys().is_empty() || matches!(c, ConfigError::Io { .. }),
+            SimError::Invalid { key, .. } => !key.is_empty(),
+            SimError::Io { .. } | SimError::Map(_) => true,
+        }
+    }
+
+    /// A bundled scenario with the value of one `key = value` line replaced.
+    fn mutated(text: &str, line: usize, new: &str) -> String {
+        let assignments: Vec<usize> = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim_start().starts_with('#') && l.contains(" = "))
+            .map(|(i, _)| i)
+            .collect();
+        let target = assignments[line % assignments.len()];
+        text.lines()
+            .enumerate()
+            .map(|(i, l)| match l.split_once(" = ") {
+                Some((k, _)) if i == target => format!("{k} = {new}"),
+                _ => l.to_owned(),
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    fn value() -> impl proptest::strategy::Strategy<Value = String> {
+        use proptest::prelude::*;
+        prop_oneof![
+            any::<f64>().prop_map(|v| format!("{v:?}")),
+            any::<i64>().prop_map(|v| v.to_string()),
+            Just("nan".to_owned()),
+            Just("1e300".to_owned()),
+            Just("\"r3.2\"".to_owned()),
+            Just("[]".to_owned()),
+            Just("[[1e300, -1e300]]".to_owned()),
+            Just("true".to_owned()),
+        ]
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
+
+        #[test]
+        fn a_mutated_bundled_scenario_loads_or_names_the_key(
+            which in 0usize..BUILTIN_SCENARIOS.len(),
+            line in 0usize..500,
+            new in value(),
+        ) {
+            let (name, text) = BUILTIN_SCENARIOS[which];
+            let file = PathBuf::from(format!("sim/scenarios/{name}.toml"));
+            if let Err(e) = Scenario::parse(&mutated(text, line, &new), &file) {
+                proptest::prop_assert!(names_a_key_or_file(&e), "{e:?}");
+            }
+        }
     }
 
     proptest::proptest! {

@@ -1,8 +1,8 @@
 //! The smoke density field: a 2D grid of mass concentration (g/m³, assumed
 //! mixed over a layer at sensor height) moved by advection–diffusion, lost by
 //! decay (ventilation, deposition) and fed by point sources on a schedule, as
-//! in seed 000's trials (a smoke machine injecting at one point of the arena
-//! while the robot maps) and in Pascoal et al. (cited there: smoke injected
+//! in the trials of SmokeNav (Santos et al. 2015) (a smoke machine injecting at one point of the arena
+//! while the robot maps) and in Pascoal et al. 2008 (cited there: smoke injected
 //! progressively and spread by a ventilator).
 //!
 //! Walls are no-flux boundaries: the grid cells they cross are solid and

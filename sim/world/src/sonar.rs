@@ -2,24 +2,24 @@
 //! reflection.
 //!
 //! * Immune to smoke: "since they use acoustic waves, they are immune to
-//!   smoke or dust particles" (seed 000, Sec. 4). The model never looks at the
+//!   smoke or dust particles" (SmokeNav (Santos et al. 2015), Sec. 4). The model never looks at the
 //!   smoke field.
 //! * Cone: the beam is sampled by rays across its full width (15° for the
 //!   Pioneer's SensComp Series 600 at −6 dB, ~20° for the Scout's Polaroid
-//!   6500; seed 000 Sec. 4, both in the robot profiles). The reading is the
+//!   6500; SmokeNav Sec. 4, both in the robot profiles). The reading is the
 //!   nearest surface that echoes.
 //! * Specular reflection: smooth walls mirror ultrasound, so a patch only
 //!   echoes back to the transducer when the ray meets it within a critical
 //!   incidence angle of its normal; otherwise the sound is deflected away and,
 //!   with nothing else in the cone, the sonar reports its maximum range
-//!   (saturated). Seed 000 Fig. 5: in a plain corridor only the Pioneer's ±90°
+//!   (saturated). SmokeNav Fig. 5: in a plain corridor only the Pioneer's ±90°
 //!   sonars see the walls ("obstacles are only detected when the incident
 //!   beam is normal or nearly normal"); Fig. 6: the Scout's side sonars "are
 //!   able to detect the walls even when the incident sonar beam is not
 //!   normal". Hence a small critical angle for the Pioneer and a larger one
 //!   for the Scout, both configurable.
 //! * Range noise: both transducer families are specified at ±1 % of range.
-//! * "The Pioneer's less stable behaviour" (seed 000 Sec. 4, 5.3.1) is an
+//! * "The Pioneer's less stable behaviour" (SmokeNav Sec. 4, 5.3.1) is an
 //!   option: echoes randomly lost (max-range reading) and occasional short
 //!   crosstalk readings from a neighbour's ping.
 
@@ -47,7 +47,7 @@ pub struct SonarParams {
 }
 
 impl SonarParams {
-    /// Seed 000's Pioneer 3-DX ring: 15° cones, near-normal echoes only.
+    /// The SmokeNav paper's Pioneer 3-DX ring: 15° cones, near-normal echoes only.
     pub fn pioneer() -> Self {
         Self {
             cone_deg: 15.0,
@@ -61,7 +61,7 @@ impl SonarParams {
         }
     }
 
-    /// Seed 000's Nomad Scout ring: ~20° Polaroid 6500 cones that echo off oblique walls.
+    /// The SmokeNav paper's Nomad Scout ring: ~20° Polaroid 6500 cones that echo off oblique walls.
     pub fn scout() -> Self {
         Self {
             cone_deg: 20.0,
@@ -176,7 +176,7 @@ mod tests {
 
     #[test]
     fn pioneer_oblique_sonars_saturate_in_a_plain_corridor() {
-        // Seed 000 Fig. 5b: only ±90° see the walls; ±50° and ±30° meet them at 40°/60° incidence.
+        // SmokeNav Fig. 5b: only ±90° see the walls; ±50° and ±30° meet them at 40°/60° incidence.
         for yaw in [50.0, 30.0, -30.0, -50.0] {
             let e = ping(SonarParams::pioneer(), yaw, 0.0);
             assert!(e.saturated && e.range_m == 5.0, "yaw {yaw}: {e:?}");
@@ -185,7 +185,7 @@ mod tests {
 
     #[test]
     fn scout_oblique_sonars_see_corridor_walls() {
-        // Seed 000 Fig. 6: the Scout's side sonars detect the walls off normal incidence.
+        // SmokeNav Fig. 6: the Scout's side sonars detect the walls off normal incidence.
         for yaw in [67.5, 45.0, -45.0, -67.5] {
             let e = ping(SonarParams::scout(), yaw, 0.0);
             assert!(!e.saturated, "yaw {yaw}: {e:?}");

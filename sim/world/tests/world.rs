@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Duration;
 
 /// A Pioneer parked in the corridor facing its end wall: laser at x = 13.16 m,
-/// wall at 16 m (2.84 m ahead), as in seed 000's Fig. 4 trial.
+/// wall at 16 m (2.84 m ahead), as in the Fig. 4 trial of SmokeNav (Santos et al. 2015).
 fn facing_wall(extra: &str) -> Scenario {
     let text = format!(
         "name = \"facing-wall\"\nseed = 11\nduration_s = 30\nrobot = \"pioneer-3dx\"\n\
@@ -250,7 +250,7 @@ fn dense_crossing_blinds_the_laser_while_sonars_keep_seeing_walls() {
     }
     let (b, i) = (mean_sd(&before).0, mean_sd(&inside).0);
     assert!(!inside.is_empty(), "the route crosses dense smoke");
-    // Seed 000's fuzzy rule trusts the laser while σ(lR) is above 0.8.
+    // SmokeNav's fuzzy rule trusts the laser while σ(lR) is above 0.8.
     assert!(b > 0.8 && i < 0.3, "scan sd before {b}, in smoke {i}");
     assert!(
         sonar_inside.0 * 2 > sonar_inside.1,

@@ -1,6 +1,7 @@
 //! Accuracy of maps and trajectories against ground truth (the simulator's,
-//! or a surveyed one): the k-nearest-neighbour map error of seed 000 in both
-//! directions, the pixel error of seed 004, and ATE/RPE for trajectories.
+//! or a surveyed one): the k-nearest-neighbour map error of SmokeNav (Santos et
+//! al. 2015) in both directions, the pixel error of SLAMfusion (Fernandes &
+//! Alexandre), and ATE/RPE for trajectories.
 //! Pure functions over loaded data plus loaders whose errors name the file;
 //! `smokenav eval` is the command-line front end.
 
@@ -47,11 +48,14 @@ pub fn evaluate_map_files(
     evaluate_maps(&t, &e, opts).map_err(|source| {
         // Name the file the problem is in.
         let path = match &source {
-            MapMetricError::NoWalls { which, .. } | MapMetricError::Geometry { which, .. }
+            MapMetricError::NoWalls { which, .. }
+            | MapMetricError::Geometry { which, .. }
+            | MapMetricError::TooManyWalls { which, .. }
                 if *which == "estimated" =>
             {
                 estimate.to_owned()
             }
+            MapMetricError::Incomparable { .. } => estimate.to_owned(),
             _ => truth.to_owned(),
         };
         EvalError::MapMetric { path, source }

@@ -1,13 +1,13 @@
 //! Map accuracy against a ground-truth map.
 //!
-//! * k-nearest-neighbour error (seed 000, Sec. 3 and Table 4, after Santos et
+//! * k-nearest-neighbour error (SmokeNav (Santos et al. 2015), Sec. 3 and Table 4, after Santos et
 //!   al. 2013): after a best-fit alignment, for each occupied ground-truth
 //!   cell the distance to the nearest occupied cell of the estimate (walls
 //!   missed or misplaced), and — so phantom walls, e.g. smoke mapped as an
 //!   obstacle, are penalised too — for each occupied estimated cell the
 //!   distance to the nearest occupied ground-truth cell. Reported in metres
-//!   and in cells of the ground truth (the seed's tables are in pixels).
-//! * Pixel error (seed 004): with cells normalised to −1 unknown, 0 free, 1
+//!   and in cells of the ground truth (the paper's tables are in pixels).
+//! * Pixel error (SLAMfusion (Fernandes & Alexandre)): with cells normalised to −1 unknown, 0 free, 1
 //!   occupied (occupancy/100 in between), Error = (Σ (T − M)²)^½ over the
 //!   ground-truth grid, and the same as a root mean square per cell.
 //!
@@ -24,6 +24,16 @@ use smokenav_platform_map::OccupancyGrid;
 
 /// Cells at or above this occupancy count as occupied (map_server's 0.65 threshold).
 pub const DEFAULT_OCCUPIED: i8 = 65;
+
+/// Most wall cells a map may have. The alignment costs each candidate pose a
+/// pass over the estimate's walls: a building's map has tens of thousands; a
+/// map millions of cells "occupied" is not a map of walls (an inverted
+/// image, a wrong threshold) and would keep `smokenav eval` busy for minutes.
+pub const MAX_WALL_CELLS: usize = 200_000;
+
+/// Largest ratio between the two maps' cell sizes: beyond it the finer map's
+/// walls fit in a handful of the coarser map's cells and the comparison says nothing.
+pub const MAX_RESOLUTION_RATIO: f64 = 100.0;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct MapOptions {
@@ -113,7 +123,7 @@ pub struct MapReport {
     pub knn_error_m: f64,
     /// The same in ground-truth cells (pixels).
     pub knn_error_cells: f64,
-    /// Seed 004's error: (Σ (T − M)²)^½ over the ground-truth grid.
+    /// SLAMfusion's pixel error: (Σ (T − M)²)^½ over the ground-truth grid.
     pub pixel_error: f64,
     /// Per-cell root mean square of T − M.
     pub pixel_rms: f64,
@@ -126,6 +136,18 @@ pub enum MapMetricError {
     NoWalls { which: &'static str, threshold: i8 },
     #[error("the {which} map has an invalid geometry: {reason}")]
     Geometry { which: &'static str, reason: String },
+    #[error(
+        "the {which} map has {cells} occupied cells (occupancy ≥ {threshold}), more than the {MAX_WALL_CELLS} a map of walls has"
+    )]
+    TooManyWalls {
+        which: &'static str,
+        cells: usize,
+        threshold: i8,
+    },
+    #[error(
+        "the estimated map's cells ({estimate_m} m) and the ground truth's ({truth_m} m) differ by more than {MAX_RESOLUTION_RATIO}×"
+    )]
+    Incomparable { truth_m: f64, estimate_m: f64 },
 }
 
 fn occupied(g: &OccupancyGrid, threshold: i8) -> Vec<(f64, f64)> {
@@ -356,7 +378,24 @@ pub fn evaluate_maps(
 ) -> Result<MapReport, MapMetricError> {
     check_geometry(truth, "ground-truth")?;
     check_geometry(est, "estimated")?;
+    let ratio = est.resolution / truth.resolution;
+    if !(1.0 / MAX_RESOLUTION_RATIO..=MAX_RESOLUTION_RATIO).contains(&ratio) {
+        return Err(MapMetricError::Incomparable {
+            truth_m: truth.resolution,
+            estimate_m: est.resolution,
+        });
+    }
     let thr = opts.occupied_threshold;
+    for (g, which) in [(truth, "ground-truth"), (est, "estimated")] {
+        let cells = g.cells.iter().filter(|&&c| c >= thr).count();
+        if cells > MAX_WALL_CELLS {
+            return Err(MapMetricError::TooManyWalls {
+                which,
+                cells,
+                threshold: thr,
+            });
+        }
+    }
     let truth_pts = occupied(truth, thr);
     let est_pts = occupied(est, thr);
     if truth_pts.is_empty() {
@@ -395,7 +434,7 @@ pub fn evaluate_maps(
     );
     let knn_error_m = (truth_to_map.mean_m + map_to_truth.mean_m) / 2.0;
 
-    // Seed 004's pixel error over the ground-truth grid, the estimate sampled at each aligned cell centre.
+    // SLAMfusion's pixel error over the ground-truth grid, the estimate sampled at each aligned cell centre.
     let mut sum2 = 0.0;
     for y in 0..truth.height {
         for x in 0..truth.width {
@@ -429,6 +468,37 @@ mod tests {
     use smokenav_platform_map::{FREE, OCCUPIED};
 
     const RES: f64 = 0.05;
+
+    // Both used to keep `smokenav eval` busy for minutes (ring searches
+    // across 1e300 m, alignment passes over 4 M "walls"); now they are errors.
+    #[test]
+    fn a_map_of_absurd_cell_size_is_incomparable() {
+        let mut est = room(40);
+        est.resolution = 1e300;
+        assert_eq!(
+            evaluate_maps(&room(40), &est, &MapOptions::default()),
+            Err(MapMetricError::Incomparable {
+                truth_m: RES,
+                estimate_m: 1e300
+            })
+        );
+    }
+
+    #[test]
+    fn a_fully_occupied_map_is_not_a_map_of_walls() {
+        let mut est = OccupancyGrid::new(2000, 2000, RES, [0.0, 0.0, 0.0]);
+        est.cells.fill(OCCUPIED);
+        let err = evaluate_maps(&room(40), &est, &MapOptions::default()).unwrap_err();
+        assert_eq!(
+            err,
+            MapMetricError::TooManyWalls {
+                which: "estimated",
+                cells: 4_000_000,
+                threshold: DEFAULT_OCCUPIED
+            }
+        );
+        assert!(err.to_string().contains("4000000"), "{err}");
+    }
 
     /// A 4 × 3 m room (80 × 60 cells inside a 1-cell wall) with a free-standing
     /// partition at column `partition_x`, rows 10 to 40 (31 cells, 8 cells
@@ -499,7 +569,7 @@ mod tests {
                 r.truth_to_map
             );
             assert!((r.knn_error_cells - k as f64 * 31.0 / n).abs() < 1e-6);
-            // Seed 004: 31 cells went occupied → free and 31 free → occupied, each (1 − 0)² = 1.
+            // SLAMfusion's error: 31 cells went occupied → free and 31 free → occupied, each (1 − 0)² = 1.
             assert!(
                 (r.pixel_error - 62f64.sqrt()).abs() < 1e-9,
                 "k = {k}: {}",

@@ -4,8 +4,9 @@
 use crate::geometry::{GeometryError, ScanShape, Section, Sections, SonarEcho, SonarGeometry};
 use crate::v1::{self, LaserSectionStats, SmokeClassifier, SmokeState};
 use crate::v2::{FuzzyModel, LaserTrust};
+use smokenav_platform_config::RobotConfig;
+use smokenav_platform_config::ScanLayout;
 use smokenav_platform_config::fusion::{V1Params, V2Params};
-use smokenav_platform_config::{Method, RobotConfig, ScanLayout};
 use smokenav_shared_types::laser::{BEAM_BEYOND_MAX, BEAM_NO_RETURN};
 use smokenav_shared_types::{
     BeamReading, FixedStr, FusedScan, FusionMethod, Header, LaserScan, MAX_BEAMS, MAX_SONARS,
@@ -119,11 +120,7 @@ impl FusionEngine {
         method: Option<FusionMethod>,
     ) -> Result<Self, GeometryError> {
         let geometry = SonarGeometry::from_config(&cfg.laser, &cfg.sonar, &cfg.fusion)?;
-        let method = method.unwrap_or(match cfg.fusion.method {
-            Method::LaserOnly => FusionMethod::LaserOnly,
-            Method::V1 => FusionMethod::V1,
-            Method::V2 => FusionMethod::V2,
-        });
+        let method = method.unwrap_or(cfg.fusion.method);
         let mut e = Self::new(
             method,
             geometry,

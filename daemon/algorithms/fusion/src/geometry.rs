@@ -4,7 +4,7 @@
 //! Each transducer pose comes from the robot profile (base frame) and is
 //! moved into the laser frame once. A reading `r` means "an echo somewhere on
 //! the arc of radius `r` around the transducer, within its cone". Algorithm 1
-//! of the seed paper paints ±cone/2 around the bearing of the axis point at
+//! of SmokeNav (Santos et al. 2015) paints ±cone/2 around the bearing of the axis point at
 //! that point's distance; here every beam of the laser (at its own angular
 //! resolution) is intersected with the true arc, which is the same thing when
 //! the sonar sits at the laser origin and stays right when it does not (a

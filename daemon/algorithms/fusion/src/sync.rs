@@ -1,9 +1,9 @@
 //! Approximate-time synchronisation with ROS message_filters semantics, plus a timeout.
 //!
-//! [`ApproxCore`] is a port of the `ApproximateTime` policy (see
-//! `shared/reference/sync.md`): per-topic bounded queues, a pivot, candidate
-//! sets of minimal span (with ROS's age penalty), emission once a set is
-//! provably optimal, inter-message lower bounds to prove it early. It works on
+//! [`ApproxCore`] is a port of ROS message_filters' `ApproximateTime`
+//! policy: per-topic bounded queues, a pivot, candidate sets of minimal span
+//! (with ROS's age penalty), emission once a set is provably optimal,
+//! inter-message lower bounds to prove it early. It works on
 //! stamps only; the typed layer ([`Sync3`]) keeps the messages in FIFOs that
 //! mirror the stamp queues, so no message is copied out or allocated per cycle.
 //!

@@ -89,7 +89,7 @@ pub fn saturated_ring(geometry: &SonarGeometry, stamp_ns: u64, seq: u64) -> Sona
     ring
 }
 
-/// The layout of the seed paper's Hokuyo URG-04LX (steps 44–725 of 1024 per
+/// The layout of the Hokuyo URG-04LX SmokeNav (Santos et al. 2015) used (steps 44–725 of 1024 per
 /// turn, step 384 ahead): the test scans' shape.
 pub fn urg_04lx_shape() -> ScanShape {
     let inc = std::f64::consts::TAU / 1024.0;
@@ -127,7 +127,7 @@ pub fn smoky_scan(stamp_ns: u64, seq: u64) -> LaserScan {
     })
 }
 
-/// A ready smoke-sensor reading at `level` (seed scale).
+/// A ready smoke-sensor reading at `level` (the SmokeNav paper's mV scale).
 pub fn smoke_reading(stamp_ns: u64, seq: u64, level: f32, trend: SmokeTrend) -> SmokeReading {
     SmokeReading {
         header: Header::new(stamp_ns, seq, "smoke"),

@@ -1,4 +1,5 @@
-//! SmokeNav v1: the heuristic of Algorithm 2 (seed 000, §5.3).
+//! SmokeNav v1: the heuristic of Algorithm 2 of SmokeNav (Santos et al.
+//! 2015, §5.3), as implemented here.
 //!
 //! The smoke level picks a state — *clean* (only the laser), *light* (sonar
 //! and laser superimposed, the sonar replacing noisy or contradicted laser
@@ -13,6 +14,22 @@
 //! "LRF superimposed to sonar" while falling. Both keep both readings; in a
 //! laser-shaped scan that means the nearer of the two per beam
 //! (`SectionSource::Both`), so the direction only changes the threshold.
+//!
+//! Its numbers are keys under `[fusion.v1]` (keys, defaults and ranges in
+//! `smokenav_platform_config::fusion`):
+//!
+//! | paper                 | key                           | default |
+//! |-----------------------|-------------------------------|---------|
+//! | SMOKE_MIN             | `v1.smoke_min`                | 130     |
+//! | SMOKE_MAX_UP          | `v1.smoke_max_up`             | 200     |
+//! | SMOKE_MAX_DOWN        | `v1.smoke_max_down`           | 240     |
+//! | (Ns−1)/3 crossings    | `v1.zero_crossing_fraction`   | 1/3     |
+//! | MAX_DIFF = α_step·r̄  | (computed per section)        |         |
+//!
+//! Choices where the paper gives no number: `v1.disagreement_m` (a "high
+//! difference" between the laser and the sonar of one section, 0.3 m) and
+//! `v1.noise_floor_m` (differences smaller than this carry no sign in the
+//! zero-crossing test; 0 = the paper, every non-zero difference counts).
 
 use crate::geometry::SonarEcho;
 use smokenav_platform_config::fusion::V1Params;

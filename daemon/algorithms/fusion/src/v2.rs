@@ -1,20 +1,83 @@
-//! SmokeNav v2: the fuzzy model of Algorithm 3 and Fig. 14 (seed 000, §5.4).
+//! SmokeNav v2: the fuzzy model of Algorithm 3 and Fig. 14 of SmokeNav
+//! (Santos et al. 2015, §5.4), as implemented here, and the design choices
+//! where the paper is ambiguous or silent.
 //!
-//! Inputs: the section's sonar reading s_R[τ,t], the smoke level a_R[t] and
-//! the standard deviation σ(l_R[t]) of the scan's valid ranges. The rule
-//! base, read as the paper's rationale states it (see `smokenav_platform_config::fusion`
-//! for why the literal rule text cannot be meant):
+//! Every breakpoint is a key under `[fusion.v2]`; the keys, defaults and
+//! accepted ranges are listed in `smokenav_platform_config::fusion`.
 //!
-//! - laser:  w_L = max(1 − μ_Alcoholized(a), 1 − μ_Dense(σ))  — clean air OR a non-uniform scan;
-//! - ELSE-IF sonar: w_S = min(1 − w_L, μ_Confident(s)).
+//! ## Inputs and membership functions
 //!
-//! Beyond the paper, per section τ (see `smokenav_platform_config::fusion`, "the sonar
-//! as a witness"): w_L(τ) = min(w_L, max(1 − μ_Alcoholized(a),
-//! 1 − μ_Contradicted(c_τ))), where c_τ is the share of the section's laser
-//! ranges nearer than its sonar's arc; the sonar rule uses w_L(τ).
+//! Inputs: the section's sonar reading s_R\[τ,t\], the smoke level a_R\[t\] and
+//! the standard deviation σ(l_R\[t\]) of the scan's valid ranges.
 //!
-//! Each strength goes through Mamdani min/max and a centroid (ρL, ρS). With
-//! no usable smoke reading the laser rule uses σ alone.
+//! The breakpoints of Fig. 14 are not in the text. The paper's rationale is:
+//! "the LRF readings can only be trusted when alcohol readings are below 20
+//! or the standard deviation of the laser readings is above 0.8. If not, only
+//! trust the sonar readings whenever it presents readings inferior to 2.5
+//! meters". Each membership function therefore crosses 0.5 at the number the
+//! rationale names:
+//!
+//! | set          | key                   | input             | Π breakpoints a, b, c, d           | μ = 0.5 at |
+//! |--------------|-----------------------|-------------------|------------------------------------|------------|
+//! | Confident    | `v2.confident`        | sonar range s, m  | 0.05, 0.15, 2.0, 3.0               | 2.5 m      |
+//! | Alcoholized  | `v2.alcoholized`      | smoke level a     | 10, 30, inf, inf (rising shoulder) | 20         |
+//! | Dense        | `v2.dense`            | laser σ, m        | 0, 0, 0.6, 1.0 (falling shoulder)  | 0.8 m      |
+//!
+//! A Π function ([`crate::fuzzy::pi`]) is 0 below `a`, rises along an
+//! S-curve to 1 at `b`, stays 1 up to `c` and falls along a Z-curve to 0 at
+//! `d`; `a = b` or `c = d` makes that side a step, `inf` leaves it open.
+//!
+//! ## The rule base, and where the paper is ambiguous
+//!
+//! - **The rule text contradicts the rationale.** Algorithm 3 reads "IF a is
+//!   Alcoholized OR σ is Dense THEN ρL is Laser-driven", which would raise
+//!   the trust in the laser when there is smoke. We follow the rationale
+//!   (and the required behaviour: dense smoke ⇒ sonar, clean air ⇒ laser):
+//!   the laser rule fires with
+//!   `w_L = max(1 − μ_Alcoholized(a), 1 − μ_Dense(σ))` (the laser is trusted
+//!   when the air is clean OR the scan is not uniform), and the ELSE-IF
+//!   sonar rule with `w_S = min(1 − w_L, μ_Confident(s))`. With no usable
+//!   smoke reading the laser rule uses σ alone.
+//! - **One bell per output cannot express low trust.** With a single
+//!   consequent term, the centroid of the clipped term stays near the middle
+//!   of [0, 1] however weakly the rule fires. Each output therefore has the
+//!   same generalised bell twice ("the same bell-shaped membership relation
+//!   for softening both outputs", `v2.output_bell`): a *high* term centred at
+//!   1 fired with `w` and a *low* term centred at 0 fired with `1 − w`,
+//!   Mamdani min implication, max aggregation, centroid over
+//!   `v2.defuzz_samples` points of [0, 1] ([`crate::fuzzy::Defuzzifier`]).
+//!   ρ > 0.5 exactly when `w` > 0.5.
+//! - **Decision.** Sonar when ρS > ρL and ρS > ρT; laser when ρL ≥ ρS and
+//!   ρL > ρT; otherwise neither (beams marked beyond max range). The paper's
+//!   formula uses a strict `>` against ρT = 1/2 (`v2.rho_threshold`); its
+//!   prose says "equal or greater"; we use the formula.
+//! - **Uncovered laser sections** (between sonar cones) follow ρL, and are
+//!   dropped when a neighbouring section's laser was found contradicted.
+//!
+//! ## Beyond the paper: the sonar as a witness
+//!
+//! The smoke sensor sits on the robot, but the laser sees a smoke cloud
+//! metres before the robot enters it: for seconds the scan is a phantom wall
+//! while the smoke reading has barely risen, and a scan that is part phantom
+//! and part real walls keeps a high spread, so the Dense test does not fire
+//! either. Ultrasound is not scattered by smoke, and a sonar echoes from the
+//! nearest surface in its cone, so laser ranges clearly nearer (by more than
+//! `v2.contradiction_margin_m`) than the sonar's arc in that cone are
+//! something the sonar cannot see. When the sonar heard nothing within its
+//! cap, the arc is the cap's: beyond it a sonar misses weak and glancing
+//! echoes, so its silence there proves nothing.
+//!
+//! Each section's laser rule is therefore
+//! `w_L(τ) = min(w_L, max(1 − μ_Alcoholized(a), 1 − μ_Contradicted(c_τ)))`,
+//! where c_τ is the share of the section's laser ranges nearer than its
+//! sonar's arc (`v2.contradicted`: 0.1, 0.3, inf, inf); the sonar rule uses
+//! w_L(τ). In clean air nothing changes (bit-identical output); in
+//! alcoholized air a contradicted section goes to a confident sonar, or to
+//! neither when the sonar heard nothing — conflicting sensors give
+//! "unknown", as Bayesian occupancy fusion (Tran et al. 2021) requires of a
+//! fusion rule. Single contradicted beams of a kept section are dropped.
+//! `contradicted = { a = 2.0, b = 2.0, c = inf, d = inf }` (a share never
+//! reached) turns the witness off.
 
 use crate::fuzzy::{Defuzzifier, pi};
 use crate::geometry::SonarEcho;

@@ -2,8 +2,8 @@
 //! the GMapping reference poses and per-scan timing (thread CPU time).
 //!
 //! `cargo bench -p smokenav-algorithms-slam --bench csail` (full log, 30 particles).
-//! Environment: `CSAIL_DIR` (default ../../../shared/reference/slam from this
-//! crate), `CSAIL_SCANS` (stop after N scans), `CSAIL_PARTICLES`,
+//! Environment: `CSAIL_DIR` (required: the folder holding `mit-csail.clf` and
+//! `csail-reference-poses.txt`), `CSAIL_SCANS` (stop after N scans), `CSAIL_PARTICLES`,
 //! `CSAIL_PARAMS` (extra `[slam]` TOML keys, `;`-separated), `CSAIL_THETA0`
 //! (heading of the first pose in the map frame), `CSAIL_OUT` (folder for
 //! map.png/.pgm/.yaml, trajectory.txt, trajectory_online.txt,
@@ -40,11 +40,12 @@ fn main() {
     if std::env::args().any(|a| a == "--list") {
         return;
     }
-    let dir = std::env::var("CSAIL_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../../shared/reference/slam")
-        });
+    let Some(dir) = std::env::var_os("CSAIL_DIR").map(PathBuf::from) else {
+        eprintln!(
+            "csail: set CSAIL_DIR to the folder holding mit-csail.clf and csail-reference-poses.txt (the MIT CSAIL log, see REFERENCES.md); nothing measured"
+        );
+        std::process::exit(2);
+    };
     let max_scans: usize = std::env::var("CSAIL_SCANS")
         .ok()
         .and_then(|v| v.parse().ok())

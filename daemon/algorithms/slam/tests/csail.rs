@@ -2,10 +2,9 @@
 //! GMapping's corrected poses for the same scans (a reference, not ground truth).
 //!
 //! The prefix test runs by default on the first 200 scans (a fixture in
-//! `tests/data`). The full-log test needs a release build and the shared
-//! reference folder:
-//! `cargo test --release -p smokenav-algorithms-slam --test csail -- --ignored`
-//! (`CSAIL_DIR` overrides where `mit-csail.clf` and `csail-reference-poses.txt` are).
+//! `tests/data`). The full-log test needs a release build and the full log:
+//! `CSAIL_DIR=<folder with mit-csail.clf and csail-reference-poses.txt>
+//! cargo test --release -p smokenav-algorithms-slam --test csail -- --ignored`.
 
 use smokenav_algorithms_slam::eval::{AteReport, absolute_trajectory_error, parse_pose_file};
 use smokenav_algorithms_slam::offline::LogScans;
@@ -119,11 +118,9 @@ fn same_seed_same_trajectory_other_seed_other_trajectory() {
 #[test]
 #[ignore = "full 1988-scan log: run with --release -- --ignored"]
 fn csail_full_log_30_particles_within_0_3_m_rms() {
-    let dir = std::env::var("CSAIL_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../../shared/reference/slam")
-        });
+    let dir = std::env::var_os("CSAIL_DIR").map(PathBuf::from).expect(
+        "set CSAIL_DIR to the folder holding mit-csail.clf and csail-reference-poses.txt (the MIT CSAIL log, see REFERENCES.md)",
+    );
     let cfg = SlamSection::default();
     assert_eq!(cfg.particles, 30);
     let r = run(&dir.join("mit-csail.clf"), &cfg);

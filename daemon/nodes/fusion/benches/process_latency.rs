@@ -14,9 +14,11 @@
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_fusion::testkit::{Room, smoke_reading, smoky_scan};
 use smokenav_platform_bus::{Bus, BusOptions, Waiter, topics};
-use smokenav_platform_config::{Method, RobotConfig};
+use smokenav_platform_config::RobotConfig;
 use smokenav_shared_types::clock::monotonic_now_ns;
-use smokenav_shared_types::{FusedScan, Health, LaserScan, SmokeReading, SmokeTrend, SonarRing};
+use smokenav_shared_types::{
+    FusedScan, FusionMethod, Health, LaserScan, SmokeReading, SmokeTrend, SonarRing,
+};
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -39,7 +41,7 @@ fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../config/nomad-scout.toml");
     let mut cfg = RobotConfig::load(&src).expect("profile");
-    cfg.fusion.method = Method::V2;
+    cfg.fusion.method = FusionMethod::V2;
     // 25 Hz inputs: successive stamps 40 ms apart, so 20 ms bounds hold.
     cfg.fusion.sync.laser_min_period_s = 0.02;
     cfg.fusion.sync.sonar_min_period_s = 0.02;

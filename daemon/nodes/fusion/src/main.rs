@@ -14,7 +14,7 @@
 //! ```
 
 use anyhow::Context;
-use clap::{Parser, ValueEnum};
+use clap::Parser;
 use smokenav_algorithms_fusion::engine::StepReport;
 use smokenav_algorithms_fusion::pipeline::{FusionPipeline, LASER, SMOKE, SONAR, TOPIC_NAMES};
 use smokenav_algorithms_fusion::sync::DropReason;
@@ -27,14 +27,6 @@ use smokenav_shared_types::{
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum MethodArg {
-    #[value(name = "laser-only")]
-    LaserOnly,
-    V1,
-    V2,
-}
-
 #[derive(Parser)]
 #[command(
     version,
@@ -45,17 +37,12 @@ struct Args {
     common: CommonArgs,
     /// Fusion method, overriding `[fusion] method`.
     #[arg(long, value_enum)]
-    method: Option<MethodArg>,
+    method: Option<FusionMethod>,
 }
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    let method = args.method.map(|m| match m {
-        MethodArg::LaserOnly => FusionMethod::LaserOnly,
-        MethodArg::V1 => FusionMethod::V1,
-        MethodArg::V2 => FusionMethod::V2,
-    });
-    smokenav_platform_runtime::main("fusion", &args.common, |p| run(p, method))
+    smokenav_platform_runtime::main("fusion", &args.common, |p| run(p, args.method))
 }
 
 /// Where fused scans go, and what happened to them.

@@ -1,100 +1,54 @@
-//! `[fusion]`: the synchroniser and the SmokeNav methods (seed 000, §5.2–5.4).
+//! `[fusion]`: the synchroniser and the SmokeNav methods.
 //!
 //! Every threshold and membership breakpoint of both methods is a key here,
-//! with the seed paper's value as the default where the paper gives one.
+//! with the value of SmokeNav (Santos et al. 2015) as the default where the
+//! paper gives one. What the methods do with them — the paper's tables, where
+//! its text is ambiguous and what was decided, what goes beyond it — is the
+//! design documentation beside the code: `smokenav_algorithms_fusion::v1` and
+//! `smokenav_algorithms_fusion::v2` (`daemon/algorithms/fusion/src/v1.rs`,
+//! `v2.rs`); the synchroniser follows ROS message_filters' ApproximateTime
+//! policy (`smokenav_algorithms_fusion::sync`).
 //!
-//! ## SmokeNav v1 (`[fusion.v1]`, Algorithm 2)
+//! | key                         | meaning                                                                   | default              | range                       |
+//! |-----------------------------|---------------------------------------------------------------------------|----------------------|-----------------------------|
+//! | `method`                    | fusion method: `laser-only`, `v1` or `v2`                                 | `v2`                 | one of the three            |
+//! | `sonar_cap_m`               | sonar readings beyond are saturated, m                                    | 2.5                  | [0.2, 20]                   |
+//! | `section_range_m`           | range at which a sonar's cone defines its laser section τ, m              | `sonar_cap_m`        | [0.2, 20]                   |
+//! | `sync.queue_size`           | messages kept per input topic                                             | 8                    | 2–1000                      |
+//! | `sync.max_interval_s`       | widest stamp span of a set, s                                             | 0.15                 | [0.001, 5]                  |
+//! | `sync.timeout_s`            | an input silent this long no longer holds up the output, s                | 0.5                  | [0.01, 10]                  |
+//! | `sync.age_penalty`          | ROS's age penalty                                                         | 0.1                  | [0, 10]                     |
+//! | `sync.laser_min_period_s`   | inter-message lower bound of the laser, s (0 off)                         | 0.05                 | [0, 10], < `sync.timeout_s` |
+//! | `sync.sonar_min_period_s`   | … of the sonar ring, s                                                    | 0.05                 | [0, 10], < `sync.timeout_s` |
+//! | `sync.smoke_min_period_s`   | … of the smoke sensor, s                                                  | 0.05                 | [0, 10], < `sync.timeout_s` |
+//! | `v1.smoke_min`              | SMOKE_MIN: below it, only the laser                                       | 130                  | ≥ 0, < both maxima          |
+//! | `v1.smoke_max_up`           | SMOKE_MAX_UP: rising smoke at or above it, only the sonar                 | 200                  | finite                      |
+//! | `v1.smoke_max_down`         | SMOKE_MAX_DOWN: the same while the smoke falls                            | 240                  | finite                      |
+//! | `v1.zero_crossing_fraction` | share of sign changes that makes a laser section noisy                    | 1/3                  | [0, 1]                      |
+//! | `v1.noise_floor_m`          | differences up to this carry no sign, m                                   | 0                    | [0, 1]                      |
+//! | `v1.disagreement_m`         | laser–sonar difference at which the sonar replaces the laser, m           | 0.3                  | [0, 20]                     |
+//! | `v2.rho_threshold`          | ρT: a source needs more trust than this                                   | 0.5                  | [0, 1]                      |
+//! | `v2.confident`              | μ Confident over the sonar range, m                                       | 0.05, 0.15, 2.0, 3.0 | Π shape                     |
+//! | `v2.alcoholized`            | μ Alcoholized over the smoke level                                        | 10, 30, inf, inf     | Π shape                     |
+//! | `v2.dense`                  | μ Dense over the laser's spread σ, m                                      | 0, 0, 0.6, 1.0       | Π shape                     |
+//! | `v2.contradicted`           | μ Contradicted over the share of laser ranges nearer than the sonar's arc | 0.1, 0.3, inf, inf   | Π shape                     |
+//! | `v2.contradiction_margin_m` | how much nearer a laser range must be to contradict, m                    | 0.3                  | [0, 5]                      |
+//! | `v2.output_bell`            | the consequent bell: `width` at μ = 0.5, `slope`                          | 0.2, 2.0             | [0.01, 1], [0.1, 20]        |
+//! | `v2.defuzz_samples`         | points of [0, 1] the centroid is taken over                               | 101                  | 11–10001                    |
 //!
-//! | paper              | key here                  | default |
-//! |--------------------|---------------------------|---------|
-//! | SMOKE_MIN          | `smoke_min`               | 130     |
-//! | SMOKE_MAX_UP       | `smoke_max_up`            | 200     |
-//! | SMOKE_MAX_DOWN     | `smoke_max_down`          | 240     |
-//! | (Ns−1)/3 crossings | `zero_crossing_fraction`  | 1/3     |
-//! | MAX_DIFF = α_step·r̄ | (computed per section)   |         |
-//!
-//! Choices where the paper gives no number: `disagreement_m` (a "high
-//! difference" between the laser and the sonar of one section, 0.3 m) and
-//! `noise_floor_m` (differences smaller than this carry no sign in the
-//! zero-crossing test; 0 = the paper, every non-zero difference counts).
-//!
-//! ## SmokeNav v2 (`[fusion.v2]`, Algorithm 3, Fig. 14)
-//!
-//! The breakpoints of Fig. 14 are not in the text. The paper's rationale is:
-//! "the LRF readings can only be trusted when alcohol readings are below 20
-//! or the standard deviation of the laser readings is above 0.8. If not, only
-//! trust the sonar readings whenever it presents readings inferior to 2.5
-//! meters". Each membership function therefore crosses 0.5 at the number the
-//! rationale names:
-//!
-//! | set          | input             | Π breakpoints a, b, c, d        | μ = 0.5 at |
-//! |--------------|-------------------|---------------------------------|------------|
-//! | Confident    | sonar range s, m  | 0.05, 0.15, 2.0, 3.0            | 2.5 m      |
-//! | Alcoholized  | smoke level a     | 10, 30, inf, inf (rising shoulder) | 20      |
-//! | Dense        | laser σ, m        | 0, 0, 0.6, 1.0 (falling shoulder)  | 0.8 m   |
-//!
-//! A Π function is 0 below `a`, rises along an S-curve to 1 at `b`, stays 1
-//! up to `c` and falls along a Z-curve to 0 at `d`; `a = b` or `c = d` makes
-//! that side a step, `inf` leaves it open.
-//!
-//! Where the paper is ambiguous, and what this implementation does:
-//! - **The rule text contradicts the rationale.** Algorithm 3 reads "IF a is
-//!   Alcoholized OR σ is Dense THEN ρL is Laser-driven", which would raise
-//!   the trust in the laser when there is smoke. We follow the rationale
-//!   (and the required behaviour: dense smoke ⇒ sonar, clean air ⇒ laser):
-//!   the laser rule fires with `w_L = max(1 − μ_Alcoholized, 1 − μ_Dense)`
-//!   (laser trusted when the air is clean OR the scan is not uniform), and the
-//!   ELSE-IF sonar rule with `w_S = min(1 − w_L, μ_Confident)`.
-//! - **One bell per output cannot express low trust.** With a single
-//!   consequent term, the centroid of the clipped term stays near the middle
-//!   of [0, 1] however weakly the rule fires. Each output therefore has the
-//!   same generalised bell twice ("the same bell-shaped membership relation
-//!   for softening both outputs"): a *high* term centred at 1 fired with `w`
-//!   and a *low* term centred at 0 fired with `1 − w`, Mamdani min
-//!   implication, max aggregation, centroid over `defuzz_samples` points of
-//!   [0, 1]. ρ > 0.5 exactly when `w` > 0.5.
-//! - **Decision.** Sonar when ρS > ρL and ρS > ρT; laser when ρL ≥ ρS and
-//!   ρL > ρT; otherwise neither (beams marked beyond max range). The paper's
-//!   formula uses a strict `>` against ρT = 1/2; its prose says "equal or
-//!   greater"; we use the formula.
-//! - **Uncovered laser sections** (between sonar cones) follow ρL, and are
-//!   dropped when a neighbouring section's laser was found contradicted.
-//!
-//! Beyond the paper: **the sonar as a witness.** The smoke sensor sits on the
-//! robot, but the laser sees a smoke cloud metres before the robot enters
-//! it: for seconds the scan is a phantom wall while the smoke reading has
-//! barely risen, and a scan that is part phantom and part real walls keeps
-//! a high spread, so the Dense test does not fire either. Ultrasound is not
-//! scattered by smoke, and a sonar echoes from the nearest surface in its
-//! cone, so laser ranges clearly nearer than the sonar's arc in that cone
-//! are something the sonar cannot see. When the sonar heard nothing within
-//! its cap, the arc is the cap's: beyond it a sonar misses weak and glancing
-//! echoes, so its silence there proves nothing. Each section's laser rule is therefore
-//! `w_L(τ) = min(w_L, max(1 − μ_Alcoholized, 1 − μ_Contradicted(τ)))`: in
-//! clean air nothing changes (bit-identical output); in alcoholized air a
-//! contradicted section goes to a confident sonar, or to neither when the
-//! sonar heard nothing — conflicting sensors give "unknown", as seed 003
-//! requires of a fusion rule. `contradicted = { a = 2.0, b = 2.0, c = inf, d = inf }` (a share never
-//! reached) turns it off.
+//! A Π shape is written `{ a = …, b = …, c = …, d = … }`: 0 below `a`, 1
+//! from `b` to `c`, 0 above `d`, with `a <= b <= c <= d`; `c` and `d` may be
+//! `inf` (an open shoulder). Every other value must be finite.
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Method {
-    #[serde(rename = "laser-only")]
-    LaserOnly,
-    #[serde(rename = "v1")]
-    V1,
-    #[serde(rename = "v2")]
-    V2,
-}
+pub use smokenav_shared_types::FusionMethod;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FusionSection {
     #[serde(default = "default_method")]
-    pub method: Method,
+    pub method: FusionMethod,
     /// Sonar readings beyond this are treated as saturated (the paper limited sonar to 2.5 m).
     #[serde(default = "default_cap")]
     pub sonar_cap_m: f64,
@@ -110,8 +64,8 @@ pub struct FusionSection {
     pub v2: V2Params,
 }
 
-fn default_method() -> Method {
-    Method::V2
+fn default_method() -> FusionMethod {
+    FusionMethod::V2
 }
 fn default_cap() -> f64 {
     2.5
@@ -266,7 +220,7 @@ pub struct V2Params {
     pub rho_threshold: f64,
     /// μ Confident over the section's sonar range, m.
     pub confident: PiShape,
-    /// μ Alcoholized over the smoke level (seed scale, see `SmokeReading::level`).
+    /// μ Alcoholized over the smoke level (the SmokeNav paper's mV scale, see `SmokeReading::level`).
     pub alcoholized: PiShape,
     /// μ Dense over the standard deviation of the scan's valid ranges, m.
     pub dense: PiShape,
@@ -450,7 +404,7 @@ mod tests {
     #[test]
     fn empty_section_has_the_papers_values() {
         let s = parse("").unwrap();
-        assert_eq!(s.method, Method::V2);
+        assert_eq!(s.method, FusionMethod::V2);
         assert_eq!(s.sonar_cap_m, 2.5);
         assert_eq!(s.section_range(), 2.5);
         assert_eq!(
@@ -487,6 +441,36 @@ mod tests {
     fn unknown_v2_key_is_rejected() {
         let err = parse("[v2]\nrho_t = 0.4\n").unwrap_err();
         assert!(err.contains("rho_t"), "{err}");
+    }
+
+    /// The key table of the module docs lists every key of the section, and nothing else.
+    #[test]
+    fn module_docs_list_every_key() {
+        let documented: std::collections::BTreeSet<String> = include_str!("fusion.rs")
+            .lines()
+            .take_while(|l| l.starts_with("//!"))
+            .filter_map(|l| l.strip_prefix("//! | `"))
+            .filter_map(|l| l.split('`').next())
+            .map(str::to_owned)
+            .collect();
+        let section = FusionSection {
+            section_range_m: Some(2.5),
+            ..FusionSection::default()
+        };
+        let table: toml::Table = toml::from_str(&toml::to_string(&section).unwrap()).unwrap();
+        let mut keys = std::collections::BTreeSet::new();
+        for (k, v) in &table {
+            match v.as_table() {
+                // Π shapes and the bell are one row each.
+                Some(t) if k == "sync" || k == "v1" || k == "v2" => {
+                    keys.extend(t.keys().map(|sub| format!("{k}.{sub}")))
+                }
+                _ => {
+                    keys.insert(k.clone());
+                }
+            }
+        }
+        assert_eq!(documented, keys);
     }
 
     #[test]

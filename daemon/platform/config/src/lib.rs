@@ -2,11 +2,13 @@
 //!
 //! Parsing is strict: unknown keys are rejected (a typo must not silently fall
 //! back to a default on a robot), and every value is validated. Errors name
-//! the file, the key and the reason:
+//! the file, the line, the key and the reason, every problem at once:
 //!
 //! ```text
-//! config/pioneer-3dx.toml: key `laser.stall_timeout_s`: must be within [0.2, 30], got -1
+//! config/pioneer-3dx.toml:12: key `laser.stall_timeout_s`: must be within [0.2, 30], got -1
 //! ```
+//!
+//! The shipped profiles are built in ([`RobotConfig::builtin`]).
 
 pub mod base;
 pub mod common;
@@ -20,17 +22,29 @@ pub mod validate;
 
 pub use base::{BaseSection, PioneerOptions, ScoutOptions, WheelOrder};
 pub use common::MountPose;
-pub use fusion::{FusionSection, Method, SyncParams};
+pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::{LaserSection, ScanLayout};
 pub use robot::{BusSection, Platform, RobotSection};
 pub use slam::SlamSection;
 pub use smoke::{AdcBackend, SmokeSection};
 pub use sonar::{SonarSection, Transducer};
-pub use validate::{Issue, Validate, Validator};
+pub use validate::{Issue, Validate, Validator, key_line};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::{Path, PathBuf};
+
+/// The robot profiles shipped in `config/`: (name, text).
+pub const BUILTIN_PROFILES: [(&str, &str); 2] = [
+    (
+        "pioneer-3dx",
+        include_str!("../../../../config/pioneer-3dx.toml"),
+    ),
+    (
+        "nomad-scout",
+        include_str!("../../../../config/nomad-scout.toml"),
+    ),
+];
 
 /// Environment variable that overrides `robot.instance`.
 pub const INSTANCE_ENV: &str = "SMOKENAV_INSTANCE";
@@ -89,9 +103,10 @@ pub enum ConfigError {
         error: std::io::Error,
     },
     /// The TOML is malformed, a key is unknown or a value has the wrong type.
-    #[error("{file}:{line}: key `{key}`: {reason}")]
+    #[error("{}: key `{key}`: {reason}", At(file, *line))]
     Parse {
         file: PathBuf,
+        /// 1-based; 0 when neither toml nor the key path locate it.
         line: usize,
         key: String,
         reason: String,
@@ -99,6 +114,21 @@ pub enum ConfigError {
     /// Values are well-formed but not acceptable.
     #[error("{}", InvalidDisplay(file, issues))]
     Invalid { file: PathBuf, issues: Vec<Issue> },
+    /// [`RobotConfig::builtin`] was asked for a profile that is not shipped.
+    #[error("no shipped robot profile is called {name:?} (have: {known})")]
+    UnknownBuiltin { name: String, known: String },
+}
+
+/// `file:line`, or `file` when the line is unknown (0).
+struct At<'a>(&'a Path, usize);
+
+impl fmt::Display for At<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.1 {
+            0 => write!(f, "{}", self.0.display()),
+            line => write!(f, "{}:{line}", self.0.display()),
+        }
+    }
 }
 
 struct InvalidDisplay<'a>(&'a PathBuf, &'a [Issue]);
@@ -109,7 +139,7 @@ impl fmt::Display for InvalidDisplay<'_> {
             if i > 0 {
                 writeln!(f)?;
             }
-            write!(f, "{}: {}", self.0.display(), issue)?;
+            write!(f, "{}: {}", At(self.0, issue.line.unwrap_or(0)), issue)?;
         }
         Ok(())
     }
@@ -119,7 +149,7 @@ impl ConfigError {
     /// The keys this error is about (for tests and tools).
     pub fn keys(&self) -> Vec<&str> {
         match self {
-            ConfigError::Io { .. } => vec![],
+            ConfigError::Io { .. } | ConfigError::UnknownBuiltin { .. } => vec![],
             ConfigError::Parse { key, .. } => vec![key.as_str()],
             ConfigError::Invalid { issues, .. } => issues.iter().map(|i| i.key.as_str()).collect(),
         }
@@ -138,19 +168,25 @@ impl RobotConfig {
         Ok(cfg)
     }
 
+    /// A profile shipped in `config/` by name (see [`BUILTIN_PROFILES`]),
+    /// parsed and validated. The environment overrides are not applied: the
+    /// caller decides (see [`Self::apply_env`]).
+    pub fn builtin(name: &str) -> Result<Self, ConfigError> {
+        let (name, text) = BUILTIN_PROFILES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .ok_or_else(|| ConfigError::UnknownBuiltin {
+                name: name.to_owned(),
+                known: BUILTIN_PROFILES.map(|(n, _)| n).join(", "),
+            })?;
+        Self::parse(text, Path::new(&format!("config/{name}.toml")))
+    }
+
     /// Parses and validates `text`; `file` is only used in messages.
     pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
         let cfg: RobotConfig = parse_toml(text, file)?;
-        let mut v = Validator::default();
-        cfg.validate("", &mut v);
-        if v.issues.is_empty() {
-            Ok(cfg)
-        } else {
-            Err(ConfigError::Invalid {
-                file: file.to_owned(),
-                issues: v.issues,
-            })
-        }
+        check(&cfg, text, file)?;
+        Ok(cfg)
     }
 
     /// `SMOKENAV_INSTANCE` and `SMOKENAV_IOX2_ROOT` override the file.
@@ -173,6 +209,21 @@ impl RobotConfig {
     }
 }
 
+/// Validates `value` (read from the TOML `text` of `file`): every issue, each
+/// with its key path and line.
+pub fn check(value: &impl Validate, text: &str, file: &Path) -> Result<(), ConfigError> {
+    let mut v = Validator::default();
+    value.validate("", &mut v);
+    if v.issues.is_empty() {
+        return Ok(());
+    }
+    v.locate(text);
+    Err(ConfigError::Invalid {
+        file: file.to_owned(),
+        issues: v.issues,
+    })
+}
+
 /// Deserialises any config-like TOML strictly, reporting the key path and line.
 pub fn parse_toml<T: serde::de::DeserializeOwned>(
     text: &str,
@@ -189,7 +240,8 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(
 fn toml_error(text: &str, file: &Path, key: String, e: &toml::de::Error) -> ConfigError {
     let line = e
         .span()
-        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
+        .map(|s| validate::line_of(text, s.start))
+        .or_else(|| validate::key_line(text, &key))
         .unwrap_or(0);
     let key = if key.is_empty() || key == "." {
         "(document)".to_owned()

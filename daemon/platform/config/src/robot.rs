@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Platform {
-    /// Pioneer 2/3 family over ARCOS (P3-DX in the seed paper).
+    /// Pioneer 2/3 family over ARCOS (the P3-DX of SmokeNav (Santos et al. 2015)).
     Pioneer,
     /// Nomad Scout over the Nomadic direct serial protocol.
     Scout,

@@ -1,7 +1,7 @@
 //! `[slam]`: the Rao-Blackwellised particle-filter SLAM (GMapping class).
 //!
 //! Every parameter has a default tuned for a laser scanner. `preset = "seed-table3"`
-//! starts from the values of the seed paper's Table 3 instead (GMapping as the
+//! starts from the values of SmokeNav (Santos et al. 2015), Table 3 instead (GMapping as the
 //! SmokeNav authors ran it on sonar-only data in the 4.57 × 4.04 m MRL arena):
 //!
 //! | Table 3          | key here             | value |
@@ -18,7 +18,7 @@
 //! | delta            | `resolution_m`       | 0.01  |
 //!
 //! Keys given explicitly in the file override the preset. Parameters Table 3
-//! does not list take GMapping's own defaults in the seed preset (srr 0.1,
+//! does not list take GMapping's own defaults in the Table 3 preset (srr 0.1,
 //! srt 0.2, str 0.1, stt 0.2, lsigma 0.075, ogain 3, lstep/astep 0.05) and
 //! write every processed scan into the maps, as GMapping does.
 //!
@@ -39,7 +39,7 @@ pub enum SlamPreset {
     #[default]
     #[serde(rename = "default")]
     Default,
-    /// The seed paper's Table 3 (GMapping fed by sonar in the MRL arena).
+    /// SmokeNav (Santos et al. 2015), Table 3 (GMapping fed by sonar in the MRL arena).
     #[serde(rename = "seed-table3")]
     SeedTable3,
 }
@@ -57,7 +57,7 @@ pub enum SlamInput {
 }
 
 /// Declares the section once: each field with its doc, type, default value and
-/// seed-Table-3 value. Generates the public struct, the all-optional raw form
+/// Table-3 value. Generates the public struct, the all-optional raw form
 /// serde reads, and the preset resolution.
 macro_rules! slam_section {
     ($( $(#[doc = $doc:literal])* $name:ident : $ty:ty = ($default:expr, $table3:expr) ),* $(,)?) => {
@@ -167,7 +167,7 @@ slam_section! {
     /// Log-odds added to the cell a sonar-painted beam ends in. The fused scan
     /// paints a sonar's echo as an arc across its cone, but the echo came
     /// from one place on it (the nearest surface): the arc's cells are
-    /// weaker evidence than a laser endpoint (seed 003: weigh each sensor by
+    /// weaker evidence than a laser endpoint (Tran et al. 2021: weigh each sensor by
     /// its precision). The free space before the arc is as sure as a laser's.
     sonar_hit_logodds: f64 = (0.3, 0.3),
     /// Log-odds removed from a cell a beam passes through.
@@ -183,13 +183,13 @@ slam_section! {
     min_match_laser_points: u32 = (40, 40),
     /// Endpoint standard deviation of beams that came from sonar (per `FusedScan::beam_source`), m.
     sonar_sigma_m: f64 = (0.2, 0.2),
-    /// Laser range variance in clear air (seed 001: B_o = 5, mm²).
+    /// Laser range variance in clear air (Sevcik & Oh 2007: B_o = 5, mm²).
     laser_variance_clear: f64 = (5.0, 5.0),
-    /// Laser range variance in light obscurant (seed 001: rain, B_rain = 8.39).
+    /// Laser range variance in light obscurant (Sevcik & Oh 2007: rain, B_rain = 8.39).
     laser_variance_light: f64 = (8.39, 8.39),
-    /// Laser range variance in dense obscurant (seed 001: fog at ~8 m visibility, B_fog = 13.75).
+    /// Laser range variance in dense obscurant (Sevcik & Oh 2007: fog at ~8 m visibility, B_fog = 13.75).
     laser_variance_dense: f64 = (13.75, 13.75),
-    /// Smoke level (seed scale) at which the light-obscurant variance applies (SmokeNav v1's first threshold).
+    /// Smoke level (SmokeNav's mV scale) at which the light-obscurant variance applies (SmokeNav v1's first threshold).
     smoke_level_light: f64 = (130.0, 130.0),
     /// Smoke level at and above which the dense-obscurant variance applies (SmokeNav v1's last threshold).
     smoke_level_dense: f64 = (240.0, 240.0),
@@ -312,8 +312,8 @@ impl Validate for SlamSection {
 }
 
 impl SlamSection {
-    /// Standard-deviation multiplier of laser beams at `smoke_level` (seed scale): the
-    /// square root of the variance ratio seed 001 measured (clear → rain → fog),
+    /// Standard-deviation multiplier of laser beams at `smoke_level` (SmokeNav's mV scale): the
+    /// square root of the variance ratio Sevcik & Oh 2007 measured (clear → rain → fog),
     /// interpolated linearly in variance between the configured smoke levels.
     pub fn laser_noise_factor(&self, smoke_level: f64) -> f64 {
         let clear = self.laser_variance_clear;

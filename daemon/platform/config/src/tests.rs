@@ -26,6 +26,20 @@ fn shipped_profiles_are_valid() {
 }
 
 #[test]
+fn builtin_profiles_are_the_shipped_files() {
+    for (name, _) in BUILTIN_PROFILES {
+        let file = profile(&format!("{name}.toml"));
+        let shipped = RobotConfig::parse(&std::fs::read_to_string(&file).unwrap(), &file).unwrap();
+        assert_eq!(RobotConfig::builtin(name).unwrap(), shipped);
+    }
+    let err = RobotConfig::builtin("pioneer-2").unwrap_err().to_string();
+    assert!(
+        err.contains("pioneer-2") && err.contains("pioneer-3dx, nomad-scout"),
+        "{err}"
+    );
+}
+
+#[test]
 fn pioneer_sonar_poses_are_arias() {
     let cfg = parse(&pioneer_text()).unwrap();
     let s3 = cfg.sonar.transducer(3).unwrap();
@@ -67,6 +81,83 @@ fn negative_rate_names_file_key_and_reason() {
     assert!(msg.contains("config/test-robot.toml"), "{msg}");
     assert_eq!(err.keys(), vec!["base.rate_hz"], "{msg}");
     assert!(msg.contains("-10"), "{msg}");
+}
+
+/// 1-based line of the first line of `text` starting with `prefix` (after indentation).
+fn line_starting(text: &str, prefix: &str) -> usize {
+    text.lines()
+        .position(|l| l.trim_start().starts_with(prefix))
+        .unwrap_or_else(|| panic!("no line starts with {prefix:?}"))
+        + 1
+}
+
+#[test]
+fn invalid_value_names_its_line() {
+    let text = pioneer_text().replace("cone_deg = 15.0", "cone_deg = 0.0");
+    let err = parse(&text).unwrap_err();
+    let ConfigError::Invalid { issues, .. } = &err else {
+        panic!("expected invalid values, got {err:?}")
+    };
+    let line = line_starting(&text, "cone_deg = 0.0");
+    assert_eq!(issues[0].line, Some(line));
+    assert!(
+        err.to_string().starts_with(&format!(
+            "config/test-robot.toml:{line}: key `sonar.cone_deg`: "
+        )),
+        "{err}"
+    );
+}
+
+#[test]
+fn invalid_array_element_names_the_elements_line() {
+    let text = pioneer_text().replace(
+        "{ index = 5, x = 0.148, y = -0.078, yaw_deg = -30.0 }",
+        "{ index = 5, x = 0.148, y = -0.078, yaw_deg = -390.0 }",
+    );
+    let err = parse(&text).unwrap_err();
+    assert_eq!(err.keys(), vec!["sonar.transducers[5].yaw_deg"], "{err}");
+    let line = line_starting(&text, "{ index = 5,");
+    assert!(
+        err.to_string()
+            .starts_with(&format!("config/test-robot.toml:{line}: ")),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_default_that_no_longer_fits_names_its_tables_line() {
+    // The inter-message bounds keep their default 0.05 s, now above the timeout.
+    let text = pioneer_text().replace(
+        "[fusion]\nmethod = \"v2\"\nsonar_cap_m = 2.5\n",
+        "[fusion]\nmethod = \"v2\"\nsonar_cap_m = 2.5\n\n[fusion.sync]\ntimeout_s = 0.04\n",
+    );
+    let err = parse(&text).unwrap_err();
+    let ConfigError::Invalid { issues, .. } = &err else {
+        panic!("expected invalid values, got {err:?}")
+    };
+    let laser = issues
+        .iter()
+        .find(|i| i.key == "fusion.sync.laser_min_period_s")
+        .unwrap_or_else(|| panic!("{err}"));
+    assert_eq!(laser.line, Some(line_starting(&text, "[fusion.sync]")));
+}
+
+#[test]
+fn key_line_follows_tables_arrays_and_inline_tables() {
+    let text = "a = 1\n[b]\nc = [\n  { d = 2 },\n  { d = 3, e = 4 },\n]\n[b.f]\ng = 5\n";
+    assert_eq!(key_line(text, "a"), Some(1));
+    assert_eq!(key_line(text, "b"), Some(2));
+    assert_eq!(key_line(text, "b.c"), Some(3));
+    assert_eq!(key_line(text, "b.c[1].e"), Some(5));
+    assert_eq!(
+        key_line(text, "b.c[9].e"),
+        Some(3),
+        "missing element: its array"
+    );
+    assert_eq!(key_line(text, "b.f.g"), Some(8));
+    assert_eq!(key_line(text, "b.f.h"), Some(7), "missing key: its table");
+    assert_eq!(key_line(text, "z"), None);
+    assert_eq!(key_line("not toml [", "a"), None);
 }
 
 #[test]
@@ -132,4 +223,121 @@ fn effective_config_round_trips() {
 fn unreadable_file_names_the_path() {
     let err = RobotConfig::load(Path::new("/nonexistent/robot.toml")).unwrap_err();
     assert!(err.to_string().contains("/nonexistent/robot.toml"));
+}
+
+mod props {
+    //! Profiles from the outside world: whatever the text, `parse` returns a
+    //! profile or a typed error that names a key, and never panics.
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Values a hand-edited or damaged file may hold where a number, string,
+    /// flag, table or array was expected.
+    fn value() -> impl Strategy<Value = String> {
+        prop_oneof![
+            any::<f64>().prop_map(|v| format!("{v:?}")),
+            any::<i64>().prop_map(|v| v.to_string()),
+            Just("nan".to_owned()),
+            Just("-inf".to_owned()),
+            Just("1e309".to_owned()),
+            Just("18446744073709551616".to_owned()),
+            "\"[^\"\\\\]{0,12}\"".prop_map(|s| s),
+            any::<bool>().prop_map(|b| b.to_string()),
+            Just("[]".to_owned()),
+            Just("{}".to_owned()),
+            Just("[1, \"a\", true]".to_owned()),
+            Just("{ a = 1 }".to_owned()),
+        ]
+    }
+
+    /// The shipped profile with the value of its `line`-th `key = value` line replaced.
+    fn mutated(text: &str, line: usize, new: &str) -> String {
+        let assignments: Vec<usize> = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim_start().starts_with('#') && l.contains(" = "))
+            .map(|(i, _)| i)
+            .collect();
+        let target = assignments[line % assignments.len()];
+        text.lines()
+            .enumerate()
+            .map(|(i, l)| match l.split_once(" = ") {
+                Some((k, _)) if i == target && !l.trim_start().starts_with('{') => {
+                    format!("{k} = {new}")
+                }
+                _ => l.to_owned(),
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    fn outcome_names_a_key(r: &Result<RobotConfig, ConfigError>) -> Result<(), TestCaseError> {
+        if let Err(e) = r {
+            prop_assert!(!e.keys().is_empty(), "no key in {e:?}");
+            prop_assert!(e.keys().iter().all(|k| !k.is_empty()), "{e:?}");
+        }
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1500))]
+
+        #[test]
+        fn a_mutated_value_gives_a_profile_or_an_error_naming_a_key(
+            shipped in 0usize..2,
+            line in 0usize..1000,
+            new in value(),
+        ) {
+            let text = BUILTIN_PROFILES[shipped].1;
+            let r = parse(&mutated(text, line, &new));
+            outcome_names_a_key(&r)?;
+        }
+
+        #[test]
+        fn arbitrary_text_gives_a_profile_or_an_error_naming_a_key(text in "\\PC{0,300}") {
+            outcome_names_a_key(&parse(&text))?;
+        }
+
+        #[test]
+        fn damaged_bytes_give_a_profile_or_an_error_naming_a_key(
+            shipped in 0usize..2,
+            at in 0usize..4000,
+            cut in 0usize..40,
+            insert in "[\\[\\]{}=\"#.,\n a-z0-9]{0,8}",
+        ) {
+            let text = BUILTIN_PROFILES[shipped].1;
+            let mut s: Vec<char> = text.chars().collect();
+            let at = at % s.len();
+            let cut = cut.min(s.len() - at);
+            s.splice(at..at + cut, insert.chars());
+            outcome_names_a_key(&parse(&s.into_iter().collect::<String>()))?;
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        /// Whatever valid profile a mutation produced, `to_toml` writes it so
+        /// that it loads back the same.
+        #[test]
+        fn a_valid_profile_round_trips_through_to_toml(
+            shipped in 0usize..2,
+            line in 0usize..1000,
+            new in value(),
+        ) {
+            let text = BUILTIN_PROFILES[shipped].1;
+            if let Ok(cfg) = parse(&mutated(text, line, &new)) {
+                let back = parse(&cfg.to_toml()).map_err(|e| TestCaseError::fail(e.to_string()))?;
+                prop_assert_eq!(back, cfg);
+            }
+        }
+    }
+
+    #[test]
+    fn shipped_profiles_round_trip_through_to_toml() {
+        for (name, _) in BUILTIN_PROFILES {
+            let cfg = RobotConfig::builtin(name).unwrap();
+            assert_eq!(parse(&cfg.to_toml()).unwrap(), cfg, "{name}");
+        }
+    }
 }

@@ -10,6 +10,9 @@ pub struct Issue {
     /// Dotted key path, e.g. `sonar.transducers[3].yaw_deg`.
     pub key: String,
     pub reason: String,
+    /// 1-based line of the key in the file (or of the nearest table that
+    /// holds it, when the value came from a default), once [`Validator::locate`] ran.
+    pub line: Option<usize>,
 }
 
 impl fmt::Display for Issue {
@@ -29,7 +32,21 @@ impl Validator {
         self.issues.push(Issue {
             key: key.into(),
             reason: reason.into(),
+            line: None,
         });
+    }
+
+    /// Fills in each issue's line from the TOML `text` the values came from.
+    pub fn locate(&mut self, text: &str) {
+        if self.issues.is_empty() {
+            return;
+        }
+        let Ok(doc) = toml::de::DeTable::parse(text) else {
+            return;
+        };
+        for issue in &mut self.issues {
+            issue.line = key_offset(doc.get_ref(), &issue.key).map(|at| line_of(text, at));
+        }
     }
 
     /// `value` must be finite and > 0.
@@ -71,6 +88,69 @@ impl Validator {
             self.fail(key, "must not be empty");
         }
     }
+}
+
+/// 1-based line of byte offset `at` in `text`.
+pub fn line_of(text: &str, at: usize) -> usize {
+    let at = at.min(text.len());
+    text.as_bytes()[..at]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
+}
+
+/// 1-based line of `key` (a path as [`Issue::key`] writes it) in the TOML
+/// `text`: the key itself, or the deepest table or array element on its path
+/// that the file spells out. `None` when the text is not TOML or names
+/// nothing on the path.
+pub fn key_line(text: &str, key: &str) -> Option<usize> {
+    let doc = toml::de::DeTable::parse(text).ok()?;
+    key_offset(doc.get_ref(), key).map(|at| line_of(text, at))
+}
+
+/// Byte offset of the deepest part of `path` found in `table`.
+fn key_offset(table: &toml::de::DeTable<'_>, path: &str) -> Option<usize> {
+    use toml::de::DeValue;
+    let mut found = None;
+    let mut here: Option<&DeValue<'_>> = None;
+    for part in path_parts(path) {
+        let next = match (part, here) {
+            (Part::Key(k), None) => table.get_key_value(k),
+            (Part::Key(k), Some(DeValue::Table(t))) => t.get_key_value(k),
+            (Part::Index(i), Some(DeValue::Array(a))) => {
+                let Some(v) = a.get(i) else { break };
+                found = Some(v.span().start);
+                here = Some(v.get_ref());
+                continue;
+            }
+            _ => None,
+        };
+        let Some((k, v)) = next else { break };
+        found = Some(k.span().start);
+        here = Some(v.get_ref());
+    }
+    found
+}
+
+enum Part<'a> {
+    Key(&'a str),
+    Index(usize),
+}
+
+/// `a.b[3].c` → `a`, `b`, `3`, `c`.
+fn path_parts(path: &str) -> impl Iterator<Item = Part<'_>> {
+    path.split('.').flat_map(|seg| {
+        let (name, rest) = seg.split_once('[').unwrap_or((seg, ""));
+        let indices = rest
+            .split('[')
+            .filter_map(|i| i.trim_end_matches(']').parse().ok())
+            .map(Part::Index);
+        (!name.is_empty())
+            .then_some(Part::Key(name))
+            .into_iter()
+            .chain(indices)
+    })
 }
 
 /// Implemented by every config section.

@@ -14,6 +14,15 @@ use std::path::{Path, PathBuf};
 /// Largest grid accepted from a file, in cells (a 1 km × 1 km map at 5 cm is 400 M; we cap lower
 /// because a robot's map never needs that and a crafted header must not exhaust memory).
 pub const MAX_CELLS: usize = 64 * 1024 * 1024;
+/// Largest map YAML read, bytes (a real one is a few hundred).
+pub const MAX_YAML_BYTES: u64 = 64 * 1024;
+/// Largest image file read, bytes (a raw PGM of [`MAX_CELLS`] cells plus its header).
+pub const MAX_IMAGE_BYTES: u64 = MAX_CELLS as u64 + 4096;
+/// Coarsest cell accepted, m: beyond this a "map" is a typo (`1e300`) whose
+/// extent overflows every computation made on it.
+pub const MAX_RESOLUTION_M: f64 = 1000.0;
+/// Farthest origin accepted, m from the map frame's origin in x and y.
+pub const MAX_ORIGIN_M: f64 = 1e7;
 
 pub const UNKNOWN: i8 = -1;
 pub const FREE: i8 = 0;
@@ -41,6 +50,15 @@ pub enum MapError {
         path: PathBuf,
         width: u64,
         height: u64,
+    },
+    /// A FIFO, device or directory where a map file was expected: reading it could block forever.
+    #[error("{path}: not a regular file")]
+    NotAFile { path: PathBuf },
+    #[error("{path}: {bytes} bytes exceeds the limit of {limit} for this file")]
+    FileTooLarge {
+        path: PathBuf,
+        bytes: u64,
+        limit: u64,
     },
     #[error("grid has {cells} cells but width×height is {expected}")]
     Shape { cells: usize, expected: usize },
@@ -217,8 +235,31 @@ pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<P
     Ok(yaml)
 }
 
+/// Checks that `path` is a regular file of at most `limit` bytes before it is
+/// opened: opening a FIFO blocks until a writer comes, and a device never ends.
+fn check_file(path: &Path, limit: u64) -> Result<(), MapError> {
+    let meta = fs::metadata(path).map_err(|e| MapError::Io {
+        path: path.to_owned(),
+        error: e,
+    })?;
+    if !meta.is_file() {
+        return Err(MapError::NotAFile {
+            path: path.to_owned(),
+        });
+    }
+    if meta.len() > limit {
+        return Err(MapError::FileTooLarge {
+            path: path.to_owned(),
+            bytes: meta.len(),
+            limit,
+        });
+    }
+    Ok(())
+}
+
 /// Loads a map_server map the way nav2's `map_io` interprets it.
 pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
+    check_file(yaml_path, MAX_YAML_BYTES)?;
     let text = fs::read_to_string(yaml_path).map_err(|e| MapError::Io {
         path: yaml_path.to_owned(),
         error: e,
@@ -232,16 +273,27 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
         key,
         reason,
     };
-    if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
+    if !(meta.resolution.is_finite()
+        && meta.resolution > 0.0
+        && meta.resolution <= MAX_RESOLUTION_M)
+    {
         return Err(bad(
             "resolution",
-            format!("must be > 0, got {}", meta.resolution),
+            format!(
+                "must be > 0 and at most {MAX_RESOLUTION_M} m, got {:?}",
+                meta.resolution
+            ),
         ));
     }
-    if meta.origin.len() != 3 || meta.origin.iter().any(|v| !v.is_finite()) {
+    if meta.origin.len() != 3
+        || meta.origin.iter().any(|v| !v.is_finite())
+        || meta.origin[..2].iter().any(|v| v.abs() > MAX_ORIGIN_M)
+    {
         return Err(bad(
             "origin",
-            "must be [x, y, yaw] with finite numbers".into(),
+            format!(
+                "must be [x, y, yaw] with finite numbers, |x| and |y| at most {MAX_ORIGIN_M} m"
+            ),
         ));
     }
     for (key, v) in [
@@ -263,6 +315,7 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
         .parent()
         .unwrap_or_else(|| Path::new("."))
         .join(&meta.image);
+    check_file(&image_path, MAX_IMAGE_BYTES)?;
     let reader = image::ImageReader::open(&image_path)
         .and_then(|r| r.with_guessed_format())
         .map_err(|e| MapError::Io {
@@ -374,6 +427,102 @@ mod tests {
         fs::write(&yaml, text).unwrap();
         let err = load_map_server(&yaml).unwrap_err().to_string();
         assert!(err.contains("resolution"), "{err}");
+    }
+
+    #[test]
+    fn absurd_resolution_and_origin_are_rejected_with_key() {
+        let dir = tempfile::tempdir().unwrap();
+        let yaml = save_map_server(&sample(), dir.path(), "m").unwrap();
+        let good = fs::read_to_string(&yaml).unwrap();
+        fs::write(&yaml, good.replace("resolution: 0.05", "resolution: 1e300")).unwrap();
+        let err = load_map_server(&yaml).unwrap_err().to_string();
+        assert!(
+            err.contains("`resolution`") && err.contains("1e300"),
+            "{err}"
+        );
+        let far = good.replace("- -1.0\n", "- -1.0e12\n");
+        assert_ne!(far, good);
+        fs::write(&yaml, far).unwrap();
+        let err = load_map_server(&yaml).unwrap_err().to_string();
+        assert!(err.contains("`origin`"), "{err}");
+    }
+
+    #[test]
+    fn a_fifo_as_image_or_yaml_is_refused_without_blocking() {
+        let dir = tempfile::tempdir().unwrap();
+        let yaml = save_map_server(&sample(), dir.path(), "m").unwrap();
+        let pgm = dir.path().join("m.pgm");
+        fs::remove_file(&pgm).unwrap();
+        nix::unistd::mkfifo(&pgm, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        // Opening a FIFO for reading blocks until a writer comes: this test
+        // would hang, not fail, if the loader opened it.
+        let err = load_map_server(&yaml).unwrap_err();
+        assert!(matches!(err, MapError::NotAFile { .. }), "{err}");
+        assert!(err.to_string().contains("m.pgm"), "{err}");
+        let fifo_yaml = dir.path().join("fifo.yaml");
+        nix::unistd::mkfifo(&fifo_yaml, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let err = load_map_server(&fifo_yaml).unwrap_err();
+        assert!(matches!(err, MapError::NotAFile { .. }), "{err}");
+    }
+
+    #[test]
+    fn an_oversized_yaml_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let yaml = save_map_server(&sample(), dir.path(), "m").unwrap();
+        let mut text = fs::read_to_string(&yaml).unwrap();
+        text.push_str(&"#".repeat(MAX_YAML_BYTES as usize));
+        fs::write(&yaml, text).unwrap();
+        let err = load_map_server(&yaml).unwrap_err();
+        assert!(matches!(err, MapError::FileTooLarge { .. }), "{err}");
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(400))]
+
+        /// Any YAML text next to a valid image: a grid or a typed error, never a panic.
+        #[test]
+        fn mutated_yaml_gives_a_grid_or_an_error(
+            cut in 0usize..200,
+            insert in "\\PC{0,12}",
+            at in 0usize..200,
+        ) {
+            let dir = tempfile::tempdir().unwrap();
+            let yaml = save_map_server(&sample(), dir.path(), "m").unwrap();
+            let good = fs::read_to_string(&yaml).unwrap();
+            let mut chars: Vec<char> = good.chars().collect();
+            let at = at.min(chars.len());
+            let cut = cut.min(chars.len() - at).min(8);
+            chars.splice(at..at + cut, insert.chars());
+            fs::write(&yaml, chars.into_iter().collect::<String>()).unwrap();
+            if let Ok(g) = load_map_server(&yaml) {
+                proptest::prop_assert_eq!(g.cells.len(), g.width * g.height);
+                proptest::prop_assert!(g.resolution > 0.0 && g.resolution <= MAX_RESOLUTION_M);
+            }
+        }
+
+        /// Any bytes changed in the image: a grid of the header's size or an error.
+        #[test]
+        fn mutated_image_gives_a_grid_or_an_error(
+            edits in proptest::collection::vec((0usize..64, proptest::num::u8::ANY), 1..8),
+            truncate in proptest::option::of(0usize..64),
+        ) {
+            let dir = tempfile::tempdir().unwrap();
+            let yaml = save_map_server(&sample(), dir.path(), "m").unwrap();
+            let pgm = dir.path().join("m.pgm");
+            let mut bytes = fs::read(&pgm).unwrap();
+            for (i, b) in edits {
+                let i = i % bytes.len();
+                bytes[i] = b;
+            }
+            if let Some(n) = truncate {
+                bytes.truncate(n);
+            }
+            fs::write(&pgm, &bytes).unwrap();
+            if let Ok(g) = load_map_server(&yaml) {
+                proptest::prop_assert_eq!(g.cells.len(), g.width * g.height);
+                proptest::prop_assert!(g.width * g.height <= MAX_CELLS);
+            }
+        }
     }
 
     #[test]

@@ -358,7 +358,7 @@ pub static SMOKE_READING: MsgDef = MsgDef {
            uint64 seq\n\
            float32 raw_mv\n\
            uint32 raw_counts\n\
-           # mV above the clean-air baseline (the seed paper's scale).\n\
+           # mV above the clean-air baseline (the SmokeNav paper's scale).\n\
            float32 level\n\
            float32 baseline_mv\n\
            uint8 trend\n\

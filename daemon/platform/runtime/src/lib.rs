@@ -7,7 +7,9 @@
 //! - systemd `READY=1`, `STATUS=` and `WATCHDOG=1` (sd-notify; no-ops outside systemd);
 //! - [`HealthReporter`]: periodic `Health` on `health/<role>` with rates,
 //!   counters ([`Report`]), the last error and latency percentiles;
-//! - [`Reconnect`]: every driver's open → back off → reopen, shown in health.
+//! - [`Reconnect`]: every driver's open → back off → reopen, shown in health;
+//! - [`launch`]: starting and stopping a smokenav process from another
+//!   program (the lab's supervisor, the end-to-end tests).
 //!
 //! A process looks like:
 //!
@@ -36,6 +38,7 @@
 
 mod args;
 mod health;
+pub mod launch;
 mod logging;
 mod process;
 mod reconnect;

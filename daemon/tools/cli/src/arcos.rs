@@ -3,7 +3,7 @@
 //! commands with their arguments, and framing errors.
 
 use anyhow::Context;
-use clap::{Args, Subcommand, ValueEnum};
+use clap::{Args, Subcommand};
 use smokenav_pioneer_codec::capture::{CaptureFormat, Direction, decode_capture};
 use std::io::{Read, Write};
 use std::path::PathBuf;
@@ -20,34 +20,17 @@ pub struct DecodeArgs {
     /// The capture file; `-` or nothing reads stdin.
     file: Option<PathBuf>,
     /// Input format (auto: raw if the file holds FA FB bytes, else hex text).
-    #[arg(long, value_enum, default_value_t = Format::Auto)]
-    format: Format,
+    #[arg(long, value_enum, default_value_t = CaptureFormat::Auto)]
+    format: CaptureFormat,
     /// Who sent bytes that carry no TX/RX marker.
-    #[arg(long, value_enum, default_value_t = Dir::Guess)]
-    from: Dir,
+    #[arg(long, value_enum, default_value_t = Direction::Unknown)]
+    from: Direction,
     /// Convert SIP units with this subclass's factors until a SYNC2 reply names one.
     #[arg(long)]
     subclass: Option<String>,
     /// Indented JSON instead of one object per line.
     #[arg(long)]
     pretty: bool,
-}
-
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum Format {
-    Auto,
-    Hex,
-    Raw,
-}
-
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum Dir {
-    /// Host to robot: commands.
-    Host,
-    /// Robot to host: SYNC replies, SIPs, CONFIG.
-    Robot,
-    /// Decide per packet from its type and length.
-    Guess,
 }
 
 /// Largest capture read (a day of SIPs at 10 Hz is ~80 MB; refuse anything absurd).
@@ -74,20 +57,10 @@ fn decode(a: DecodeArgs) -> anyhow::Result<()> {
             .and_then(|f| f.take(MAX_INPUT).read_to_end(&mut input))
             .with_context(|| format!("reading {}", p.display()))?,
     };
-    let format = match a.format {
-        Format::Auto => CaptureFormat::Auto,
-        Format::Hex => CaptureFormat::Hex,
-        Format::Raw => CaptureFormat::Raw,
-    };
-    let dir = match a.from {
-        Dir::Host => Direction::ToRobot,
-        Dir::Robot => Direction::FromRobot,
-        Dir::Guess => Direction::Unknown,
-    };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let mut write_err = None;
-    let summary = decode_capture(&input, format, dir, a.subclass.as_deref(), |v| {
+    let summary = decode_capture(&input, a.format, a.from, a.subclass.as_deref(), |v| {
         if write_err.is_some() {
             return;
         }

@@ -1,6 +1,7 @@
 //! `smokenav eval`: how far an estimated map (and trajectory) is from the
-//! ground truth: seed 000's k-nearest-neighbour map error in both directions,
-//! seed 004's pixel error, and ATE/RPE. Text for people, `--json` for scripts.
+//! ground truth: the k-nearest-neighbour map error of SmokeNav (Santos et al.
+//! 2015) in both directions, the pixel error of SLAMfusion (Fernandes &
+//! Alexandre), and ATE/RPE. Text for people, `--json` for scripts.
 
 use anyhow::Context;
 use clap::Args;
@@ -125,7 +126,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
     );
     let _ = writeln!(
         s,
-        "  k-NN error    {:.4} m = {:.2} cells  (seed 000; mean of both directions)",
+        "  k-NN error    {:.4} m = {:.2} cells  (SmokeNav paper; mean of both directions)",
         m.knn_error_m, m.knn_error_cells
     );
     for (label, d) in [
@@ -140,7 +141,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
     }
     let _ = writeln!(
         s,
-        "  pixel error   {:.3}  (seed 004: √Σ(T−M)² over {} cells; rms {:.4})",
+        "  pixel error   {:.3}  (SLAMfusion: √Σ(T−M)² over {} cells; rms {:.4})",
         m.pixel_error, m.pixel_count, m.pixel_rms
     );
     if let Some((t, e, r)) = &traj {

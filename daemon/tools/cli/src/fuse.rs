@@ -7,44 +7,22 @@
 //! reported on stderr with their line number and skipped.
 
 use anyhow::Context;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use smokenav_algorithms_fusion::offline::{BadLine, fuse_jsonl};
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_platform_config::RobotConfig;
 use smokenav_shared_types::FusionMethod;
 use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-/// Used when no `--config` is given: the seed paper's first platform.
-const DEFAULT_PROFILE: &str = include_str!("../../../../config/pioneer-3dx.toml");
-const DEFAULT_PROFILE_NAME: &str = "config/pioneer-3dx.toml (built in)";
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum MethodArg {
-    /// The laser scan untouched.
-    #[value(name = "laser-only")]
-    LaserOnly,
-    /// SmokeNav v1, the heuristic (Algorithm 2).
-    V1,
-    /// SmokeNav v2, the fuzzy model (Algorithm 3).
-    V2,
-}
-
-impl From<MethodArg> for FusionMethod {
-    fn from(m: MethodArg) -> Self {
-        match m {
-            MethodArg::LaserOnly => FusionMethod::LaserOnly,
-            MethodArg::V1 => FusionMethod::V1,
-            MethodArg::V2 => FusionMethod::V2,
-        }
-    }
-}
+/// Used when no `--config` is given: the first platform of SmokeNav (Santos et al. 2015).
+const DEFAULT_PROFILE: &str = "pioneer-3dx";
 
 #[derive(Debug, Args)]
 pub struct FuseArgs {
     /// Fusion method.
     #[arg(long, value_enum)]
-    method: MethodArg,
+    method: FusionMethod,
     /// Robot profile (sonar poses, laser mount, [fusion] parameters). Default:
     /// the shipped Pioneer 3-DX profile.
     #[arg(long, value_name = "FILE")]
@@ -55,10 +33,9 @@ pub fn run(args: FuseArgs) -> anyhow::Result<()> {
     let cfg = match &args.config {
         Some(path) => RobotConfig::load(path)
             .with_context(|| format!("invalid robot profile {}", path.display()))?,
-        None => RobotConfig::parse(DEFAULT_PROFILE, Path::new(DEFAULT_PROFILE_NAME))
-            .context("the built-in profile is invalid")?,
+        None => RobotConfig::builtin(DEFAULT_PROFILE).context("the built-in profile is invalid")?,
     };
-    let mut pipeline = FusionPipeline::from_config(&cfg, Some(args.method.into()))
+    let mut pipeline = FusionPipeline::from_config(&cfg, Some(args.method))
         .context("the profile's sonar geometry is unusable")?;
     let stdin = std::io::stdin().lock();
     let stdout = BufWriter::new(std::io::stdout().lock());

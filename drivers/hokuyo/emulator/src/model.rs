@@ -1,8 +1,9 @@
 //! What each emulated model says about itself.
 //!
-//! URG-04LX strings are the real ones from a firmware 3.1.00 device (its PP
-//! geometry is the codec's [`Geometry::URG_04LX`]). The UTM-30LX-EW PP is the
-//! real one from a captured reply; its VV and II were not captured and are
+//! URG-04LX strings are the real ones from a firmware 3.1.00 device (the
+//! hokuyo codec's `tests/vectors/A_wiki_vv_pp_ii.txt`; its PP geometry is the
+//! codec's [`Geometry::URG_04LX`]). The UTM-30LX-EW PP is the real one
+//! (`I_utm30lxew_pp.txt` there); its VV and II were not captured and are
 //! plausible stand-ins, marked below.
 
 use smokenav_hokuyo_codec::Geometry;

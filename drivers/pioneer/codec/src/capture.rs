@@ -19,14 +19,18 @@ use serde::Serialize;
 use serde_json::{Value, json};
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum Direction {
     /// Host to robot: commands.
+    #[cfg_attr(feature = "clap", value(name = "host"))]
     ToRobot,
     /// Robot to host: SYNC replies, SIPs, CONFIG.
+    #[cfg_attr(feature = "clap", value(name = "robot"))]
     FromRobot,
     /// Not marked: guessed per packet from its type and length.
     #[default]
+    #[cfg_attr(feature = "clap", value(name = "guess"))]
     Unknown,
 }
 
@@ -41,6 +45,7 @@ impl Direction {
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum CaptureFormat {
     /// Raw if the input contains `FA FB` as bytes, else hex text.
     #[default]
@@ -322,52 +327,4 @@ pub fn decode_capture(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn annotated_line_yields_direction_and_trailing_bytes() {
-        let (d, b) = parse_hex_line("RX type 0x32 t=0.20          ok=True len=6 fa fb 03 00 00 00");
-        assert_eq!(d, Some(Direction::FromRobot));
-        assert_eq!(b, [0xfa, 0xfb, 0x03, 0x00, 0x00, 0x00]);
-        let (d, b) = parse_hex_line("TX VEL +200 ok=True len=9 fa fb 06 0b 3b c8 00 d3 3b");
-        assert_eq!(d, Some(Direction::ToRobot));
-        assert_eq!(b.len(), 9);
-        let (d, b) = parse_hex_line("FAFB030000 0x00");
-        assert_eq!(d, None);
-        assert_eq!(b, [0xfa, 0xfb, 0x03, 0x00, 0x00, 0x00]);
-    }
-
-    #[test]
-    fn raw_capture_with_noise_reports_error_objects_and_packets() {
-        let mut input = vec![0x00, 0x13];
-        input.extend_from_slice(&[0xFA, 0xFB, 0x06, 0x04, 0x3B, 0x01, 0x00, 0x05, 0x3C]); // bad ck
-        input.extend_from_slice(&[0xFA, 0xFB, 0x06, 0x0B, 0x3B, 0x2C, 0x01, 0x37, 0x3C]); // VEL 300
-        let mut out = Vec::new();
-        let sum = decode_capture(&input, CaptureFormat::Auto, Direction::ToRobot, None, |v| {
-            out.push(v)
-        })
-        .unwrap();
-        assert_eq!(out.len(), 2);
-        assert!(out[0]["error"].as_str().unwrap().contains("bad checksum"));
-        assert_eq!(out[1]["name"], "VEL");
-        assert_eq!(out[1]["arg"]["int"], 300);
-        assert_eq!(sum.framing.checksum_errors, 1);
-    }
-
-    #[test]
-    fn unmarked_vel2_is_a_command_not_a_config_reply() {
-        // VEL2 is command 32 = 0x20, the CONFIG reply's type.
-        let mut out = Vec::new();
-        decode_capture(
-            b"fa fb 06 20 3b 05 0a 25 45",
-            CaptureFormat::Hex,
-            Direction::Unknown,
-            None,
-            |v| out.push(v),
-        )
-        .unwrap();
-        assert_eq!(out[0]["kind"], "command");
-        assert_eq!(out[0]["name"], "VEL2");
-    }
-}
+mod tests;

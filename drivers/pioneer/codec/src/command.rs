@@ -338,7 +338,7 @@ mod tests {
         c.packet().unwrap().as_bytes().to_vec()
     }
 
-    // Every vector in NOTES.md §2, byte for byte.
+    // Every ARCOS command vector (as ARIA and p2os encode them), byte for byte.
     #[test]
     fn notes_command_vectors_encode_byte_for_byte() {
         let cases: [(Command<'_>, &[u8]); 9] = [

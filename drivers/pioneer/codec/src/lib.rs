@@ -9,8 +9,9 @@
 //! - [`capture`]: a hex or raw capture to one JSON object per packet
 //!   (`smokenav arcos decode`).
 //!
-//! Facts and test vectors: `shared/reference/arcos/NOTES.md`; the AMRISim
-//! capture used by the tests is in `fixtures/`.
+//! Facts: the ARCOS protocol as the Pioneer 3 Operations Manual, ARIA and
+//! p2os give it (REFERENCES.md); the AMRISim capture used by the tests is in
+//! `fixtures/`.
 
 pub mod capture;
 pub mod command;
@@ -104,9 +105,6 @@ pub fn hex(bytes: &[u8]) -> String {
     }
     s
 }
-
-#[cfg(test)]
-mod capture_tests;
 
 #[cfg(test)]
 mod fuzz_tests {

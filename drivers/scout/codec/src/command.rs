@@ -156,7 +156,7 @@ mod tests {
 
     #[test]
     fn notes_vectors_encode_byte_for_byte() {
-        // The vectors worked out from Ndirect.c for each command.
+        // Packets as Nomadic's host library (`Ndirect.c`) builds them.
         assert_eq!(
             bytes(Command::GetState),
             [0x01, 0x02, 0x00, 0x07, 0x0A, 0x5C]

@@ -42,7 +42,7 @@ mod tests {
 
     #[test]
     fn minus_107_is_magnitude_with_sign_bit() {
-        // vm(107, -107, 0) in NOTES.md carries `6B 80` for -107.
+        // vm(107, -107, 0) as Nomadic's host encodes it carries `6B 80` for -107.
         assert_eq!(encode_sm16(-107).unwrap(), [0x6B, 0x80]);
         assert_eq!(decode_sm16([0x6B, 0x80]), -107);
         assert_eq!(encode_sm16(107).unwrap(), [0x6B, 0x00]);

@@ -1,6 +1,7 @@
 //! Pure codec for the Nomadic direct serial protocol of the Nomad Scout (bytes in, typed values out, no I/O).
 //!
-//! Facts come from Nomadic's host library `Ndirect.c` (v2.6.13):
+//! Facts come from Nomadic's host library `Ndirect.c` (v2.6.13, the Nomadic
+//! direct protocol in REFERENCES.md):
 //! - [`frame`]: `01 | len_lo len_hi | type | data | chk | 5C` framing and an
 //!   incremental [`Splitter`] that resynchronises after garbage;
 //! - [`int`]: sign-magnitude 16-bit integers;

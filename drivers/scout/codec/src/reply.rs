@@ -238,7 +238,7 @@ mod tests {
     fn state_reply_is_48_bytes_on_the_wire() {
         let mut out = [0u8; MAX_FRAME];
         let n = sample().encode(PacketType::Gs, &mut out).unwrap();
-        // NOTES.md: 43 bytes + checksum (≈48 on the wire); len = 44.
+        // Ndirect.c's state packet: 43 bytes + checksum (≈48 on the wire); len = 44.
         assert_eq!(n, 48);
         assert_eq!(&out[..4], &[0x01, 44, 0x00, 0x07]);
         assert_eq!(out[47], 0x5C);

@@ -1,6 +1,6 @@
 //! Pure ADC sample-line codec and MQ303A signal processing (no I/O).
 //!
-//! The seed paper reads an MQ303A alcohol sensor (it smells the glycol-based
+//! SmokeNav (Santos et al. 2015) reads an MQ303A alcohol sensor (it smells the glycol-based
 //! smoke) through an ADC at about 10 Hz; the sensor's output voltage falls
 //! as the concentration rises, reacts fast to smoke and recovers slowly.
 //! This crate is everything between the ADC and a `SmokeReading`, with no

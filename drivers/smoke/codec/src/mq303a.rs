@@ -1,4 +1,4 @@
-//! A pure model of the MQ303A alcohol sensor as the seed paper wired it.
+//! A pure model of the MQ303A alcohol sensor as SmokeNav (Santos et al. 2015) wired it.
 //!
 //! Facts it is built on:
 //!

@@ -7,7 +7,7 @@
 //!                                 └─ disconnected / saturated / stale
 //! ```
 //!
-//! * **Level** is on the seed paper's scale: millivolts the sensor output has
+//! * **Level** is on the SmokeNav paper's scale: millivolts the sensor output has
 //!   moved away from its clean-air baseline, so 0 is clean air and SmokeNav
 //!   v1's SMOKE_MIN / SMOKE_MAX_UP / SMOKE_MAX_DOWN are 130 / 200 / 240. The
 //!   MQ303A's output is *inversely* proportional to the concentration, so by

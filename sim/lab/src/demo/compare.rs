@@ -31,7 +31,7 @@ pub struct MethodResult {
     /// The best particle's (smoothed) trajectory, of the median run.
     pub trajectory: Vec<StampedPose>,
     pub series: Vec<SeriesPoint>,
-    /// Share of sections that used the sonar (seed 000's "sonar usage").
+    /// Share of sections that used the sonar (the SmokeNav paper's "sonar usage").
     pub sonar_usage: f64,
     pub scans: u64,
     /// Fusion gave SLAM exactly the same scans as this method did (so the SLAM result is shared).

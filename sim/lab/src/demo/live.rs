@@ -12,6 +12,7 @@ use smokenav_platform_bus::{Bus, BusOptions, Subscriber, Waiter, topics};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_recording::{BusMessage, Recorder};
+use smokenav_platform_runtime::launch;
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::{
     FusedScan, Health, HealthState, LaserScan, Odometry, PoseEstimate, SectionSource, SmokeReading,
@@ -24,7 +25,6 @@ use smokenav_sim_world::Scenario;
 use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
@@ -61,16 +61,9 @@ impl Proc {
         let file =
             File::create(&log).with_context(|| format!("cannot create {}", log.display()))?;
         let err = file.try_clone().context("cannot share the log file")?;
-        let child = Command::new(bin)
+        let child = launch::command(bin, instance)
             .arg("--config")
             .arg(profile)
-            .env("SMOKENAV_INSTANCE", instance)
-            .env(
-                "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
-            )
-            .env_remove("NOTIFY_SOCKET")
-            .stdin(Stdio::null())
             .stdout(file)
             .stderr(err)
             .spawn()
@@ -103,20 +96,7 @@ impl Proc {
 
     /// SIGTERM, then SIGKILL if it has not exited after [`STOP_TIMEOUT`].
     fn stop(&mut self) -> Option<std::process::ExitStatus> {
-        if let Some(s) = self.exited() {
-            return Some(s);
-        }
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-        let end = Instant::now() + STOP_TIMEOUT;
-        while Instant::now() < end {
-            if let Some(s) = self.exited() {
-                return Some(s);
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.child.kill();
-        self.child.wait().ok()
+        launch::stop(&mut self.child, STOP_TIMEOUT).ok()
     }
 }
 

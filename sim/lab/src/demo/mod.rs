@@ -1,4 +1,4 @@
-//! `smokenav-lab demo`: the seed paper's smoke experiment, end to end.
+//! `smokenav-lab demo`: the smoke experiment of SmokeNav (Santos et al. 2015), end to end.
 //!
 //! 1. Live (unless `--fast`): the simulated world feeds the device emulators
 //!    on PTYs (smokenav-simlink); the real driver processes, the fusion

@@ -175,7 +175,7 @@ pub fn table(main: &Comparison, clean: Option<&Comparison>) -> String {
     );
     let _ = writeln!(
         s,
-        "map error: seed 000's k-NN error, mean of both directions (truth walls → nearest mapped wall, mapped walls → nearest true wall) after best-fit alignment"
+        "map error: the SmokeNav paper's k-NN error, mean of both directions (truth walls → nearest mapped wall, mapped walls → nearest true wall) after best-fit alignment"
     );
     table_rows(&mut s, main);
     if let Some(c) = clean {
