@@ -52,6 +52,9 @@ impl BusArgs {
         if root.is_none() && Path::new(SYSTEMD_IOX2_ROOT).is_dir() {
             root = Some(SYSTEMD_IOX2_ROOT.to_owned());
         }
+        if let Some(root) = &root {
+            crate::access::ensure_bus_access(Path::new(root), name)?;
+        }
         let node = format!("{name}-{}", std::process::id());
         Bus::open(&BusOptions::new(&instance, &node).with_root_path(root))
             .with_context(|| format!("cannot open bus instance `{instance}`"))
