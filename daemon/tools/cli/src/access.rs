@@ -27,6 +27,9 @@ const DRIVE_GROUP: &str = "smokenav-drive";
 /// Makes this process able to use the bus under `root`, or explains why it cannot.
 /// `command` is the subcommand's name (for the message).
 pub fn ensure_bus_access(root: &Path, command: &str) -> anyhow::Result<()> {
+    // `/run/smokenav/iox2/` as iceoryx2 wants it; said without the slash.
+    let root: PathBuf = root.components().collect();
+    let root = root.as_path();
     let Some((_dir, meta)) = nearest_existing(root) else {
         return Ok(());
     };
