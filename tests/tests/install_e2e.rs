@@ -25,6 +25,7 @@ const BIN_DIR: &str = "usr/local/bin";
 const UNIT_DIR: &str = "etc/systemd/system";
 const UDEV_DIR: &str = "etc/udev/rules.d";
 const SYSUSERS_FILE: &str = "usr/lib/sysusers.d/smokenav.conf";
+const SUDOERS_FILE: &str = "etc/sudoers.d/smokenav";
 const PROFILE_FILE: &str = "etc/smokenav/robot.toml";
 const DOC_FILE: &str = "usr/local/share/doc/smokenav/README.md";
 
@@ -107,6 +108,12 @@ fn expected_tree(profile: &Path, bin_dir: &Path) -> BTreeMap<PathBuf, (PathBuf, 
         SYSUSERS_FILE.into(),
         systemd_dir().join("smokenav.sysusers"),
         0o644,
+    );
+    // sudo ignores a drop-in that others may write, and visudo wants 0440.
+    add(
+        SUDOERS_FILE.into(),
+        systemd_dir().join("smokenav.sudoers"),
+        0o440,
     );
     add(PROFILE_FILE.into(), profile.to_owned(), 0o644);
     add(DOC_FILE.into(), workspace_root().join("README.md"), 0o644);

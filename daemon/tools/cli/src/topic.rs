@@ -49,8 +49,17 @@ impl BusArgs {
         let instance = instance.unwrap_or_else(|| "smokenav".into());
         // On a robot running the systemd units, the processes share this
         // directory (systemd/smokenav-*.service); find them without extra flags.
-        if root.is_none() && Path::new(SYSTEMD_IOX2_ROOT).is_dir() {
+        // Someone outside group smokenav cannot even look at it: still this bus,
+        // so that they are told how to get in rather than shown an empty one.
+        let systemd_bus = match std::fs::metadata(SYSTEMD_IOX2_ROOT) {
+            Ok(m) => m.is_dir(),
+            Err(e) => e.kind() == std::io::ErrorKind::PermissionDenied,
+        };
+        if root.is_none() && systemd_bus {
             root = Some(SYSTEMD_IOX2_ROOT.to_owned());
+        }
+        if let Some(root) = &root {
+            crate::access::ensure_bus_access(Path::new(root), name)?;
         }
         let node = format!("{name}-{}", std::process::id());
         Bus::open(&BusOptions::new(&instance, &node).with_root_path(root))
