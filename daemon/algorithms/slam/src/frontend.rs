@@ -204,7 +204,7 @@ impl FrontEnd {
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
         if !stale {
             return match &self.fresh {
-                Some(f) => f.pose.compose(&f.odom.between(&odom)),
+                Some(f) => f.pose.compose(&f.odom.between(odom)),
                 None => *last_pose,
             };
         }

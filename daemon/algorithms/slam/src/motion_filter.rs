@@ -59,7 +59,7 @@ impl MotionFilter {
             return true;
         };
         if !std::mem::take(&mut self.jumped) {
-            let step = last.between(&odom);
+            let step = last.between(odom);
             self.dist += step.translation_norm();
             self.rot += step.theta.abs();
         }
