@@ -12,6 +12,7 @@
 
 pub mod clock;
 pub mod fused;
+pub mod geometry;
 pub mod header;
 pub mod health;
 pub mod laser;
@@ -24,6 +25,7 @@ pub mod text;
 
 pub use clock::{Clock, MockClock, MonotonicClock, Stamp};
 pub use fused::{FusedScan, FusionMethod, SectionDecision, SectionSource, SyncState};
+pub use geometry::{Pose2, normalize_angle};
 pub use header::Header;
 pub use health::{Health, HealthState, Metric};
 pub use laser::{BeamReading, LaserScan, MAX_BEAMS};

@@ -63,16 +63,7 @@ pub struct VelocityCommand {
     pub angular: f64,
 }
 
-/// Wraps an angle to (-π, π].
-pub fn normalize_angle(a: f64) -> f64 {
-    let mut a = a % std::f64::consts::TAU;
-    if a <= -std::f64::consts::PI {
-        a += std::f64::consts::TAU;
-    } else if a > std::f64::consts::PI {
-        a -= std::f64::consts::TAU;
-    }
-    a
-}
+pub use crate::geometry::normalize_angle;
 
 #[cfg(test)]
 mod tests {

@@ -5,9 +5,9 @@
 //! is saved with `smokenav map save` and with SIGUSR1, and a burst of scans
 //! shows the process skipping to the newest instead of queueing.
 
+use smokenav_algorithms_eval::{StampedPose, TrajectoryOptions, evaluate_trajectories};
+use smokenav_algorithms_slam::Pose2;
 use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
-use smokenav_algorithms_slam::eval::{absolute_trajectory_error, parse_pose_file};
-use smokenav_algorithms_slam::{Pose2, StampedPose};
 use smokenav_platform_bus::{MapSubscriber, Publisher, Waiter, topics};
 use smokenav_platform_config::MountPose;
 use smokenav_platform_config::slam::SlamInput;
@@ -140,19 +140,20 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
         assert_eq!(p.particles, 10);
         assert!(p.n_eff > 0.0 && p.n_eff <= 10.0);
         assert_eq!(p.header.frame_id.as_str(), "map");
-        estimate.push(StampedPose {
-            stamp_ns: rec.ipc_timestamp_ns,
-            pose: Pose2::new(p.x, p.y, p.theta),
-        });
+        estimate.push(StampedPose::from_ns(
+            rec.ipc_timestamp_ns,
+            &Pose2::new(p.x, p.y, p.theta),
+        ));
     }
-    let reference = parse_pose_file(&std::fs::read_to_string(
-        workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"),
-    )?)?;
-    let ate = absolute_trajectory_error(&estimate, &reference, 1_000_000).expect("common poses");
+    let reference = smokenav_algorithms_eval::load_trajectory(
+        &workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"),
+    )?;
+    // The reference poses sit at some of the log's stamps: paired by stamp.
+    let ate = evaluate_trajectories(&reference, &estimate, &TrajectoryOptions::same_stamp())?;
     eprintln!("slam_e2e: ATE of the online poses over the first 200 CSAIL scans: {ate:?}");
     // The first 200 scans hold 30 reference poses; the raw odometry is metres off.
-    assert_eq!(ate.matched, 30);
-    assert!(ate.rms_m < 0.15, "{ate:?}");
+    assert_eq!(ate.pairs, 30);
+    assert!(ate.ate_m.rmse < 0.15, "{ate:?}");
 
     // The map published on slam/map, saved by the CLI from the bus.
     let saved = dir.path().join("saved");

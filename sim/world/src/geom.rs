@@ -1,6 +1,5 @@
-//! Plane geometry: points, poses and wall segments.
+//! Plane geometry: points and wall segments; poses are the shared `Pose2`.
 
-use std::f64::consts::{PI, TAU};
 use std::ops::{Add, Mul, Sub};
 
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -73,53 +72,17 @@ impl Mul<f64> for Vec2 {
     }
 }
 
-/// A planar pose: position (m) and heading (rad, counter-clockwise from +x).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose2 {
-    pub x: f64,
-    pub y: f64,
-    pub theta: f64,
+pub use smokenav_shared_types::geometry::{Pose2, normalize_angle};
+
+/// A pose's position as the simulator's vector.
+pub trait Position {
+    fn position(&self) -> Vec2;
 }
 
-impl Pose2 {
-    pub const fn new(x: f64, y: f64, theta: f64) -> Self {
-        Self { x, y, theta }
-    }
-
-    pub fn position(&self) -> Vec2 {
+impl Position for Pose2 {
+    fn position(&self) -> Vec2 {
         Vec2::new(self.x, self.y)
     }
-
-    /// A point given in this pose's frame, expressed in the parent frame.
-    pub fn transform_point(&self, p: Vec2) -> Vec2 {
-        self.position() + p.rotated(self.theta)
-    }
-
-    /// `self ∘ other`: `other` is expressed in this pose's frame.
-    pub fn compose(&self, other: &Pose2) -> Pose2 {
-        let p = self.transform_point(other.position());
-        Pose2::new(p.x, p.y, normalize_angle(self.theta + other.theta))
-    }
-
-    /// Linear interpolation (shortest way round for the heading), `s` in [0, 1].
-    pub fn lerp(&self, to: &Pose2, s: f64) -> Pose2 {
-        Pose2::new(
-            self.x + (to.x - self.x) * s,
-            self.y + (to.y - self.y) * s,
-            normalize_angle(self.theta + normalize_angle(to.theta - self.theta) * s),
-        )
-    }
-}
-
-/// Wraps an angle to (-π, π].
-pub fn normalize_angle(a: f64) -> f64 {
-    let mut a = a % TAU;
-    if a <= -PI {
-        a += TAU;
-    } else if a > PI {
-        a -= TAU;
-    }
-    a
 }
 
 /// A reflecting wall piece. `normal` is the unit normal used for incidence
@@ -195,8 +158,12 @@ mod tests {
     fn pose_lerp_takes_the_short_way_round() {
         let a = Pose2::new(0.0, 0.0, 3.0);
         let b = Pose2::new(1.0, 0.0, -3.0);
-        let m = a.lerp(&b, 0.5);
-        assert!((m.theta.abs() - PI).abs() < 1e-9, "{}", m.theta);
+        let m = a.interpolate(&b, 0.5);
+        assert!(
+            (m.theta.abs() - std::f64::consts::PI).abs() < 1e-9,
+            "{}",
+            m.theta
+        );
         assert!((m.x - 0.5).abs() < 1e-12);
     }
 

@@ -35,7 +35,7 @@
 //!   ≥ 22 m, nothing in range"); too weak a return reads code 1 ("low intensity").
 
 use crate::arena::Arena;
-use crate::geom::{Pose2, Vec2, normalize_angle};
+use crate::geom::{Pose2, Position, Vec2, normalize_angle};
 use crate::rng::Rng;
 use crate::smoke::SmokeField;
 

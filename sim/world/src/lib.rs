@@ -34,7 +34,7 @@ pub mod truth;
 pub mod world;
 
 pub use arena::{Arena, ArenaSource, BuiltinArena};
-pub use geom::{Pose2, Segment, Vec2};
+pub use geom::{Pose2, Position, Segment, Vec2};
 pub use scenario::{BUILTIN_SCENARIOS, Scenario};
 pub use truth::TruthSample;
 pub use world::{LaserFrame, OdometrySample, SmokeSample, SonarSample, StepOutput, TICK_NS, World};

@@ -2,7 +2,7 @@
 //! collisions, and the wheel odometry it reports, with configurable errors.
 
 use crate::arena::Arena;
-use crate::geom::{Pose2, Vec2, normalize_angle};
+use crate::geom::{Pose2, Position, Vec2, normalize_angle};
 use crate::rng::Rng;
 
 #[derive(Debug, Clone, PartialEq)]

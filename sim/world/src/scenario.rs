@@ -41,7 +41,7 @@
 
 use crate::SimError;
 use crate::arena::{Arena, ArenaSource, BuiltinArena};
-use crate::geom::{Pose2, Vec2};
+use crate::geom::{Pose2, Position, Vec2};
 use crate::laser::LaserParams;
 use crate::mq303a::Mq303aParams;
 use crate::robot::{DriveParams, OdometryErrors};

@@ -24,7 +24,7 @@
 //!   crosstalk readings from a neighbour's ping.
 
 use crate::arena::Arena;
-use crate::geom::{Pose2, Vec2};
+use crate::geom::{Pose2, Position, Vec2};
 use crate::rng::Rng;
 
 #[derive(Debug, Clone, PartialEq)]

@@ -6,7 +6,7 @@
 //! seed and the commands given — never on how a caller slices time into
 //! `step` calls (a fraction of a tick left over is carried to the next call).
 
-use crate::geom::{Pose2, normalize_angle};
+use crate::geom::{Pose2, Position, normalize_angle};
 use crate::laser::{LaserModel, URG_SCAN_PERIOD_NS, URG_STEPS};
 use crate::mq303a::SmokeSensor;
 use crate::rng::Rng;

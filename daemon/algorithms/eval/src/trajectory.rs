@@ -5,9 +5,13 @@
 //! Files hold one pose per line, `timestamp x y theta` (s, m, m, rad),
 //! separated by spaces or tabs; blank lines and lines starting with `#` are
 //! skipped; timestamps must increase. Estimated poses are paired with the
-//! ground truth interpolated at their timestamps.
+//! ground truth interpolated at their timestamps, or (for a reference that
+//! only has poses at some of the estimate's stamps, like GMapping's corrected
+//! poses of a CARMEN log) with the truth sample at the same stamp.
 
 use serde::Serialize;
+use smokenav_shared_types::Pose2;
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Longest trajectory file read, bytes (a day at 100 Hz is ~150 MB; crafted files must not exhaust memory).
@@ -19,6 +23,27 @@ pub struct StampedPose {
     pub x: f64,
     pub y: f64,
     pub theta: f64,
+}
+
+impl StampedPose {
+    /// A pose stamped in nanoseconds (the bus's and the logs' unit).
+    pub fn from_ns(stamp_ns: u64, pose: &Pose2) -> Self {
+        Self {
+            t: stamp_ns as f64 * 1e-9,
+            x: pose.x,
+            y: pose.y,
+            theta: pose.theta,
+        }
+    }
+}
+
+/// Writes poses in the trajectory file format (microsecond stamps).
+pub fn format_trajectory(poses: &[StampedPose]) -> String {
+    let mut s = String::with_capacity(poses.len() * 48);
+    for p in poses {
+        let _ = writeln!(s, "{:.6} {:.6} {:.6} {:.6}", p.t, p.x, p.y, p.theta);
+    }
+    s
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -112,6 +137,16 @@ pub fn load_trajectory(path: &Path) -> Result<Vec<StampedPose>, TrajectoryError>
     parse_trajectory(&text, path)
 }
 
+/// How estimated poses find their ground truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pairing {
+    /// The truth interpolated at the estimate's stamp (a dense truth, e.g. the simulator's).
+    Interpolate,
+    /// The truth sample nearest the estimate's stamp, if within `tolerance_s`,
+    /// as it is (a sparse reference at some of the estimate's own stamps).
+    SameStamp { tolerance_s: f64 },
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrajectoryOptions {
     /// Align the estimate to the truth with the best rigid transform before ATE.
@@ -120,6 +155,7 @@ pub struct TrajectoryOptions {
     pub max_gap_s: f64,
     /// Time step of the relative pose error, s.
     pub rpe_delta_s: f64,
+    pub pairing: Pairing,
 }
 
 impl Default for TrajectoryOptions {
@@ -128,6 +164,18 @@ impl Default for TrajectoryOptions {
             align: true,
             max_gap_s: 0.5,
             rpe_delta_s: 1.0,
+            pairing: Pairing::Interpolate,
+        }
+    }
+}
+
+impl TrajectoryOptions {
+    /// Pairs at equal stamps (within 1 ms): for a reference made of poses at
+    /// some of the estimate's stamps.
+    pub fn same_stamp() -> Self {
+        Self {
+            pairing: Pairing::SameStamp { tolerance_s: 1e-3 },
+            ..Self::default()
         }
     }
 }
@@ -173,6 +221,8 @@ pub struct TrajectoryReport {
     pub align_dtheta_deg: f64,
     /// Absolute position error after alignment, m.
     pub ate_m: ErrorStats,
+    /// Stamp of the estimated pose with the largest position error, s.
+    pub ate_max_at_s: f64,
     /// Absolute heading error after alignment, degrees.
     pub ate_heading_deg: ErrorStats,
     pub rpe_delta_s: f64,
@@ -223,6 +273,18 @@ fn truth_at(truth: &[StampedPose], t: f64, max_gap: f64) -> Option<StampedPose> 
     })
 }
 
+/// The truth sample nearest `t`, if within `tolerance`.
+fn truth_near(truth: &[StampedPose], t: f64, tolerance: f64) -> Option<StampedPose> {
+    let i = truth.partition_point(|p| p.t < t);
+    [i.checked_sub(1), Some(i)]
+        .into_iter()
+        .flatten()
+        .filter_map(|j| truth.get(j))
+        .min_by(|a, b| (a.t - t).abs().total_cmp(&(b.t - t).abs()))
+        .filter(|p| (p.t - t).abs() <= tolerance)
+        .copied()
+}
+
 /// Relative motion from `a` to `b` in `a`'s frame: (dx, dy, dθ).
 fn relative(a: &StampedPose, b: &StampedPose) -> (f64, f64, f64) {
     let (s, c) = a.theta.sin_cos();
@@ -238,7 +300,13 @@ pub fn evaluate_trajectories(
 ) -> Result<TrajectoryReport, TrajectoryMetricError> {
     let pairs: Vec<(StampedPose, StampedPose)> = est
         .iter()
-        .filter_map(|e| truth_at(truth, e.t, opts.max_gap_s).map(|g| (*e, g)))
+        .filter_map(|e| {
+            match opts.pairing {
+                Pairing::Interpolate => truth_at(truth, e.t, opts.max_gap_s),
+                Pairing::SameStamp { tolerance_s } => truth_near(truth, e.t, tolerance_s),
+            }
+            .map(|g| (*e, g))
+        })
         .collect();
     if pairs.len() < 2 {
         return Err(TrajectoryMetricError::TooFewPairs { pairs: pairs.len() });
@@ -271,9 +339,14 @@ pub fn evaluate_trajectories(
     let (s, c) = f64::sin_cos(dth);
     let mut pos = Vec::with_capacity(pairs.len());
     let mut head = Vec::with_capacity(pairs.len());
+    let mut worst = (f64::NEG_INFINITY, 0.0);
     for (e, g) in &pairs {
         let (x, y) = (c * e.x - s * e.y + tx, s * e.x + c * e.y + ty);
-        pos.push(((x - g.x).powi(2) + (y - g.y).powi(2)).sqrt());
+        let d = ((x - g.x).powi(2) + (y - g.y).powi(2)).sqrt();
+        if d > worst.0 {
+            worst = (d, e.t);
+        }
+        pos.push(d);
         head.push(wrap(e.theta + dth - g.theta).abs().to_degrees());
     }
     // RPE: each pose against the first one at least `rpe_delta_s` later.
@@ -307,6 +380,7 @@ pub fn evaluate_trajectories(
         align_dy_m: ty,
         align_dtheta_deg: dth.to_degrees(),
         ate_m: ErrorStats::from(pos),
+        ate_max_at_s: worst.1,
         ate_heading_deg: ErrorStats::from(head),
         rpe_delta_s: opts.rpe_delta_s,
         rpe_pairs: rpe_t.len(),
@@ -453,6 +527,95 @@ mod tests {
             .to_string();
         assert!(e.contains("est.txt") && e.contains("no poses"), "{e}");
         assert_eq!(parse_trajectory("0\t1 2 0.5\n", p).unwrap()[0].y, 2.0);
+    }
+
+    #[test]
+    fn same_stamp_pairing_reports_rms_and_max_of_the_residual() {
+        // A reference at 4 stamps; the estimate is the same line moved far away
+        // and turned, stamped 3 ns later, with one point 0.4 m off sideways.
+        let reference: Vec<StampedPose> = (0..4)
+            .map(|i| StampedPose {
+                t: i as f64 * 100e-9,
+                x: i as f64,
+                y: 0.0,
+                theta: 0.0,
+            })
+            .collect();
+        let (s, c) = (-1.0f64).sin_cos();
+        let mut estimate = transform(&reference, 10.0, 5.0, -1.0);
+        for e in &mut estimate {
+            e.t += 3e-9;
+        }
+        estimate[2].x += -s * 0.4;
+        estimate[2].y += c * 0.4;
+        let near = |tolerance_s| TrajectoryOptions {
+            pairing: Pairing::SameStamp { tolerance_s },
+            ..Default::default()
+        };
+        let r = evaluate_trajectories(&reference, &estimate, &near(10e-9)).unwrap();
+        assert_eq!(r.pairs, 4);
+        assert!(r.ate_m.max > 0.25 && r.ate_m.max < 0.4, "{r:?}");
+        assert!((r.ate_max_at_s - 203e-9).abs() < 1e-15, "{r:?}");
+        assert!(r.ate_m.rmse < r.ate_m.max);
+        assert_eq!(
+            evaluate_trajectories(&reference, &estimate, &near(1e-9)),
+            Err(TrajectoryMetricError::TooFewPairs { pairs: 0 }),
+            "stamps 3 ns apart do not pair at 1 ns"
+        );
+    }
+
+    #[test]
+    fn same_stamp_pairing_ignores_estimates_between_reference_poses() {
+        // A reference at every 5th stamp of the estimate (GMapping's corrected
+        // poses of a log): interpolation would pair every estimated pose.
+        let est = circle(10.0, 20.0);
+        let sparse: Vec<StampedPose> = est.iter().step_by(5).copied().collect();
+        let r = evaluate_trajectories(&sparse, &est, &TrajectoryOptions::same_stamp()).unwrap();
+        assert_eq!(r.pairs, 40);
+        assert!(r.ate_m.max < 1e-12);
+        let dense = evaluate_trajectories(&sparse, &est, &TrajectoryOptions::default()).unwrap();
+        assert_eq!(dense.pairs, 196);
+    }
+
+    #[test]
+    fn rotated_and_shifted_copy_aligns_exactly() {
+        let truth: Vec<StampedPose> = (0..20)
+            .map(|i| StampedPose {
+                t: i as f64,
+                x: i as f64 * 0.3,
+                y: (i as f64 * 0.7).sin(),
+                theta: 0.0,
+            })
+            .collect();
+        // The estimate is the truth turned by -0.7 rad: the alignment turns it back.
+        let est = transform(&truth, -576.5, 3.2, -0.7);
+        let r = evaluate_trajectories(&truth, &est, &TrajectoryOptions::same_stamp()).unwrap();
+        assert!(
+            (r.align_dtheta_deg - 0.7f64.to_degrees()).abs() < 1e-9,
+            "{r:?}"
+        );
+        assert!(r.ate_m.max < 1e-9, "{r:?}");
+    }
+
+    #[test]
+    fn written_trajectories_read_back_to_the_microsecond() {
+        let poses = [
+            StampedPose::from_ns(
+                1_134_864_642_914_187_000,
+                &Pose2::new(0.154, 0.068, 0.562729),
+            ),
+            StampedPose::from_ns(1_134_864_643_553_180_000, &Pose2::new(-1.5, 2.0, -3.1)),
+        ];
+        let text = format_trajectory(&poses);
+        assert!(
+            text.starts_with("1134864642.914187 0.154000 0.068000 0.562729\n"),
+            "{text}"
+        );
+        let back = parse_trajectory(&text, Path::new("t.txt")).unwrap();
+        assert_eq!(back.len(), 2);
+        for (a, b) in back.iter().zip(&poses) {
+            assert!((a.t - b.t).abs() < 1e-6 && (a.theta - b.theta).abs() < 1e-6);
+        }
     }
 
     proptest::proptest! {

@@ -9,12 +9,25 @@
 //! map.png/.pgm/.yaml, trajectory.txt, trajectory_online.txt,
 //! trajectory_frontend.txt, trajectory_odometry.txt and spread.txt).
 
-use smokenav_algorithms_slam::eval::{
-    absolute_trajectory_error, format_pose_file, parse_pose_file,
+use smokenav_algorithms_eval::{
+    TrajectoryOptions, evaluate_trajectories, format_trajectory, load_trajectory,
 };
+use smokenav_algorithms_slam::carmen::format_stamp;
 use smokenav_algorithms_slam::offline::LogScans;
-use smokenav_algorithms_slam::{Rbpf, SlamBackend, StampedPose};
+use smokenav_algorithms_slam::rbpf::Rbpf;
+use smokenav_algorithms_slam::{BackendOptions, SlamPipeline, StampedPose};
 use smokenav_platform_config::{SlamSection, parse_toml};
+
+fn eval_poses(poses: &[StampedPose]) -> Vec<smokenav_algorithms_eval::StampedPose> {
+    poses
+        .iter()
+        .map(|p| smokenav_algorithms_eval::StampedPose::from_ns(p.stamp_ns, &p.pose))
+        .collect()
+}
+
+fn format_pose_file(poses: &[StampedPose]) -> String {
+    format_trajectory(&eval_poses(poses))
+}
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
@@ -61,11 +74,14 @@ fn main() {
         cfg.particles = n;
     }
     let log = std::fs::File::open(dir.join("mit-csail.clf")).expect("mit-csail.clf");
-    let reference =
-        parse_pose_file(&std::fs::read_to_string(dir.join("csail-reference-poses.txt")).unwrap())
-            .unwrap();
+    let reference = load_trajectory(&dir.join("csail-reference-poses.txt")).unwrap();
     let mut scans = LogScans::new(BufReader::new(log));
-    let mut slam = Rbpf::new(&cfg, true);
+    let mut slam = SlamPipeline::from_config(
+        &cfg,
+        BackendOptions {
+            keep_trajectory: true,
+        },
+    );
     if let Some(t) = std::env::var("CSAIL_THETA0")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -114,8 +130,14 @@ fn main() {
         times[((q * times.len() as f64).ceil() as usize).clamp(1, times.len()) - 1] as f64 / 1e6
     };
     let traj = slam.trajectory();
-    let stats = slam.stats();
-    let (tiles, bytes) = slam.map_memory();
+    let fallbacks = slam.stats().frontend_fallbacks;
+    let rbpf: &Rbpf = slam
+        .backend()
+        .as_any()
+        .downcast_ref()
+        .expect("the bench runs the particle filter");
+    let stats = rbpf.stats();
+    let (tiles, bytes) = rbpf.map_memory();
     println!(
         "csail: {} scans, {} particles: per-scan CPU p50 {:.2} ms p99 {:.2} ms max {:.2} ms; total {:.1} CPU-s; peak RSS {:.1} MB; {} tiles ({:.1} MB); {} resamples, {} fallbacks, {:.1} evaluations per particle-scan",
         online.len(),
@@ -128,18 +150,18 @@ fn main() {
         tiles,
         bytes as f64 / 1e6,
         stats.resamples,
-        stats.frontend_fallbacks,
+        fallbacks,
         stats.match_evaluations as f64 / (stats.updates.max(1) * cfg.particles as u64) as f64
     );
     for (name, est) in [("smoothed", &traj), ("online", &online)] {
-        if let Some(r) = absolute_trajectory_error(est, &reference, 1_000_000) {
+        if let Ok(r) = evaluate_trajectories(
+            &reference,
+            &eval_poses(est),
+            &TrajectoryOptions::same_stamp(),
+        ) {
             println!(
-                "csail: ATE {name}: RMS {:.3} m, max {:.3} m at {}, mean {:.3} m over {} poses",
-                r.rms_m,
-                r.max_m,
-                smokenav_algorithms_slam::eval::format_stamp(r.max_at_ns),
-                r.mean_m,
-                r.matched
+                "csail: ATE {name}: RMS {:.4} m, max {:.3} m at {:.6}, mean {:.3} m over {} poses",
+                r.ate_m.rmse, r.ate_m.max, r.ate_max_at_s, r.ate_m.mean, r.pairs
             );
         }
     }
@@ -163,7 +185,7 @@ fn main() {
             .map(|(t, sx, sy, st, n, r)| {
                 format!(
                     "{} {sx:.4} {sy:.4} {st:.5} {n:.1} {}\n",
-                    smokenav_algorithms_slam::eval::format_stamp(*t),
+                    format_stamp(*t),
                     u8::from(*r)
                 )
             })

@@ -5,7 +5,8 @@
 //!
 //! `overlay REF.yaml REF_POSES EST.yaml EST_POSES OUT.png`
 
-use smokenav_algorithms_slam::eval::{absolute_trajectory_error, parse_pose_file};
+use smokenav_algorithms_eval::{TrajectoryOptions, evaluate_trajectories, load_trajectory};
+use smokenav_algorithms_slam::Pose2;
 use std::path::Path;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -14,12 +15,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("usage: overlay REF.yaml REF_POSES EST.yaml EST_POSES OUT.png".into());
     }
     let reference = smokenav_platform_map::load_map_server(Path::new(&a[1]))?;
-    let ref_poses = parse_pose_file(&std::fs::read_to_string(&a[2])?)?;
+    let ref_poses = load_trajectory(Path::new(&a[2]))?;
     let est = smokenav_platform_map::load_map_server(Path::new(&a[3]))?;
-    let est_poses = parse_pose_file(&std::fs::read_to_string(&a[4])?)?;
-    let ate =
-        absolute_trajectory_error(&est_poses, &ref_poses, 1_000_000).ok_or("no common poses")?;
+    let est_poses = load_trajectory(Path::new(&a[4]))?;
+    let ate = evaluate_trajectories(&ref_poses, &est_poses, &TrajectoryOptions::same_stamp())?;
     println!("{ate:?}");
+    // Estimate → reference frame.
+    let alignment = Pose2::new(
+        ate.align_dx_m,
+        ate.align_dy_m,
+        ate.align_dtheta_deg.to_radians(),
+    );
     let mut img = image::RgbImage::from_pixel(
         reference.width as u32,
         reference.height as u32,
@@ -44,8 +50,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for x in 0..est.width {
             if est.get(x, y).is_some_and(|v| v >= 65) {
                 let (wx, wy) = est.cell_center(x, y);
-                let (rx, ry) = ate.alignment.apply(wx, wy);
-                if let Some((cx, cy)) = reference.world_to_cell(rx, ry) {
+                let r = alignment.transform_point(&nalgebra::Point2::new(wx, wy));
+                if let Some((cx, cy)) = reference.world_to_cell(r.x, r.y) {
                     put(&mut img, cx, cy, [0, 0, 200]);
                 }
             }

@@ -5,10 +5,11 @@
 //!
 //! `refine_spread LOG K N SIGMA_XY SIGMA_THETA [key=value ...]`
 
-use smokenav_algorithms_slam::matcher::{MatchParams, PreparedScan, refine};
 use smokenav_algorithms_slam::offline::LogScans;
+use smokenav_algorithms_slam::rbpf::Rbpf;
+use smokenav_algorithms_slam::rbpf::matcher::{MatchParams, PreparedScan, refine};
 use smokenav_algorithms_slam::rng::Rng;
-use smokenav_algorithms_slam::{Pose2, Rbpf, SlamBackend};
+use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline};
 use smokenav_platform_config::{SlamSection, parse_toml};
 use std::io::BufReader;
 
@@ -22,17 +23,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (sxy, sth): (f64, f64) = (a[4].parse()?, a[5].parse()?);
     let cfg: SlamSection = parse_toml(&a[6..].join("\n"), std::path::Path::new("args"))?;
     let mut scans = LogScans::new(BufReader::new(std::fs::File::open(&a[1])?));
-    let mut slam = Rbpf::new(&cfg, false);
+    let mut slam = SlamPipeline::from_config(&cfg, BackendOptions::default());
     for _ in 0..k {
         let (scan, odom) = scans.next_scan().ok_or("log too short")?;
         slam.process(scan, &odom);
     }
-    let best = slam.particles()[slam.best_index()].clone();
+    let filter: &Rbpf = slam
+        .backend()
+        .as_any()
+        .downcast_ref()
+        .ok_or("refine_spread needs the particle filter")?;
+    let best = filter.particles()[filter.best_index()].clone();
     let (scan, odom) = scans.next_scan().ok_or("log too short")?;
     let scan = scan.clone();
     // The filter's own answer for scan K+1 is the reference mode.
-    let mut probe = slam;
-    let mode = probe.process(&scan, &odom).pose;
+    let mode = slam.process(&scan, &odom).pose;
     let mp = MatchParams::from_config(&cfg);
     let mut prepared = PreparedScan::default();
     prepared.prepare(&scan, &mp);

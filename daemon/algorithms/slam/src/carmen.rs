@@ -16,9 +16,8 @@
 //! lines are capped at [`MAX_LINE_BYTES`], readings at [`MAX_READINGS`], and a
 //! bad line is reported with its number and skipped, never a panic.
 
-use crate::eval::parse_stamp_ns;
-use crate::pose::Pose2;
 use crate::scan::{Beam, BeamKind, RangeScan};
+use smokenav_shared_types::Pose2;
 use std::io::BufRead;
 
 /// Longest line accepted, bytes (a 1081-beam ROBOTLASER1 with remissions is ~15 kB).
@@ -269,7 +268,7 @@ impl LaserRecord {
     pub fn fill_range_scan(&self, out: &mut RangeScan) {
         out.clear();
         out.stamp_ns = self.ipc_timestamp_ns;
-        let mount = self.laser_pose.relative_to(&self.robot_pose);
+        let mount = self.robot_pose.between(&self.laser_pose);
         out.sensor_pose = if mount.is_finite() {
             mount
         } else {
@@ -386,6 +385,38 @@ impl<R: BufRead> Iterator for CarmenReader<R> {
     }
 }
 
+/// Parses a decimal timestamp in seconds (`1134864629.895182`, or `1.13486e+09`)
+/// into nanoseconds without going through floating point when it is plain decimal.
+pub fn parse_stamp_ns(text: &str) -> Option<u64> {
+    let t = text.trim();
+    if t.is_empty() || t.starts_with('-') || t.starts_with('+') {
+        return None;
+    }
+    if t.bytes().all(|b| b.is_ascii_digit() || b == b'.') {
+        let (int, frac) = t.split_once('.').unwrap_or((t, ""));
+        if int.is_empty() && frac.is_empty() || frac.contains('.') {
+            return None;
+        }
+        let secs: u64 = if int.is_empty() { 0 } else { int.parse().ok()? };
+        let mut ns = 0u64;
+        for (i, b) in frac.bytes().take(9).enumerate() {
+            ns += (b - b'0') as u64 * 10u64.pow(8 - i as u32);
+        }
+        return secs.checked_mul(1_000_000_000)?.checked_add(ns);
+    }
+    let v: f64 = t.parse().ok()?;
+    (0.0..1.8e10).contains(&v).then(|| (v * 1e9).round() as u64)
+}
+
+/// Formats nanoseconds as seconds with microseconds, the way CARMEN logs write stamps.
+pub fn format_stamp(stamp_ns: u64) -> String {
+    format!(
+        "{}.{:06}",
+        stamp_ns / 1_000_000_000,
+        (stamp_ns % 1_000_000_000) / 1000
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -399,6 +430,23 @@ mod tests {
             "FLASER {n} {} 576.536523 0.106594 -2.255213 576.536523 0.106594 -2.255213 1134864629.895182 b21 0.086295",
             ranges.join(" ")
         )
+    }
+
+    #[test]
+    fn stamps_keep_microseconds_exactly() {
+        assert_eq!(
+            parse_stamp_ns("1134864629.895182"),
+            Some(1_134_864_629_895_182_000)
+        );
+        assert_eq!(format_stamp(1_134_864_629_895_182_000), "1134864629.895182");
+        assert_eq!(
+            parse_stamp_ns("1.13486e+09"),
+            Some(1_134_860_000_000_000_000)
+        );
+        assert_eq!(parse_stamp_ns("-1"), None);
+        assert_eq!(parse_stamp_ns("1.2.3"), None);
+        assert_eq!(parse_stamp_ns("."), None);
+        assert_eq!(parse_stamp_ns("99999999999999999999"), None);
     }
 
     #[test]

@@ -22,7 +22,7 @@
 //!
 //! Deterministic: no randomness, ties go to the first candidate in a fixed order.
 
-use crate::pose::Pose2;
+use smokenav_shared_types::Pose2;
 use std::collections::VecDeque;
 
 /// Fine cells per side of the coarsest table is `1 << LEVELS`.
@@ -178,7 +178,7 @@ impl FrontEnd {
         let prediction = self.predict(&last_pose, odom, stamp_ns, stale);
         // The prior follows the predicted motion: wider for larger steps and
         // while the odometry repeats (the prediction is then extrapolated).
-        let step = prediction.relative_to(&last_pose);
+        let step = last_pose.between(&prediction);
         // Without a fresh odometry reference (after a reset) the prediction is a guess too.
         let (st, sr) = if stale || self.fresh.is_none() {
             (STALE_SIGMA_T, STALE_SIGMA_R)
@@ -204,7 +204,7 @@ impl FrontEnd {
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
         if !stale {
             return match &self.fresh {
-                Some(f) => f.pose.compose(&odom.relative_to(&f.odom)),
+                Some(f) => f.pose.compose(&f.odom.between(odom)),
                 None => *last_pose,
             };
         }
@@ -218,7 +218,7 @@ impl FrontEnd {
         if dt_v <= 1e-3 || since > MAX_EXTRAPOLATION_S {
             return *last_pose;
         }
-        let v = b.odom.relative_to(&a.odom);
+        let v = a.odom.between(&b.odom);
         let k = dt / dt_v;
         last_pose.compose(&Pose2::new(v.x * k, v.y * k, v.theta * k))
     }
@@ -601,7 +601,7 @@ mod tests {
         world
             .into_iter()
             .map(|(x, y)| {
-                let p = Pose2::new(x, y, 0.0).relative_to(pose);
+                let p = pose.between(&Pose2::new(x, y, 0.0));
                 (p.x, p.y)
             })
             .collect()

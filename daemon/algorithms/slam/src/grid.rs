@@ -11,8 +11,8 @@
 //! `[cx·res, (cx+1)·res) × [cy·res, (cy+1)·res)` of the map frame, so the grid
 //! grows in any direction without moving what is already there.
 
-use crate::pose::Pose2;
 use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Pose2;
 use std::sync::Arc;
 
 pub const TILE_SHIFT: i32 = 5;

@@ -1,7 +1,7 @@
 //! Pairs a scan with the odometry at its stamp: a bounded history of
 //! odometry poses, interpolated between the two readings around the stamp.
 
-use crate::pose::{Pose2, interpolate};
+use smokenav_shared_types::Pose2;
 use std::collections::VecDeque;
 
 /// Where the odometry for a stamp came from.
@@ -105,7 +105,7 @@ impl OdomBuffer {
         let (t1, p1) = self.readings[i];
         let (t0, p0) = self.readings[i - 1];
         let t = (stamp_ns - t0) as f64 / (t1 - t0) as f64;
-        OdomAt::Interpolated(interpolate(&p0, &p1, t))
+        OdomAt::Interpolated(p0.interpolate(&p1, t))
     }
 }
 

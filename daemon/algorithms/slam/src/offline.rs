@@ -1,10 +1,47 @@
-//! Feeding a CARMEN log to a back-end: scans with the odometry pose the
-//! logger attached, bad lines counted and kept (the first few) for the report.
+//! Offline input for the pipeline: a CARMEN log (scans with the odometry pose
+//! the logger attached; bad lines counted and kept, the first few, for the
+//! report), and recorded bus messages replayed in receive order exactly as
+//! the SLAM process handles them live.
 
+use crate::backend::SlamUpdate;
 use crate::carmen::{CarmenReader, LineError, Record};
-use crate::pose::Pose2;
+use crate::pipeline::SlamPipeline;
 use crate::scan::RangeScan;
+use smokenav_shared_types::Pose2;
+use smokenav_shared_types::{FusedScan, LaserScan, Odometry};
 use std::io::BufRead;
+
+/// A message the SLAM process subscribes to.
+#[derive(Debug, Clone, Copy)]
+pub enum Received<'a> {
+    Odometry(&'a Odometry),
+    Fused(&'a FusedScan),
+    Laser(&'a LaserScan),
+}
+
+/// Feeds `(receive time ns, message)` pairs in receive order through the
+/// pipeline, polling after each one at its receive time as the process polls
+/// after each wake-up, then flushes the scan still waiting at the end.
+/// `on_update` sees every update in order.
+pub fn replay<'a>(
+    pipeline: &mut SlamPipeline,
+    received: impl IntoIterator<Item = (u64, Received<'a>)>,
+    mut on_update: impl FnMut(&SlamUpdate),
+) {
+    for (now_ns, message) in received {
+        match message {
+            Received::Odometry(o) => pipeline.push_odom(o),
+            Received::Fused(f) => pipeline.push_fused(f),
+            Received::Laser(l) => pipeline.push_laser(l),
+        }
+        if let Some(u) = pipeline.poll(now_ns) {
+            on_update(&u);
+        }
+    }
+    if let Some(u) = pipeline.flush() {
+        on_update(&u);
+    }
+}
 
 /// Bad lines kept for the report; later ones are only counted.
 pub const KEPT_ERRORS: usize = 100;

@@ -1,7 +1,8 @@
 //! The scan the filter consumes, built from a `LaserScan`, a `FusedScan` or a
 //! log record, with a noise level per beam.
 
-use crate::pose::Pose2;
+use smokenav_platform_config::SlamSection;
+use smokenav_shared_types::Pose2;
 use smokenav_shared_types::{BeamReading, FusedScan, LaserScan, SectionSource};
 
 /// Where a beam's range came from, which sets its noise.
@@ -30,11 +31,85 @@ pub struct RangeScan {
     pub sensor_pose: Pose2,
     pub beams: Vec<Beam>,
     /// Multiplier of the laser endpoint noise for the obscurant the scan was
-    /// taken in (1 in clear air; see `SlamSection::laser_noise_factor`).
+    /// taken in (1 in clear air; see [`crate::noise`]).
     pub laser_noise_factor: f64,
 }
 
+/// Which beams' endpoints the scan matchers use.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EndpointLimits {
+    /// Readings at or beyond this are no return, m.
+    pub max_range: f64,
+    /// Readings beyond this only clear free space, m.
+    pub max_urange: f64,
+    /// Use every (lskip+1)-th usable beam.
+    pub lskip: usize,
+    /// Endpoints closer than this to the last one kept are dropped, m.
+    pub min_spacing: f64,
+}
+
+impl EndpointLimits {
+    pub fn from_config(c: &SlamSection) -> Self {
+        Self {
+            max_range: c.max_range_m,
+            max_urange: c.max_urange_m,
+            lskip: c.lskip as usize,
+            min_spacing: c.resolution_m,
+        }
+    }
+}
+
+/// A beam's endpoint in the robot frame, with the beam's direction and range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Endpoint {
+    pub x: f64,
+    pub y: f64,
+    pub range: f64,
+    /// Direction of the beam in the robot frame.
+    pub cos: f64,
+    pub sin: f64,
+    pub kind: BeamKind,
+}
+
 impl RangeScan {
+    /// The endpoints a scan matcher uses, into `out` (cleared first): beams with
+    /// a range inside `max_urange`, every `lskip+1`-th, at least `min_spacing`
+    /// from the previous endpoint kept (closer ones add cost but no information,
+    /// and would count the same evidence twice in a likelihood).
+    pub fn endpoints(&self, lim: &EndpointLimits, out: &mut Vec<Endpoint>) {
+        out.clear();
+        let min_spacing2 = lim.min_spacing * lim.min_spacing;
+        let sensor = &self.sensor_pose;
+        let mut used = 0usize;
+        for beam in &self.beams {
+            let Some(r) = beam.range else { continue };
+            let r = r as f64;
+            if !(r > 0.0 && r < lim.max_range && beam.angle.is_finite()) || r > lim.max_urange {
+                continue;
+            }
+            let skip = !used.is_multiple_of(lim.lskip + 1);
+            used += 1;
+            if skip {
+                continue;
+            }
+            let (sin, cos) = (sensor.theta + beam.angle as f64).sin_cos();
+            let (x, y) = (sensor.x + cos * r, sensor.y + sin * r);
+            if let Some(last) = out.last()
+                && (last.x - x).powi(2) + (last.y - y).powi(2) < min_spacing2
+            {
+                continue;
+            }
+            out.push(Endpoint {
+                x,
+                y,
+                range: r,
+                cos,
+                sin,
+                kind: beam.kind,
+            });
+        }
+    }
+
     pub fn clear(&mut self) {
         self.beams.clear();
         self.laser_noise_factor = 1.0;

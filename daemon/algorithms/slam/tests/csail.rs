@@ -6,9 +6,11 @@
 //! `CSAIL_DIR=<folder with mit-csail.clf and csail-reference-poses.txt>
 //! cargo test --release -p smokenav-algorithms-slam --test csail -- --ignored`.
 
-use smokenav_algorithms_slam::eval::{AteReport, absolute_trajectory_error, parse_pose_file};
+use smokenav_algorithms_eval::{
+    TrajectoryOptions, TrajectoryReport, evaluate_trajectories, load_trajectory,
+};
 use smokenav_algorithms_slam::offline::LogScans;
-use smokenav_algorithms_slam::{Rbpf, SlamBackend, StampedPose};
+use smokenav_algorithms_slam::{BackendOptions, SlamPipeline, StampedPose};
 use smokenav_platform_config::SlamSection;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
@@ -19,8 +21,8 @@ fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn reference(path: &Path) -> Vec<StampedPose> {
-    parse_pose_file(&std::fs::read_to_string(path).unwrap()).unwrap()
+fn reference(path: &Path) -> Vec<smokenav_algorithms_eval::StampedPose> {
+    load_trajectory(path).unwrap()
 }
 
 struct Run {
@@ -32,7 +34,12 @@ struct Run {
 
 fn run(log: &Path, cfg: &SlamSection) -> Run {
     let mut scans = LogScans::new(BufReader::new(std::fs::File::open(log).unwrap()));
-    let mut slam = Rbpf::new(cfg, true);
+    let mut slam = SlamPipeline::from_config(
+        cfg,
+        BackendOptions {
+            keep_trajectory: true,
+        },
+    );
     let mut online = Vec::new();
     while let Some((scan, odom)) = scans.next_scan() {
         let u = slam.process(scan, &odom);
@@ -49,10 +56,30 @@ fn run(log: &Path, cfg: &SlamSection) -> Run {
     }
 }
 
-fn ate(est: &[StampedPose], reference: &[StampedPose]) -> AteReport {
-    // Stamps are the log's own, so they match to the microsecond.
-    absolute_trajectory_error(est, reference, 1_000_000)
-        .expect("poses in common with the reference")
+/// ATE against the reference poses, which sit at some of the log's own
+/// stamps: paired by stamp (to the microsecond), not interpolated.
+fn ate(est: &[StampedPose], reference: &[smokenav_algorithms_eval::StampedPose]) -> Ate {
+    let est: Vec<_> = est
+        .iter()
+        .map(|p| smokenav_algorithms_eval::StampedPose::from_ns(p.stamp_ns, &p.pose))
+        .collect();
+    let r = evaluate_trajectories(reference, &est, &TrajectoryOptions::same_stamp())
+        .expect("poses in common with the reference");
+    Ate {
+        matched: r.pairs,
+        rms_m: r.ate_m.rmse,
+        max_m: r.ate_m.max,
+        report: r,
+    }
+}
+
+#[derive(Debug)]
+#[allow(dead_code)] // `report` is for the failure messages
+struct Ate {
+    matched: usize,
+    rms_m: f64,
+    max_m: f64,
+    report: TrajectoryReport,
 }
 
 #[test]

@@ -1,43 +1,37 @@
 //! `smokenav-slam`: the SLAM library as a process.
 //!
 //! Subscribes to `fusion/scan` (or `laser/scan`, per `[slam] input` or
-//! `--input`) and `base/odom`; pairs each scan with the odometry interpolated
-//! to the scan's stamp; runs the particle filter; publishes a `PoseEstimate`
-//! on `slam/pose` for every processed scan and the best particle's map on
-//! `slam/map` at `[slam] map_rate_hz`. When it falls behind it processes the
+//! `--input`) and `base/odom` and hands every message to the SLAM pipeline
+//! of `smokenav-algorithms-slam` (odometry pairing and resets, the smoke
+//! noise model, the front end, the motion filter, the back-end of `[slam]
+//! backend` or `--backend`), the very pipeline `smokenav-lab`'s offline
+//! comparison runs; publishes a `PoseEstimate` on `slam/pose` for every scan
+//! the pipeline turned into an update and the back-end's map on `slam/map`
+//! at `[slam] map_rate_hz`. When it falls behind the pipeline keeps the
 //! newest scan and counts the others as skipped: nothing queues without bound
 //! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
 //! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
 //! map.png (`smokenav map save DIR` saves the published map from anywhere).
 //!
 //! ```text
-//! smokenav-slam --config robot.toml [--input fused|laser] [--map-dir DIR]
+//! smokenav-slam --config robot.toml [--input fused|laser] [--backend rbpf] [--map-dir DIR]
 //! ```
 
 use anyhow::Context;
-use clap::{Parser, ValueEnum};
-use smokenav_algorithms_slam::odom_buffer::{OdomAt, OdomBuffer};
-use smokenav_algorithms_slam::{Pose2, RangeScan, Rbpf, SlamBackend, SlamUpdate};
+use clap::Parser;
+use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
 use smokenav_platform_bus::{MapPublisher, Publisher, Subscriber, WaitOutcome, Waiter, topics};
-use smokenav_platform_config::SlamSection;
-use smokenav_platform_config::slam::SlamInput;
+use smokenav_platform_config::{SlamBackendKind, SlamInput};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_runtime::{CommonArgs, Process};
 use smokenav_shared_types::{
-    Clock, FusedScan, Header, LaserScan, MapInfo, MonotonicClock, Odometry, OdometryFlags,
-    PoseEstimate,
+    Clock, FusedScan, Header, LaserScan, MapInfo, MonotonicClock, Odometry, PoseEstimate,
 };
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum InputArg {
-    Fused,
-    Laser,
-}
 
 #[derive(Parser)]
 #[command(
@@ -49,7 +43,10 @@ struct Args {
     common: CommonArgs,
     /// Scan topic, overriding `[slam] input`: fused (fusion/scan) or laser (laser/scan).
     #[arg(long, value_enum)]
-    input: Option<InputArg>,
+    input: Option<SlamInput>,
+    /// SLAM back-end, overriding `[slam] backend`.
+    #[arg(long, value_enum)]
+    backend: Option<SlamBackendKind>,
     /// Folder SIGUSR1 writes the map to.
     #[arg(long, value_name = "DIR", default_value = ".")]
     map_dir: PathBuf,
@@ -58,12 +55,6 @@ struct Args {
     particles: Option<usize>,
 }
 
-/// Odometry newer than a scan may still be on its way: wait this long for it.
-const ODOM_WAIT: Duration = Duration::from_millis(100);
-/// A scan up to this far past the newest odometry uses that odometry.
-const ODOM_MAX_GAP: Duration = Duration::from_millis(300);
-/// Odometry readings kept for interpolation (~10 s at the Pioneer's 50 Hz).
-const ODOM_HISTORY: usize = 512;
 /// Longest wait on the bus, so signals and the map timer are served promptly.
 const POLL: Duration = Duration::from_millis(50);
 
@@ -78,24 +69,21 @@ enum Scans {
 }
 
 impl Scans {
-    /// Drains the queue into `scan`, keeping only the newest; returns how many arrived.
-    fn drain(&self, scan: &mut RangeScan, mount: Pose2, cfg: &SlamSection) -> anyhow::Result<u64> {
-        let mut n = 0;
+    /// Hands every scan that arrived to the pipeline (which keeps the newest).
+    fn drain(&self, pipeline: &mut SlamPipeline) -> anyhow::Result<()> {
         match self {
             Scans::Fused(s) => {
                 while let Some(f) = s.receive()? {
-                    scan.fill_from_fused(&f, mount, cfg.laser_noise_factor(f.smoke_level as f64));
-                    n += 1;
+                    pipeline.push_fused(&f);
                 }
             }
             Scans::Laser(s) => {
                 while let Some(l) = s.receive()? {
-                    scan.fill_from_laser(&l, mount);
-                    n += 1;
+                    pipeline.push_laser(&l);
                 }
             }
         }
-        Ok(n)
+        Ok(())
     }
 
     fn lost(&self) -> u64 {
@@ -113,15 +101,10 @@ impl Scans {
     }
 }
 
-/// Counters surfaced as health metrics.
+/// Counters surfaced as health metrics (the pipeline keeps its own).
 #[derive(Default)]
 struct Counters {
     processed: u64,
-    /// Superseded by a newer scan before they could be processed.
-    superseded: u64,
-    /// Processed without odometry at their stamp (the last pose used was held).
-    no_odometry: u64,
-    odom_resets: u64,
     publish_errors: u64,
     maps_published: u64,
     maps_saved: u64,
@@ -155,11 +138,10 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         );
         cfg.particles = n;
     }
-    let input = match args.input {
-        Some(InputArg::Fused) => SlamInput::Fused,
-        Some(InputArg::Laser) => SlamInput::Laser,
-        None => cfg.input,
-    };
+    if let Some(b) = args.backend {
+        cfg.backend = b;
+    }
+    let input = args.input.unwrap_or(cfg.input);
     let m = &p.config.laser.mount;
     let mount = Pose2::new(m.x, m.y, m.yaw_rad());
     let save_requested = Arc::new(AtomicBool::new(false));
@@ -179,19 +161,19 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         Scans::Laser(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],
     };
 
-    let mut slam = Rbpf::new(&cfg, false);
-    let mut odom = OdomBuffer::new(ODOM_HISTORY);
-    let mut scan = RangeScan::default();
-    let mut pending = false;
-    let mut last_odom = Pose2::default();
+    let mut pipeline =
+        SlamPipeline::from_config(&cfg, BackendOptions::default()).with_sensor_pose(mount);
     let mut last_update: Option<SlamUpdate> = None;
+    let mut map: Option<OccupancyGrid> = None;
+    let mut last_map_revision = None;
     let mut counters = Counters::default();
     let map_period = Duration::from_secs_f64(1.0 / cfg.map_rate_hz);
     let mut next_map = Instant::now() + map_period;
     let clock = MonotonicClock;
     let rate = p.health.add_rate("pose_hz", Some(10.0));
     p.ready(&format!(
-        "{} particles on {} + {}, map every {:.1} s",
+        "{} with {} particles on {} + {}, map every {:.1} s",
+        pipeline.backend().name(),
         cfg.particles,
         scans.topic(),
         topics::BASE_ODOM,
@@ -203,72 +185,48 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             break;
         }
         while let Some(o) = odom_sub.receive()? {
-            if o.flags & OdometryFlags::RESET != 0 {
-                // The odometry frame jumped: poses before and after must not be mixed.
-                odom.clear();
-                slam.odometry_reset();
-                counters.odom_resets += 1;
-            }
-            odom.push(o.header.stamp_ns, Pose2::new(o.x, o.y, o.theta));
+            pipeline.push_odom(&o);
         }
-        let arrived = scans.drain(&mut scan, mount, &cfg)?;
-        if arrived > 0 {
-            // Every scan that arrived but the newest, and one still waiting for odometry, is skipped.
-            counters.superseded += arrived - 1 + u64::from(pending);
-            pending = true;
-        }
-        if pending {
-            let now = clock.now_ns();
-            let at = odom.at(
-                scan.stamp_ns,
-                now,
-                ODOM_WAIT.as_nanos() as u64,
-                ODOM_MAX_GAP.as_nanos() as u64,
-            );
-            let pose = match at {
-                OdomAt::NotYet => None,
-                OdomAt::Missing => {
-                    counters.no_odometry += 1;
-                    Some(last_odom)
+        scans.drain(&mut pipeline)?;
+        let t0 = Instant::now();
+        if let Some(update) = pipeline.poll(clock.now_ns()) {
+            let took = t0.elapsed();
+            counters.processed += 1;
+            p.health.record_latency(took);
+            let skipped = pipeline.stats().superseded + scans.lost();
+            let covariance = update.covariance_row_major();
+            let published = poses.publish_with(|e: &mut PoseEstimate| {
+                e.header = Header::new(update.stamp_ns, 0, "map");
+                e.x = update.pose.x;
+                e.y = update.pose.y;
+                e.theta = update.pose.theta;
+                e.covariance = covariance;
+                e.n_eff = update.n_eff as f32;
+                e.particles = update.particles as u32;
+                e.scans_skipped = skipped;
+                e.processing_us = took.as_micros().min(u32::MAX as u128) as u32;
+            });
+            match published {
+                Ok(_) => p.health.mark(rate),
+                Err(e) => {
+                    counters.publish_errors += 1;
+                    p.health.error(&format!("cannot publish slam/pose: {e}"));
                 }
-                other => other.pose(),
-            };
-            if let Some(odom_pose) = pose {
-                pending = false;
-                last_odom = odom_pose;
-                let t0 = Instant::now();
-                let update = slam.process(&scan, &odom_pose);
-                let took = t0.elapsed();
-                counters.processed += 1;
-                p.health.record_latency(took);
-                let skipped = counters.superseded + scans.lost();
-                let published = poses.publish_with(|e: &mut PoseEstimate| {
-                    e.header = Header::new(update.stamp_ns, 0, "map");
-                    e.x = update.pose.x;
-                    e.y = update.pose.y;
-                    e.theta = update.pose.theta;
-                    e.covariance = update.covariance;
-                    e.n_eff = update.n_eff as f32;
-                    e.particles = update.particles as u32;
-                    e.scans_skipped = skipped;
-                    e.processing_us = took.as_micros().min(u32::MAX as u128) as u32;
-                });
-                match published {
-                    Ok(_) => p.health.mark(rate),
-                    Err(e) => {
-                        counters.publish_errors += 1;
-                        p.health.error(&format!("cannot publish slam/pose: {e}"));
-                    }
-                }
-                last_update = Some(update);
             }
+            last_update = Some(update);
         }
         let now = Instant::now();
         let save = save_requested.swap(false, Ordering::Relaxed);
         if now >= next_map || save {
-            if let (Some(grid), Some(u)) = (slam.map(), last_update) {
+            // Exporting the map copies it: only when it changed since the last export.
+            let revision = pipeline.map_revision();
+            if last_map_revision != Some(revision) {
+                map = pipeline.map();
+                last_map_revision = Some(revision);
+            }
+            if let (Some(grid), Some(u)) = (&map, last_update) {
                 if now >= next_map {
-                    match maps.publish(&map_info(&grid, u.stamp_ns), &grid.cells) {
+                    match maps.publish(&map_info(grid, u.stamp_ns), &grid.cells) {
                         Ok(_) => counters.maps_published += 1,
                         Err(e) => {
                             counters.publish_errors += 1;
@@ -277,7 +235,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                     }
                 }
                 if save {
-                    match save_map(&grid, &args.map_dir) {
+                    match save_map(grid, &args.map_dir) {
                         Ok(()) => {
                             counters.maps_saved += 1;
                             tracing::info!("map saved to {}", args.map_dir.display());
@@ -293,37 +251,31 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                 next_map = now + map_period;
             }
         }
-        report(p, &slam, &counters, &scans, &odom, last_update.as_ref());
+        report(p, &pipeline, &counters, &scans);
         p.tick()?;
     }
     Ok(())
 }
 
-fn report(
-    p: &mut Process,
-    slam: &Rbpf,
-    c: &Counters,
-    scans: &Scans,
-    odom: &OdomBuffer,
-    last: Option<&SlamUpdate>,
-) {
+fn report(p: &mut Process, pipeline: &SlamPipeline, c: &Counters, scans: &Scans) {
     let h = &mut p.health;
-    let stats = slam.stats();
+    let stats = pipeline.stats();
     h.set_metric("scans_processed", c.processed as f64);
-    h.set_metric("scans_skipped", (c.superseded + scans.lost()) as f64);
+    h.set_metric("scans_skipped", (stats.superseded + scans.lost()) as f64);
     h.set_metric("scans_lost_on_bus", scans.lost() as f64);
-    h.set_metric("scans_without_odometry", c.no_odometry as f64);
+    h.set_metric("scans_without_odometry", stats.no_odometry as f64);
     h.set_metric("scans_without_ranges", stats.empty_scans as f64);
-    h.set_metric("odom_resets", c.odom_resets as f64);
-    h.set_metric("odom_out_of_order", odom.out_of_order as f64);
-    h.set_metric("resamples", stats.resamples as f64);
+    h.set_metric("scans_held_back", stats.held_back as f64);
+    h.set_metric("odom_resets", stats.odom_resets as f64);
+    h.set_metric("odom_out_of_order", stats.odom_out_of_order as f64);
     h.set_metric("frontend_fallbacks", stats.frontend_fallbacks as f64);
     h.set_metric("maps_published", c.maps_published as f64);
     h.set_metric("maps_saved", c.maps_saved as f64);
     h.set_metric("publish_errors", c.publish_errors as f64);
-    if let Some(u) = last {
-        h.set_metric("n_eff", u.n_eff);
-    }
+    // The back-end's own figures (the particle filter's resamples and N_eff).
+    pipeline
+        .backend()
+        .metrics(&mut |name, value| h.set_metric(name, value));
 }
 
 #[cfg(test)]

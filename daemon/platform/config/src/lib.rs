@@ -25,7 +25,7 @@ pub use common::MountPose;
 pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::{LaserSection, ScanLayout};
 pub use robot::{BusSection, Platform, RobotSection};
-pub use slam::SlamSection;
+pub use slam::{SlamBackendKind, SlamInput, SlamSection};
 pub use smoke::{AdcBackend, SmokeSection};
 pub use sonar::{SonarSection, Transducer};
 pub use validate::{Issue, Validate, Validator, key_line};

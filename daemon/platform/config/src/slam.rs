@@ -44,8 +44,10 @@ pub enum SlamPreset {
     SeedTable3,
 }
 
-/// The scan topic the SLAM process consumes.
+/// The scan topic the SLAM process consumes (`[slam] input`, and `--input`
+/// of `smokenav-slam` with the `clap` feature).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum SlamInput {
     /// `fusion/scan`: the SmokeNav fused scan (per-beam sources, smoke level).
     #[default]
@@ -54,6 +56,28 @@ pub enum SlamInput {
     /// `laser/scan`: the raw laser scan.
     #[serde(rename = "laser")]
     Laser,
+}
+
+/// The SLAM algorithm behind the pipeline (`[slam] backend`, and `--backend`
+/// of `smokenav-slam` and `smokenav slam` with the `clap` feature). Only the
+/// particle filter exists today; `graph` (pose-graph SLAM with loop
+/// closure), `fuzzy` (fuzzy-map registration) and `vote` (a vote over
+/// several back-ends) are the next ones. Unknown names are rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum SlamBackendKind {
+    /// Rao-Blackwellised particle filter (GMapping class).
+    #[default]
+    #[serde(rename = "rbpf")]
+    Rbpf,
+}
+
+impl SlamBackendKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SlamBackendKind::Rbpf => "rbpf",
+        }
+    }
 }
 
 /// Declares the section once: each field with its doc, type, default value and
@@ -108,6 +132,8 @@ slam_section! {
     map_rate_hz: f64 = (1.0, 1.0),
     /// Scan topic the SLAM process consumes.
     input: SlamInput = (SlamInput::Fused, SlamInput::Fused),
+    /// The SLAM algorithm (only `rbpf` so far).
+    backend: SlamBackendKind = (SlamBackendKind::Rbpf, SlamBackendKind::Rbpf),
     /// Seed of the filter's random numbers: the same input and seed give the same output.
     seed: u64 = (42, 42),
     /// Readings at or beyond this are "no return" and are ignored, m (GMapping maxRange).
@@ -183,7 +209,9 @@ slam_section! {
     min_match_laser_points: u32 = (40, 40),
     /// Endpoint standard deviation of beams that came from sonar (per `FusedScan::beam_source`), m.
     sonar_sigma_m: f64 = (0.2, 0.2),
-    /// Laser range variance in clear air (Sevcik & Oh 2007: B_o = 5, mm²).
+    /// Laser range variance in clear air (Sevcik & Oh 2007: B_o = 5, mm²). The laser
+    /// noise model of `smokenav-algorithms-slam` (its `noise` module) turns these variances and
+    /// the smoke levels below into a per-scan noise factor.
     laser_variance_clear: f64 = (5.0, 5.0),
     /// Laser range variance in light obscurant (Sevcik & Oh 2007: rain, B_rain = 8.39).
     laser_variance_light: f64 = (8.39, 8.39),
@@ -311,28 +339,6 @@ impl Validate for SlamSection {
     }
 }
 
-impl SlamSection {
-    /// Standard-deviation multiplier of laser beams at `smoke_level` (SmokeNav's mV scale): the
-    /// square root of the variance ratio Sevcik & Oh 2007 measured (clear → rain → fog),
-    /// interpolated linearly in variance between the configured smoke levels.
-    pub fn laser_noise_factor(&self, smoke_level: f64) -> f64 {
-        let clear = self.laser_variance_clear;
-        let variance = if !smoke_level.is_finite() || smoke_level <= 0.0 {
-            clear
-        } else if smoke_level < self.smoke_level_light {
-            let t = smoke_level / self.smoke_level_light.max(f64::MIN_POSITIVE);
-            clear + t * (self.laser_variance_light - clear)
-        } else if smoke_level < self.smoke_level_dense {
-            let t = (smoke_level - self.smoke_level_light)
-                / (self.smoke_level_dense - self.smoke_level_light);
-            self.laser_variance_light + t * (self.laser_variance_dense - self.laser_variance_light)
-        } else {
-            self.laser_variance_dense
-        };
-        (variance / clear).sqrt()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -410,14 +416,14 @@ mod tests {
     }
 
     #[test]
-    fn laser_noise_widens_from_clear_to_fog_as_seed_001_measured() {
-        let s = SlamSection::default();
-        assert_eq!(s.laser_noise_factor(0.0), 1.0);
-        // Rain-like variance 8.39 vs 5 at the light threshold: σ × 1.295.
-        assert!((s.laser_noise_factor(130.0) - (8.39f64 / 5.0).sqrt()).abs() < 1e-9);
-        // Fog 13.75 vs 5 at and beyond the dense threshold: σ × 1.658.
-        assert!((s.laser_noise_factor(300.0) - (13.75f64 / 5.0).sqrt()).abs() < 1e-9);
-        assert!(s.laser_noise_factor(185.0) > s.laser_noise_factor(130.0));
-        assert_eq!(s.laser_noise_factor(f64::NAN), 1.0);
+    fn backend_names_are_strict() {
+        assert_eq!(
+            section("backend = \"rbpf\"\n").backend,
+            SlamBackendKind::Rbpf
+        );
+        let err = parse_toml::<SlamSection>("backend = \"graph\"\n", Path::new("slam.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("backend") && err.contains("graph"), "{err}");
     }
 }

@@ -146,13 +146,7 @@ impl Batch {
     }
 }
 
-/// A planar pose (m, m, rad).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose2 {
-    pub x: f64,
-    pub y: f64,
-    pub yaw: f64,
-}
+pub use smokenav_shared_types::Pose2;
 
 /// Where the sensors sit on the robot (from the robot profile), for `/tf_static`
 /// and the sonar points. Without it those views are not written.
@@ -169,25 +163,16 @@ impl RobotGeometry {
     pub fn from_config(cfg: &smokenav_platform_config::RobotConfig) -> Self {
         RobotGeometry {
             laser_frame: cfg.laser.frame_id.clone(),
-            laser: Pose2 {
-                x: cfg.laser.mount.x,
-                y: cfg.laser.mount.y,
-                yaw: cfg.laser.mount.yaw_rad(),
-            },
+            laser: Pose2::new(
+                cfg.laser.mount.x,
+                cfg.laser.mount.y,
+                cfg.laser.mount.yaw_rad(),
+            ),
             sonars: cfg
                 .sonar
                 .transducers
                 .iter()
-                .map(|t| {
-                    (
-                        t.index,
-                        Pose2 {
-                            x: t.x,
-                            y: t.y,
-                            yaw: t.yaw_deg.to_radians(),
-                        },
-                    )
-                })
+                .map(|t| (t.index, Pose2::new(t.x, t.y, t.yaw_deg.to_radians())))
                 .collect(),
         }
     }
@@ -393,7 +378,7 @@ impl Encoder {
             child: &g.laser_frame,
             x: g.laser.x,
             y: g.laser.y,
-            yaw: g.laser.yaw,
+            yaw: g.laser.theta,
         };
         codec::encode_tf_message(&[t], batch.slot(ch, 0, log_time, log_time));
     }
@@ -439,11 +424,7 @@ impl Encoder {
                 }
             }
             BusMessage::Odometry(o) => {
-                let pose = Pose2 {
-                    x: o.x,
-                    y: o.y,
-                    yaw: o.theta,
-                };
+                let pose = Pose2::new(o.x, o.y, o.theta);
                 self.last_odom = Some((pose, o.header.frame_id));
                 let t = Transform2 {
                     stamp_ns: stamp,
@@ -451,7 +432,7 @@ impl Encoder {
                     child: codec::BASE_FRAME,
                     x: pose.x,
                     y: pose.y,
-                    yaw: pose.yaw,
+                    yaw: pose.theta,
                 };
                 let tf = self.tf_channel(batch);
                 codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, stamp));
@@ -460,11 +441,7 @@ impl Encoder {
                 // map → odom needs the odometry the pose was estimated against;
                 // the latest one is the best estimate the recorder has.
                 if let Some((odom, odom_frame)) = self.last_odom {
-                    let slam = Pose2 {
-                        x: p.x,
-                        y: p.y,
-                        yaw: p.theta,
-                    };
+                    let slam = Pose2::new(p.x, p.y, p.theta);
                     let mo = map_to_odom(slam, odom);
                     let t = Transform2 {
                         stamp_ns: stamp,
@@ -472,7 +449,7 @@ impl Encoder {
                         child: odom_frame.as_str(),
                         x: mo.x,
                         y: mo.y,
-                        yaw: mo.yaw,
+                        yaw: mo.theta,
                     };
                     let tf = self.tf_channel(batch);
                     codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, stamp));
@@ -493,8 +470,8 @@ impl Encoder {
                 .map(|(_, p)| *p);
             let (x, y) = match (r.status(), pose) {
                 (SonarStatus::Valid, Some(p)) => (
-                    (p.x + f64::from(r.range) * p.yaw.cos()) as f32,
-                    (p.y + f64::from(r.range) * p.yaw.sin()) as f32,
+                    (p.x + f64::from(r.range) * p.theta.cos()) as f32,
+                    (p.y + f64::from(r.range) * p.theta.sin()) as f32,
                 ),
                 _ => (f32::NAN, f32::NAN),
             };
@@ -511,13 +488,7 @@ impl Encoder {
 
 /// map → odom such that map → odom → base equals the SLAM pose.
 pub fn map_to_odom(map_base: Pose2, odom_base: Pose2) -> Pose2 {
-    let yaw = map_base.yaw - odom_base.yaw;
-    let (s, c) = yaw.sin_cos();
-    Pose2 {
-        x: map_base.x - (c * odom_base.x - s * odom_base.y),
-        y: map_base.y - (s * odom_base.x + c * odom_base.y),
-        yaw,
-    }
+    map_base.compose(&odom_base.inverse())
 }
 
 #[cfg(test)]
@@ -526,22 +497,14 @@ mod tests {
 
     #[test]
     fn map_to_odom_composes_back_to_the_slam_pose() {
-        let odom = Pose2 {
-            x: 1.0,
-            y: 2.0,
-            yaw: 0.5,
-        };
-        let slam = Pose2 {
-            x: -0.3,
-            y: 4.0,
-            yaw: 1.2,
-        };
+        let odom = Pose2::new(1.0, 2.0, 0.5);
+        let slam = Pose2::new(-0.3, 4.0, 1.2);
         let mo = map_to_odom(slam, odom);
-        let (s, c) = mo.yaw.sin_cos();
+        let (s, c) = mo.theta.sin_cos();
         let x = mo.x + c * odom.x - s * odom.y;
         let y = mo.y + s * odom.x + c * odom.y;
         assert!((x - slam.x).abs() < 1e-12 && (y - slam.y).abs() < 1e-12);
-        assert!((mo.yaw + odom.yaw - slam.yaw).abs() < 1e-12);
+        assert!((mo.theta + odom.theta - slam.theta).abs() < 1e-12);
     }
 
     #[test]

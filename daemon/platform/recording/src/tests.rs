@@ -216,22 +216,9 @@ fn bus_message(m: &Message) -> BusMessage<'_> {
 fn geometry() -> RobotGeometry {
     RobotGeometry {
         laser_frame: "laser".into(),
-        laser: Pose2 {
-            x: 0.16,
-            y: 0.0,
-            yaw: 0.0,
-        },
+        laser: Pose2::new(0.16, 0.0, 0.0),
         sonars: (0..8)
-            .map(|i| {
-                (
-                    i,
-                    Pose2 {
-                        x: 0.1,
-                        y: 0.0,
-                        yaw: f64::from(i) * 0.3,
-                    },
-                )
-            })
+            .map(|i| (i, Pose2::new(0.1, 0.0, f64::from(i) * 0.3)))
             .collect(),
     }
 }

@@ -1,12 +1,14 @@
-//! `smokenav slam --carmen LOG [--particles N] --out DIR`: runs the SLAM
-//! library over a CARMEN log as fast as the CPU allows and writes the
-//! trajectory, the map and timing statistics.
+//! `smokenav slam --carmen LOG [--particles N] [--backend rbpf] --out DIR`:
+//! runs the SLAM pipeline over a CARMEN log as fast as the CPU allows and
+//! writes the trajectory, the map and timing statistics.
 
 use anyhow::Context;
-use smokenav_algorithms_slam::eval::{self, AteReport};
+use smokenav_algorithms_eval::{
+    TrajectoryOptions, evaluate_trajectories, format_trajectory, load_trajectory,
+};
 use smokenav_algorithms_slam::offline::LogScans;
-use smokenav_algorithms_slam::{Rbpf, SlamBackend, StampedPose};
-use smokenav_platform_config::{RobotConfig, SlamSection, parse_toml};
+use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, StampedPose};
+use smokenav_platform_config::{RobotConfig, SlamBackendKind, SlamSection, parse_toml};
 use std::fmt::Write as _;
 use std::io::{BufReader, IsTerminal};
 use std::path::{Path, PathBuf};
@@ -32,7 +34,11 @@ pub struct SlamArgs {
     /// Random seed (overrides the configuration).
     #[arg(long)]
     seed: Option<u64>,
-    /// Reference poses (`timestamp x y theta`) to compare the trajectory with.
+    /// SLAM back-end (overrides `[slam] backend`).
+    #[arg(long, value_enum)]
+    backend: Option<SlamBackendKind>,
+    /// Reference poses (`timestamp x y theta`) at some of the log's stamps to
+    /// compare the trajectory with (paired by stamp, not interpolated).
     #[arg(long, value_name = "FILE")]
     reference: Option<PathBuf>,
     /// Stop after this many scans.
@@ -82,12 +88,22 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     if let Some(s) = args.seed {
         cfg.seed = s;
     }
+    if let Some(b) = args.backend {
+        cfg.backend = b;
+    }
     let mut v = smokenav_platform_config::Validator::default();
     smokenav_platform_config::Validate::validate(&cfg, "slam", &mut v);
     if let Some(issue) = v.issues.first() {
         anyhow::bail!("invalid SLAM parameters: {issue}");
     }
     Ok(cfg)
+}
+
+fn eval_poses(poses: &[StampedPose]) -> Vec<smokenav_algorithms_eval::StampedPose> {
+    poses
+        .iter()
+        .map(|p| smokenav_algorithms_eval::StampedPose::from_ns(p.stamp_ns, &p.pose))
+        .collect()
 }
 
 fn write(path: &Path, text: &str) -> anyhow::Result<()> {
@@ -100,14 +116,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         .with_context(|| format!("cannot open {}", args.carmen.display()))?;
     let size = file.metadata().map(|m| m.len()).unwrap_or(0);
     let reference = match &args.reference {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read {}", p.display()))?;
-            Some(
-                eval::parse_pose_file(&text)
-                    .with_context(|| format!("bad reference file {}", p.display()))?,
-            )
-        }
+        Some(p) => Some(load_trajectory(p).context("bad reference file")?),
         None => None,
     };
     std::fs::create_dir_all(&args.out)
@@ -128,7 +137,12 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
 
     let process_cpu_start = cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID);
     let wall_start = Instant::now();
-    let mut slam = Rbpf::new(&cfg, true);
+    let mut slam = SlamPipeline::from_config(
+        &cfg,
+        BackendOptions {
+            keep_trajectory: true,
+        },
+    );
     let mut online: Vec<StampedPose> = Vec::new();
     let mut cpu_per_scan: Vec<u64> = Vec::new();
     let mut wall_per_scan: Vec<u64> = Vec::new();
@@ -161,13 +175,15 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
 
     let trajectory = slam.trajectory();
+    let trajectory = eval_poses(&trajectory);
+    let online = eval_poses(&online);
     write(
         &args.out.join("trajectory.txt"),
-        &eval::format_pose_file(&trajectory),
+        &format_trajectory(&trajectory),
     )?;
     write(
         &args.out.join("trajectory_online.txt"),
-        &eval::format_pose_file(&online),
+        &format_trajectory(&online),
     )?;
     if let Some(map) = slam.map() {
         smokenav_platform_map::save_map_server(&map, &args.out, "map")?;
@@ -180,7 +196,6 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     wall_sorted.sort_unstable();
     let ms = |ns: u64| ns as f64 / 1e6;
     let stats = slam.stats();
-    let (tiles, tile_bytes) = slam.map_memory();
     let mut report = String::new();
     let _ = writeln!(report, "log                {}", args.carmen.display());
     let _ = writeln!(
@@ -191,7 +206,12 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         scans.error_count,
         scans.odom_records
     );
-    let _ = writeln!(report, "particles          {}", cfg.particles);
+    let _ = writeln!(
+        report,
+        "back-end           {} ({} particles)",
+        slam.backend().name(),
+        cfg.particles
+    );
     let _ = writeln!(
         report,
         "per-scan CPU ms    p50 {:.2}  p99 {:.2}  max {:.2}",
@@ -217,39 +237,44 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         "peak RSS MB        {:.1}",
         peak_rss_kb().unwrap_or(0) as f64 / 1024.0
     );
+    if let Some(rbpf) = slam.backend().as_any().downcast_ref::<Rbpf>() {
+        let (tiles, tile_bytes) = rbpf.map_memory();
+        let _ = writeln!(
+            report,
+            "maps               {} distinct tiles, {:.1} MB for {} particles",
+            tiles,
+            tile_bytes as f64 / 1e6,
+            cfg.particles
+        );
+        let _ = writeln!(
+            report,
+            "filter             {} resamples",
+            rbpf.stats().resamples
+        );
+    }
     let _ = writeln!(
         report,
-        "maps               {} distinct tiles, {:.1} MB for {} particles",
-        tiles,
-        tile_bytes as f64 / 1e6,
-        cfg.particles
-    );
-    let _ = writeln!(
-        report,
-        "filter             {} resamples, {} front-end fallbacks, {} scans without ranges",
-        stats.resamples, stats.frontend_fallbacks, stats.empty_scans
+        "pipeline           {} held back by the motion filter, {} front-end fallbacks, {} scans without ranges",
+        stats.held_back, stats.frontend_fallbacks, stats.empty_scans
     );
     if let Some(reference) = &reference {
         for (name, est) in [("trajectory", &trajectory), ("online", &online)] {
-            match eval::absolute_trajectory_error(est, reference, 1_000_000) {
-                Some(AteReport {
-                    matched,
-                    rms_m,
-                    max_m,
-                    max_at_ns,
-                    ..
-                }) => {
+            match evaluate_trajectories(reference, est, &TrajectoryOptions::same_stamp()) {
+                Ok(r) => {
                     let _ = writeln!(
                         report,
-                        "ATE {name:<14} RMS {rms_m:.3} m, max {max_m:.3} m (at {}), {matched} poses matched",
-                        eval::format_stamp(max_at_ns)
+                        "ATE {name:<14} RMS {:.3} m, max {:.3} m (at {:.6}), {} poses matched; RPE {:.3} m, {:.2}° per {} s",
+                        r.ate_m.rmse,
+                        r.ate_m.max,
+                        r.ate_max_at_s,
+                        r.pairs,
+                        r.rpe_translation_m.rmse,
+                        r.rpe_rotation_deg.rmse,
+                        r.rpe_delta_s
                     );
                 }
-                None => {
-                    let _ = writeln!(
-                        report,
-                        "ATE {name:<14} no poses in common with the reference"
-                    );
+                Err(e) => {
+                    let _ = writeln!(report, "ATE {name:<14} {e}");
                 }
             }
         }

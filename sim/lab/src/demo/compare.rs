@@ -6,7 +6,9 @@ use super::recording::{Kind, SensorLog};
 use smokenav_algorithms_eval::{MapOptions, MapReport, TrajectoryOptions, TrajectoryReport};
 use smokenav_algorithms_fusion::engine::StepReport;
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
-use smokenav_algorithms_slam::{Pose2, RangeScan, Rbpf, SlamBackend, StampedPose};
+use smokenav_algorithms_slam::noise::LaserNoiseModel;
+use smokenav_algorithms_slam::offline::{Received, replay};
+use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, StampedPose};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::{FusedScan, FusionMethod};
@@ -60,42 +62,23 @@ impl MethodResult {
     }
 }
 
-/// Wheel odometry at `stamp_ns`, interpolated between the messages around it
-/// (the first or last one outside the recorded span).
-pub fn odometry_at(odoms: &[smokenav_shared_types::Odometry], stamp_ns: u64) -> Option<Pose2> {
-    let pose = |o: &smokenav_shared_types::Odometry| Pose2::new(o.x, o.y, o.theta);
-    let i = odoms.partition_point(|o| o.header.stamp_ns < stamp_ns);
-    match (i.checked_sub(1).and_then(|j| odoms.get(j)), odoms.get(i)) {
-        (Some(a), Some(b)) => {
-            let span = b.header.stamp_ns.saturating_sub(a.header.stamp_ns);
-            let t = if span == 0 {
-                0.0
-            } else {
-                (stamp_ns - a.header.stamp_ns) as f64 / span as f64
-            };
-            Some(smokenav_algorithms_slam::pose::interpolate(
-                &pose(a),
-                &pose(b),
-                t,
-            ))
-        }
-        (Some(a), None) => Some(pose(a)),
-        (None, Some(b)) => Some(pose(b)),
-        (None, None) => None,
-    }
-}
+/// A fused scan and when fusion emitted it (the receive time of the input
+/// that completed its set): when the SLAM process would have received it.
+pub type Emitted = (u64, FusedScan);
 
 /// Fuses the recording with `method`, in receive order, exactly as the fusion
-/// process would have; returns the fused scans and the pipeline's sonar usage.
+/// process would have; returns the fused scans in the order they were
+/// emitted and the pipeline's sonar usage.
 pub fn fuse(
     log: &SensorLog,
     profile: &RobotConfig,
     method: FusionMethod,
-) -> anyhow::Result<(Vec<FusedScan>, f64)> {
+) -> anyhow::Result<(Vec<Emitted>, f64)> {
     let mut pipeline = FusionPipeline::from_config(profile, Some(method))?;
-    let mut fused: Vec<FusedScan> = Vec::with_capacity(log.lasers.len());
-    let mut emit = |f: &FusedScan, _: &StepReport| fused.push(*f);
+    let mut fused: Vec<Emitted> = Vec::with_capacity(log.lasers.len());
+    let mut end = 0;
     for &(now, kind, i) in &log.order {
+        let mut emit = |f: &FusedScan, _: &StepReport| fused.push((now, *f));
         match kind {
             Kind::Laser => pipeline.push_laser(&log.lasers[i], now, &mut emit),
             Kind::Sonar => pipeline.push_sonar(&log.sonars[i], now, &mut emit),
@@ -103,8 +86,9 @@ pub fn fuse(
             Kind::Odometry => continue,
         }
         pipeline.poll(now, &mut emit);
+        end = now;
     }
-    pipeline.flush(&mut emit);
+    pipeline.flush(&mut |f: &FusedScan, _: &StepReport| fused.push((end, *f)));
     let usage = pipeline.stats().sonar_usage();
     Ok((fused, usage))
 }
@@ -119,7 +103,7 @@ struct SlamOutcome {
 }
 
 /// The SLAM input of a fused scan: every beam as the filter reads it, and the laser noise factor.
-fn same_slam_input(a: &FusedScan, b: &FusedScan, profile: &RobotConfig) -> bool {
+fn same_slam_input(a: &FusedScan, b: &FusedScan, noise: &LaserNoiseModel) -> bool {
     let (x, y) = (&a.scan, &b.scan);
     let n = x.len();
     x.header.stamp_ns == y.header.stamp_ns
@@ -129,40 +113,37 @@ fn same_slam_input(a: &FusedScan, b: &FusedScan, profile: &RobotConfig) -> bool 
         && x.range_min.to_bits() == y.range_min.to_bits()
         && x.range_max.to_bits() == y.range_max.to_bits()
         && (0..n).all(|i| x.beam(i) == y.beam(i) && a.beam_source[i] == b.beam_source[i])
-        && profile
-            .slam
-            .laser_noise_factor(f64::from(a.smoke_level))
-            .to_bits()
-            == profile
-                .slam
-                .laser_noise_factor(f64::from(b.smoke_level))
-                .to_bits()
+        && noise.factor(f64::from(a.smoke_level)).to_bits()
+            == noise.factor(f64::from(b.smoke_level)).to_bits()
 }
 
-/// SLAM over `fused` (sorted by stamp) with the odometry of `log`, scored against the truth.
+/// SLAM over `fused` and the odometry of `log`, fed in receive order through
+/// the pipeline exactly as the SLAM process would have been, scored against the truth.
 fn slam_and_score(
     log: &SensorLog,
     profile: &RobotConfig,
-    fused: &[FusedScan],
+    fused: &[Emitted],
     truth: &TruthTrack,
     truth_map: &OccupancyGrid,
 ) -> SlamOutcome {
     let mount = profile.laser.mount;
-    let sensor = Pose2::new(mount.x, mount.y, mount.yaw_rad());
-    let mut slam = Rbpf::new(&profile.slam, true);
-    let mut scan = RangeScan::default();
-    for f in fused {
-        let Some(odom) = odometry_at(&log.odoms, f.scan.header.stamp_ns) else {
-            continue;
-        };
-        // As the SLAM process does (a laser-only scan carries no smoke level).
-        scan.fill_from_fused(
-            f,
-            sensor,
-            profile.slam.laser_noise_factor(f64::from(f.smoke_level)),
-        );
-        slam.process(&scan, &odom);
-    }
+    let mut slam = SlamPipeline::from_config(
+        &profile.slam,
+        BackendOptions {
+            keep_trajectory: true,
+        },
+    )
+    .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()));
+    // Odometry ahead of a scan received at the same time, as the process drains it first.
+    let mut received: Vec<(u64, Received<'_>)> = log
+        .order
+        .iter()
+        .filter(|&&(_, kind, _)| kind == Kind::Odometry)
+        .map(|&(t, _, i)| (t, Received::Odometry(&log.odoms[i])))
+        .chain(fused.iter().map(|(t, f)| (*t, Received::Fused(f))))
+        .collect();
+    received.sort_by_key(|&(t, _)| t);
+    replay(&mut slam, received, |_| {});
     let mut trajectory = slam.trajectory();
     // One pose per stamp (a trajectory file's stamps must increase).
     trajectory.dedup_by_key(|p| p.stamp_ns);
@@ -172,20 +153,14 @@ fn slam_and_score(
             .map_err(|e| e.to_string()),
         None => Err("SLAM processed no scan".into()),
     };
-    let to_eval = |t_ns: u64, p: (f64, f64, f64)| smokenav_algorithms_eval::StampedPose {
-        t: t_ns as f64 * 1e-9,
-        x: p.0,
-        y: p.1,
-        theta: p.2,
-    };
     let truth_poses: Vec<_> = truth
         .samples()
         .iter()
-        .map(|s| to_eval(s.t_ns, (s.pose.x, s.pose.y, s.pose.theta)))
+        .map(|s| smokenav_algorithms_eval::StampedPose::from_ns(s.t_ns, &s.pose))
         .collect();
     let est: Vec<_> = trajectory
         .iter()
-        .map(|p| to_eval(p.stamp_ns, (p.pose.x, p.pose.y, p.pose.theta)))
+        .map(|p| smokenav_algorithms_eval::StampedPose::from_ns(p.stamp_ns, &p.pose))
         .collect();
     let trajectory_report = smokenav_algorithms_eval::evaluate_trajectories(
         &truth_poses,
@@ -233,12 +208,11 @@ pub fn run_all(
     seeds: usize,
 ) -> anyhow::Result<Vec<MethodResult>> {
     let seeds = seeds.max(1);
-    let mut fused: Vec<(Vec<FusedScan>, f64)> = Vec::with_capacity(METHODS.len());
+    let mut fused: Vec<(Vec<Emitted>, f64)> = Vec::with_capacity(METHODS.len());
     for m in METHODS {
-        let (mut f, usage) = fuse(log, profile, m)?;
-        f.sort_by_key(|f| f.scan.header.stamp_ns);
-        fused.push((f, usage));
+        fused.push(fuse(log, profile, m)?);
     }
+    let noise = LaserNoiseModel::from_config(&profile.slam);
     // The first method with the same SLAM input does the work.
     let owner: Vec<usize> = (0..METHODS.len())
         .map(|i| {
@@ -249,7 +223,7 @@ pub fn run_all(
                             .0
                             .iter()
                             .zip(&fused[i].0)
-                            .all(|(a, b)| same_slam_input(a, b, profile))
+                            .all(|(a, b)| a.0 == b.0 && same_slam_input(&a.1, &b.1, &noise))
                 })
                 .unwrap_or(i)
         })
@@ -313,7 +287,7 @@ pub fn run_all(
             trajectory: o.trajectory,
             series: f
                 .iter()
-                .map(|f| SeriesPoint {
+                .map(|(_, f)| SeriesPoint {
                     stamp_ns: f.scan.header.stamp_ns,
                     smoke_level: f.smoke_level,
                     laser_spread: f.laser_spread,
@@ -334,16 +308,6 @@ pub fn run_all(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use smokenav_shared_types::{Header, Odometry};
-
-    fn odom(t: u64, x: f64, th: f64) -> Odometry {
-        Odometry {
-            header: Header::new(t, 0, "odom"),
-            x,
-            theta: th,
-            ..Default::default()
-        }
-    }
 
     #[test]
     fn the_run_shown_is_the_median_by_map_error() {
@@ -360,16 +324,6 @@ mod tests {
     }
 
     #[test]
-    fn odometry_is_interpolated_at_the_scan_stamp() {
-        let o = [odom(100, 0.0, 0.0), odom(200, 1.0, 0.2)];
-        let p = odometry_at(&o, 150).unwrap();
-        assert!((p.x - 0.5).abs() < 1e-12 && (p.theta - 0.1).abs() < 1e-12);
-        assert_eq!(odometry_at(&o, 50).unwrap().x, 0.0);
-        assert_eq!(odometry_at(&o, 900).unwrap().x, 1.0);
-        assert!(odometry_at(&[], 5).is_none());
-    }
-
-    #[test]
     fn slam_results_are_shared_only_for_identical_scans() {
         let profile = smokenav_sim_world::Scenario::builtin("mrl-clean")
             .unwrap()
@@ -381,19 +335,20 @@ mod tests {
             a.scan
                 .set_beam(i, smokenav_shared_types::BeamReading::Range(1.0 + i as f32));
         }
+        let noise = LaserNoiseModel::from_config(&profile.slam);
         let b = a;
-        assert!(same_slam_input(&a, &b, &profile));
+        assert!(same_slam_input(&a, &b, &noise));
         // A beam that came from the sonar has another noise model in SLAM.
         let mut c = a;
         c.beam_source[1] = smokenav_shared_types::SectionSource::Sonar as u8;
-        assert!(!same_slam_input(&a, &c, &profile));
+        assert!(!same_slam_input(&a, &c, &noise));
         // A smoke level that changes the laser noise factor changes the input.
         let mut d = a;
         d.smoke_level = 300.0;
-        assert!(!same_slam_input(&a, &d, &profile));
+        assert!(!same_slam_input(&a, &d, &noise));
         let mut e = a;
         e.scan
             .set_beam(2, smokenav_shared_types::BeamReading::NoReturn);
-        assert!(!same_slam_input(&a, &e, &profile));
+        assert!(!same_slam_input(&a, &e, &noise));
     }
 }

@@ -40,7 +40,7 @@ pub struct SensorLog {
     pub lasers: Vec<Box<LaserScan>>,
     pub sonars: Vec<SonarRing>,
     pub smokes: Vec<SmokeReading>,
-    /// Sorted by stamp.
+    /// In receive order (as `order` indexes them).
     pub odoms: Vec<Odometry>,
     /// (receive time, kind, index into its vector), in receive order.
     pub order: Vec<(u64, Kind, usize)>,
@@ -84,7 +84,6 @@ impl SensorLog {
             }
         }
         log.order.sort_by_key(|&(t, _, _)| t);
-        log.odoms.sort_by_key(|o| o.header.stamp_ns);
         if log.lasers.is_empty() || log.odoms.is_empty() {
             bail!(
                 "{}: no laser scans or no odometry ({} scans, {} odometry messages)",

@@ -210,7 +210,14 @@ pub fn write_files(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
             &trajectories.join(format!("{name}.txt")),
             &format!(
                 "# timestamp x y theta ({name}, SLAM map frame)\n{}",
-                smokenav_algorithms_slam::eval::format_pose_file(&r.trajectory)
+                smokenav_algorithms_eval::format_trajectory(
+                    &r.trajectory
+                        .iter()
+                        .map(|p| smokenav_algorithms_eval::StampedPose::from_ns(
+                            p.stamp_ns, &p.pose
+                        ))
+                        .collect::<Vec<_>>()
+                )
             ),
         )?;
     }

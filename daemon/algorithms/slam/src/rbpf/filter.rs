@@ -4,8 +4,8 @@
 //! shared copy-on-write with its relatives) and, optionally, its trajectory as
 //! a node in a tree shared with its ancestors. Per processed scan:
 //!
-//! 1. the odometry delta (corrected by the front end if enabled) moves every
-//!    particle through the motion model;
+//! 1. the odometry delta (the pipeline's front end has corrected it) moves
+//!    every particle through the motion model;
 //! 2. each particle's pose is refined by scan matching against its own map
 //!    (the improved proposal): hill climbing, then a few least-squares steps
 //!    on the matched points;
@@ -18,17 +18,21 @@
 //!    Writing every scan would copy each scan's small matching error into the
 //!    map five times per metre, and a map built from a particle's own recent
 //!    poses lets that error accumulate.
+//!
+//! Scans the pipeline's motion filter holds back only do step 1
+//! ([`SlamBackend::predict`]).
 
-use crate::frontend::{FrontEnd, FrontEndParams};
+use super::matcher::{self, MatchParams, PreparedScan};
+use super::motion::MotionModel;
+use super::resample;
+use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
 use crate::grid::{BeamEnd, LogOddsModel, TiledGrid};
-use crate::matcher::{self, MatchParams, PreparedScan};
-use crate::motion::MotionModel;
-use crate::pose::Pose2;
 use crate::rng::Rng;
 use crate::scan::RangeScan;
-use crate::{SlamBackend, SlamUpdate, StampedPose};
+use nalgebra::{Matrix3, Vector3};
 use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Pose2;
 use std::collections::HashSet;
 use std::sync::Arc;
 
@@ -67,12 +71,12 @@ pub struct Particle {
 /// Figures about the filter's state, for logs and health.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct FilterStats {
-    pub scans: u64,
+    /// Scans used (matched and weighed).
     pub updates: u64,
+    /// Scans held back by the motion filter (odometry only).
+    pub predictions: u64,
     pub resamples: u64,
-    /// Scans whose front-end match was not trusted (prediction used).
-    pub frontend_fallbacks: u64,
-    /// Scans with no usable beam (motion only).
+    /// Updates with no usable beam (motion only).
     pub empty_scans: u64,
     /// Matching-score evaluations over all particles and scans.
     pub match_evaluations: u64,
@@ -82,103 +86,96 @@ pub struct FilterStats {
     pub unmatched_updates: u64,
 }
 
-pub struct Rbpf {
-    cfg: SlamSection,
-    mp: MatchParams,
-    motion: MotionModel,
-    model: LogOddsModel,
+/// The particle filter's own parameters (from `[slam]`).
+#[derive(Debug, Clone)]
+pub struct RbpfParams {
+    pub particles: usize,
+    /// Cell size of the particles' maps, m.
+    pub resolution_m: f64,
+    /// Seed of the filter's random numbers.
+    pub seed: u64,
+    /// Log-weights are divided by `ogain × particles`.
+    pub ogain: f64,
+    /// Scan-match only with at least this many laser endpoints.
+    pub min_match_laser_points: usize,
+    /// Resample below this share of N_eff.
+    pub resample_threshold: f64,
+    /// Motion since the last map write that makes the next write due, m and rad.
+    pub map_update_m: f64,
+    pub map_update_rad: f64,
+    pub laser_model: LogOddsModel,
     /// The same with the sonar's hit log-odds.
-    sonar_model: LogOddsModel,
+    pub sonar_model: LogOddsModel,
+    pub matching: MatchParams,
+    pub motion: MotionModel,
+}
+
+impl RbpfParams {
+    pub fn from_config(c: &SlamSection) -> Self {
+        Self {
+            particles: c.particles.max(1),
+            resolution_m: c.resolution_m,
+            seed: c.seed,
+            ogain: c.ogain,
+            min_match_laser_points: c.min_match_laser_points as usize,
+            resample_threshold: c.resample_threshold,
+            map_update_m: c.map_update_m,
+            map_update_rad: c.map_update_rad,
+            laser_model: LogOddsModel::new(c.hit_logodds, c.miss_logodds, c.max_logodds),
+            sonar_model: LogOddsModel::new(c.sonar_hit_logodds, c.miss_logodds, c.max_logodds),
+            matching: MatchParams::from_config(c),
+            motion: MotionModel::from_config(c),
+        }
+    }
+}
+
+pub struct Rbpf {
+    p: RbpfParams,
     particles: Vec<Particle>,
     rng: Rng,
-    frontend: Option<FrontEnd>,
     keep_paths: bool,
     prepared: PreparedScan,
-    /// Odometry (front-end corrected) of the previous scan.
+    /// Odometry of the previous scan.
     last_odom: Option<Pose2>,
-    /// Motion and time since the last filter update, for the update thresholds.
-    since_update_dist: f64,
-    since_update_rot: f64,
-    last_update_ns: u64,
     /// Motion since the scans were last written into the maps.
     since_map_dist: f64,
     since_map_rot: f64,
     best: usize,
     initial_pose: Pose2,
-    /// Without a front end: ignore the odometry difference at the next scan.
+    /// Ignore the odometry difference at the next scan (its frame jumped).
     odometry_jumped: bool,
     last_n_eff: f64,
     stats: FilterStats,
+    /// Bumped whenever the best particle's map may export differently.
+    map_revision: u64,
     // Reused buffers.
     world_beams: Vec<BeamEnd>,
     weights: Vec<f64>,
 }
 
 impl Rbpf {
-    /// A filter with `cfg`'s parameters. `keep_paths` keeps every particle's
+    /// A filter with parameters `p`. `keep_paths` keeps every particle's
     /// trajectory (needed to write the smoothed trajectory of the best particle
     /// offline; memory grows with the number of scans).
-    pub fn new(cfg: &SlamSection, keep_paths: bool) -> Self {
-        let mp = MatchParams::from_config(cfg);
-        let frontend = cfg.frontend.then(|| {
-            FrontEnd::new(FrontEndParams {
-                resolution: cfg.resolution_m,
-                window_m: cfg.frontend_window_m,
-                window_rad: cfg.frontend_window_rad,
-                max_scans: cfg.frontend_scans as usize,
-            })
-        });
+    pub fn new(p: RbpfParams, keep_paths: bool) -> Self {
         Self {
-            mp,
-            motion: MotionModel::from_config(cfg),
-            model: LogOddsModel::new(cfg.hit_logodds, cfg.miss_logodds, cfg.max_logodds),
-            sonar_model: LogOddsModel::new(
-                cfg.sonar_hit_logodds,
-                cfg.miss_logodds,
-                cfg.max_logodds,
-            ),
             particles: Vec::new(),
-            rng: Rng::new(cfg.seed),
-            frontend,
+            rng: Rng::new(p.seed),
             keep_paths,
             prepared: PreparedScan::default(),
             last_odom: None,
-            since_update_dist: 0.0,
-            since_update_rot: 0.0,
-            last_update_ns: 0,
             since_map_dist: 0.0,
             since_map_rot: 0.0,
             best: 0,
             initial_pose: Pose2::default(),
             odometry_jumped: false,
-            last_n_eff: cfg.particles as f64,
+            last_n_eff: p.particles as f64,
             stats: FilterStats::default(),
+            map_revision: 0,
             world_beams: Vec::new(),
             weights: Vec::new(),
-            cfg: cfg.clone(),
+            p,
         }
-    }
-
-    /// The odometry frame jumped (base reset or reconnected): the next scan's
-    /// odometry is not compared with the previous one.
-    pub fn odometry_reset(&mut self) {
-        match &mut self.frontend {
-            Some(fe) => fe.odometry_reset(),
-            None => self.odometry_jumped = true,
-        }
-    }
-
-    /// Where the first scan is placed in the map frame (default: the origin).
-    /// Only has an effect before the first scan.
-    pub fn set_initial_pose(&mut self, pose: Pose2) {
-        if self.particles.is_empty() && pose.is_finite() {
-            self.initial_pose = pose;
-        }
-    }
-
-    /// The front end's corrected odometry of the last scan (its own drifting frame), if enabled.
-    pub fn frontend_pose(&self) -> Option<Pose2> {
-        self.frontend.as_ref().and(self.last_odom)
     }
 
     pub fn particles(&self) -> &[Particle] {
@@ -218,9 +215,9 @@ impl Rbpf {
                 });
             }
             let model = if sonar {
-                &self.sonar_model
+                &self.p.sonar_model
             } else {
-                &self.model
+                &self.p.laser_model
             };
             p.grid.integrate(&sensor, &self.world_beams, model);
         }
@@ -259,29 +256,23 @@ impl Rbpf {
         1.0 / self.weights.iter().map(|w| w * w).sum::<f64>()
     }
 
-    /// Systematic (low-variance) resampling.
     fn resample(&mut self) {
-        let n = self.particles.len();
-        let step = 1.0 / n as f64;
-        let mut u = self.rng.uniform() * step;
-        let mut cumulative = self.weights[0];
-        let mut i = 0;
-        let mut next = Vec::with_capacity(n);
-        for _ in 0..n {
-            while u > cumulative && i + 1 < n {
-                i += 1;
-                cumulative += self.weights[i];
-            }
-            let mut child = self.particles[i].clone();
-            child.log_weight = 0.0;
-            next.push(child);
-            u += step;
-        }
+        let picks = resample::systematic(&self.weights, self.rng.uniform());
+        let next: Vec<Particle> = picks
+            .map(|i| {
+                let mut child = self.particles[i].clone();
+                child.log_weight = 0.0;
+                child
+            })
+            .collect();
         self.particles = next;
         self.stats.resamples += 1;
+        // The best index may now name a copy of another particle.
+        self.map_revision += 1;
     }
 
     fn pick_best(&mut self) {
+        let before = self.best;
         self.best = self
             .particles
             .iter()
@@ -294,13 +285,17 @@ impl Rbpf {
                 }
             })
             .0;
+        if self.best != before {
+            self.map_revision += 1;
+        }
     }
 
-    fn covariance(&self) -> [f64; 9] {
+    /// Weighted covariance of the particles' poses (the heading's mean is circular).
+    fn covariance(&self) -> Matrix3<f64> {
         let w = &self.weights;
         let n = self.particles.len();
         if w.len() != n || n == 0 {
-            return [0.0; 9];
+            return Matrix3::zeros();
         }
         let (mut mx, mut my, mut ms, mut mc) = (0.0, 0.0, 0.0, 0.0);
         for (p, &wi) in self.particles.iter().zip(w) {
@@ -310,18 +305,14 @@ impl Rbpf {
             mc += wi * p.pose.theta.cos();
         }
         let mt = ms.atan2(mc);
-        let mut c = [0.0; 9];
+        let mut c = Matrix3::zeros();
         for (p, &wi) in self.particles.iter().zip(w) {
-            let d = [
+            let d = Vector3::new(
                 p.pose.x - mx,
                 p.pose.y - my,
                 smokenav_shared_types::odom::normalize_angle(p.pose.theta - mt),
-            ];
-            for r in 0..3 {
-                for k in 0..3 {
-                    c[r * 3 + k] += wi * d[r] * d[k];
-                }
-            }
+            );
+            c += (d * wi) * d.transpose();
         }
         c
     }
@@ -341,100 +332,87 @@ impl Rbpf {
             resampled,
         }
     }
-}
 
-impl SlamBackend for Rbpf {
-    fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
-        self.stats.scans += 1;
-        let stamp_ns = scan.stamp_ns;
-        self.prepared.prepare(scan, &self.mp);
-        if self.prepared.points.is_empty() {
-            self.stats.empty_scans += 1;
-        }
+    /// Every particle starts at the initial pose with the same map.
+    fn start(&mut self, odom: Pose2, stamp_ns: u64) -> SlamUpdate {
+        self.last_odom = Some(odom);
+        let n = self.p.particles;
+        let first = Particle {
+            pose: self.initial_pose,
+            log_weight: 0.0,
+            total_log_weight: 0.0,
+            grid: TiledGrid::new(self.p.resolution_m),
+            path: None,
+        };
+        self.particles = vec![first];
+        self.integrate(0);
+        let template = self.particles[0].clone();
+        self.particles.resize(n, template);
+        self.weights = vec![1.0 / n as f64; n];
+        self.push_path(stamp_ns);
+        self.stats.updates += 1;
+        self.stats.map_updates += 1;
+        self.map_revision += 1;
+        self.output(stamp_ns, true, false)
+    }
+
+    /// Moves every particle by the odometry since the previous scan (through
+    /// the motion model); `None` before the first scan.
+    fn move_particles(&mut self, odom: &Pose2) -> Option<()> {
         let odom = if odom.is_finite() {
             *odom
         } else {
-            self.last_odom.unwrap_or_default()
+            self.last_odom?
         };
-        let corrected = match &mut self.frontend {
-            Some(fe) => {
-                let t = fe.track(
-                    self.prepared
-                        .points
-                        .iter()
-                        .filter(|p| p.from_laser)
-                        .map(|p| (p.hx, p.hy)),
-                    &odom,
-                    stamp_ns,
-                );
-                if t.score.is_none() && self.last_odom.is_some() {
-                    self.stats.frontend_fallbacks += 1;
-                }
-                t.pose
-            }
-            None => odom,
-        };
-
-        let Some(last) = self.last_odom else {
-            // First scan: every particle starts at the initial pose with the same map.
-            self.last_odom = Some(corrected);
-            self.last_update_ns = stamp_ns;
-            let n = self.cfg.particles.max(1);
-            let first = Particle {
-                pose: self.initial_pose,
-                log_weight: 0.0,
-                total_log_weight: 0.0,
-                grid: TiledGrid::new(self.cfg.resolution_m),
-                path: None,
-            };
-            self.particles = vec![first];
-            self.integrate(0);
-            let template = self.particles[0].clone();
-            self.particles.resize(n, template);
-            self.weights = vec![1.0 / n as f64; n];
-            self.push_path(stamp_ns);
-            self.stats.updates += 1;
-            self.stats.map_updates += 1;
-            return self.output(stamp_ns, true, false);
-        };
-
+        let last = self.last_odom.replace(odom)?;
         let delta = if std::mem::take(&mut self.odometry_jumped) {
             Pose2::default()
         } else {
-            corrected.relative_to(&last)
+            last.between(&odom)
         };
-        self.last_odom = Some(corrected);
         for i in 0..self.particles.len() {
             let pose = self.particles[i].pose;
-            self.particles[i].pose = self.motion.sample(&pose, &delta, &mut self.rng);
+            self.particles[i].pose = self.p.motion.sample(&pose, &delta, &mut self.rng);
         }
-        self.since_update_dist += delta.translation_norm();
-        self.since_update_rot += delta.theta.abs();
         self.since_map_dist += delta.translation_norm();
         self.since_map_rot += delta.theta.abs();
-        let elapsed_s = stamp_ns.saturating_sub(self.last_update_ns) as f64 * 1e-9;
-        let due = self.since_update_dist >= self.cfg.linear_update_m
-            || self.since_update_rot >= self.cfg.angular_update_rad
-            || (self.cfg.temporal_update_s >= 0.0 && elapsed_s > self.cfg.temporal_update_s);
-        if !due {
-            self.push_path(stamp_ns);
-            return self.output(stamp_ns, false, false);
+        Some(())
+    }
+}
+
+impl SlamBackend for Rbpf {
+    fn name(&self) -> &'static str {
+        "rbpf"
+    }
+
+    fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
+        let stamp_ns = scan.stamp_ns;
+        self.prepared.prepare(scan, &self.p.matching);
+        if self.prepared.points.is_empty() {
+            self.stats.empty_scans += 1;
         }
-        self.since_update_dist = 0.0;
-        self.since_update_rot = 0.0;
-        self.last_update_ns = stamp_ns;
+        if self.particles.is_empty() {
+            let odom = if odom.is_finite() {
+                *odom
+            } else {
+                Pose2::default()
+            };
+            return self.start(odom, stamp_ns);
+        }
+        self.move_particles(odom);
         self.stats.updates += 1;
 
-        let gain = 1.0 / (self.cfg.ogain * self.particles.len() as f64);
+        let gain = 1.0 / (self.p.ogain * self.particles.len() as f64);
         if !self.prepared.points.is_empty() {
             let laser_points = self.prepared.points.iter().filter(|p| p.from_laser).count();
-            let match_scan = laser_points >= self.cfg.min_match_laser_points as usize;
+            let match_scan = laser_points >= self.p.min_match_laser_points;
             if !match_scan {
                 self.stats.unmatched_updates += 1;
             }
             for p in &mut self.particles {
                 if match_scan {
-                    let refined = matcher::refine(&p.grid, &self.prepared, &p.pose, &self.mp);
+                    let refined =
+                        matcher::refine(&p.grid, &self.prepared, &p.pose, &self.p.matching);
                     self.stats.match_evaluations += refined.evaluations as u64;
                     if refined.score > 0.0 {
                         p.pose = refined.pose;
@@ -444,7 +422,7 @@ impl SlamBackend for Rbpf {
                     &p.grid,
                     &self.prepared,
                     &p.pose,
-                    self.mp.null_likelihood,
+                    self.p.matching.null_likelihood,
                 );
                 p.log_weight += gain * l;
                 p.total_log_weight += gain * l;
@@ -453,7 +431,7 @@ impl SlamBackend for Rbpf {
         self.last_n_eff = self.normalise();
         self.pick_best();
         let mut resampled = false;
-        if self.last_n_eff < self.cfg.resample_threshold * self.particles.len() as f64 {
+        if self.last_n_eff < self.p.resample_threshold * self.particles.len() as f64 {
             self.resample();
             resampled = true;
             self.weights
@@ -461,12 +439,12 @@ impl SlamBackend for Rbpf {
                 .for_each(|w| *w = 1.0 / self.particles.len() as f64);
             self.pick_best();
         }
-        if self.since_map_dist >= self.cfg.map_update_m
-            || self.since_map_rot >= self.cfg.map_update_rad
+        if self.since_map_dist >= self.p.map_update_m || self.since_map_rot >= self.p.map_update_rad
         {
             self.since_map_dist = 0.0;
             self.since_map_rot = 0.0;
             self.stats.map_updates += 1;
+            self.map_revision += 1;
             for i in 0..self.particles.len() {
                 self.integrate(i);
             }
@@ -475,8 +453,30 @@ impl SlamBackend for Rbpf {
         self.output(stamp_ns, true, resampled)
     }
 
+    fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate {
+        if self.move_particles(odom).is_some() {
+            self.stats.predictions += 1;
+            self.push_path(stamp_ns);
+        }
+        self.output(stamp_ns, false, false)
+    }
+
+    fn odometry_reset(&mut self) {
+        self.odometry_jumped = true;
+    }
+
+    fn set_initial_pose(&mut self, pose: Pose2) {
+        if self.particles.is_empty() && pose.is_finite() {
+            self.initial_pose = pose;
+        }
+    }
+
     fn pose(&self) -> Option<Pose2> {
         self.particles.get(self.best).map(|p| p.pose)
+    }
+
+    fn map_revision(&self) -> u64 {
+        self.map_revision
     }
 
     fn map(&self) -> Option<OccupancyGrid> {
@@ -501,61 +501,30 @@ impl SlamBackend for Rbpf {
         out.reverse();
         out
     }
+
+    fn metrics(&self, emit: &mut dyn FnMut(&'static str, f64)) {
+        let s = &self.stats;
+        emit("updates", s.updates as f64);
+        emit("predictions", s.predictions as f64);
+        emit("resamples", s.resamples as f64);
+        emit("map_updates", s.map_updates as f64);
+        emit("unmatched_updates", s.unmatched_updates as f64);
+        emit("n_eff", self.last_n_eff);
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scan::{Beam, BeamKind};
+    use crate::scan::BeamKind;
+    use crate::testkit::scan_at;
 
-    /// Wall segments of a 10 m × 6 m room with an inner wall and two pillars.
-    const WALLS: [(f64, f64, f64, f64); 10] = [
-        (-5.0, -3.0, 5.0, -3.0),
-        (5.0, -3.0, 5.0, 3.0),
-        (5.0, 3.0, -5.0, 3.0),
-        (-5.0, 3.0, -5.0, -3.0),
-        (0.0, 3.0, 0.0, 1.0),
-        (2.0, -1.0, 2.3, -1.0),
-        (2.3, -1.0, 2.3, -0.7),
-        (-2.5, 0.5, -2.2, 0.5),
-        (-2.2, 0.5, -2.2, 0.8),
-        (-3.0, -3.0, -4.0, -2.0),
-    ];
-
-    /// Ray-cast range from `(x, y)` along `a` to the nearest wall.
-    fn cast(x: f64, y: f64, a: f64) -> Option<f64> {
-        let (dx, dy) = (a.cos(), a.sin());
-        let mut best: Option<f64> = None;
-        for (x1, y1, x2, y2) in WALLS {
-            let (ex, ey) = (x2 - x1, y2 - y1);
-            let den = dx * ey - dy * ex;
-            if den.abs() < 1e-12 {
-                continue;
-            }
-            let t = ((x1 - x) * ey - (y1 - y) * ex) / den;
-            let u = ((x1 - x) * dy - (y1 - y) * dx) / den;
-            if t > 0.0 && (0.0..=1.0).contains(&u) && best.is_none_or(|b| t < b) {
-                best = Some(t);
-            }
-        }
-        best
-    }
-
-    fn scan_at(truth: &Pose2, stamp_ns: u64) -> RangeScan {
-        let mut s = RangeScan {
-            stamp_ns,
-            laser_noise_factor: 1.0,
-            ..Default::default()
-        };
-        for i in 0..361 {
-            let a = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 360.0;
-            s.beams.push(Beam {
-                angle: a as f32,
-                range: cast(truth.x, truth.y, truth.theta + a).map(|r| r as f32),
-                kind: BeamKind::Laser,
-            });
-        }
-        s
+    fn rbpf(c: &SlamSection) -> Rbpf {
+        Rbpf::new(RbpfParams::from_config(c), false)
     }
 
     fn cfg(particles: usize) -> SlamSection {
@@ -565,111 +534,13 @@ mod tests {
         }
     }
 
-    /// Drives an arc through the room; odometry over-reads distance by 5 % and
-    /// turns by 3 %, so it drifts while the filter should not.
-    fn drive(slam: &mut Rbpf, steps: usize) -> (Pose2, Pose2) {
-        let start_truth = Pose2::new(-3.5, -1.5, 0.0);
-        let mut truth = start_truth;
-        let mut odom = Pose2::new(10.0, 20.0, 1.0);
-        for k in 0..steps {
-            slam.process(&scan_at(&truth, k as u64 * 100_000_000), &odom);
-            let step = Pose2::new(0.1, 0.0, if k < 40 { 0.0 } else { 0.05 });
-            truth = truth.compose(&step);
-            odom = odom.compose(&Pose2::new(step.x * 1.05, 0.0, step.theta * 1.03));
-        }
-        // The map frame is the pose of the first scan: express the last scan's pose in it.
-        let previous_truth = {
-            // `truth` has advanced one step past the last scan; step back.
-            let step = Pose2::new(0.1, 0.0, if steps - 1 < 40 { 0.0 } else { 0.05 });
-            truth.compose(&step.inverse())
-        };
-        (
-            previous_truth.relative_to(&start_truth),
-            slam.pose().unwrap(),
-        )
-    }
-
-    #[test]
-    fn filter_tracks_a_robot_whose_odometry_drifts() {
-        let mut slam = Rbpf::new(&cfg(10), true);
-        let (truth, est) = drive(&mut slam, 70);
-        // 7 m driven with odometry 5 % long and turns 3 % wide (0.35 m, 0.1 rad of drift).
-        assert!(
-            (est.x - truth.x).abs() < 0.05 && (est.y - truth.y).abs() < 0.05,
-            "{est:?} vs {truth:?}"
-        );
-        assert!(
-            (est.theta - truth.theta).abs() < 0.02,
-            "{est:?} vs {truth:?}"
-        );
-        assert_eq!(slam.trajectory().len(), 70);
-        assert_eq!(slam.stats().updates, 70);
-        let map = slam.map().unwrap();
-        // The map shows the inner wall at x = 0 (3.5 m right of the start), y from 1 to 3.
-        let (cx, cy) = map.world_to_cell(3.5, 3.5).unwrap();
-        let near_wall =
-            (cx.saturating_sub(2)..cx + 3).any(|x| map.get(x, cy).is_some_and(|v| v > 50));
-        assert!(near_wall);
-    }
-
-    #[test]
-    fn scan_without_ranges_moves_the_particles_by_odometry() {
-        let mut slam = Rbpf::new(&cfg(5), false);
-        let p = Pose2::new(-3.5, -1.5, 0.0);
-        slam.process(&scan_at(&p, 0), &Pose2::default());
-        let mut empty = scan_at(&p, 100_000_000);
-        empty.beams.iter_mut().for_each(|b| b.range = None);
-        let u = slam.process(&empty, &Pose2::new(0.2, 0.0, 0.0));
-        assert!(u.pose.is_finite());
-        assert!((u.pose.x - 0.2).abs() < 0.1, "{u:?}");
-        assert_eq!(slam.stats().empty_scans, 1);
-        // No beams at all, and a NaN odometry reading: still no panic, pose kept finite.
-        let none = RangeScan {
-            stamp_ns: 200_000_000,
-            ..Default::default()
-        };
-        let u = slam.process(&none, &Pose2::new(f64::NAN, 0.0, 0.0));
-        assert!(u.pose.is_finite());
-    }
-
-    #[test]
-    fn sonar_only_scans_weigh_but_do_not_drag_the_particles() {
-        // In dense smoke the fused scan is sonar arcs only. Here they show the
-        // room as seen from the start while the wheels report 0.5 m of travel:
-        // a matcher would pull the pose back; the filter must follow the odometry.
-        let mut slam = Rbpf::new(&cfg(10), false);
-        let p = Pose2::new(-3.5, -1.5, 0.0);
-        for k in 0..3 {
-            slam.process(&scan_at(&p, k * 100_000_000), &Pose2::default());
-        }
-        let mut stale = scan_at(&p, 0);
-        stale
-            .beams
-            .iter_mut()
-            .for_each(|b| b.kind = BeamKind::Sonar);
-        for k in 1..=5u64 {
-            stale.stamp_ns = (3 + k) * 100_000_000;
-            slam.process(&stale, &Pose2::new(0.1 * k as f64, 0.0, 0.0));
-        }
-        let est = slam.pose().unwrap();
-        assert!((est.x - 0.5).abs() < 0.15, "{est:?}");
-        assert!(slam.stats().unmatched_updates >= 1, "{:?}", slam.stats());
-        // Laser scans are matched again as soon as they return.
-        let before = slam.stats().match_evaluations;
-        slam.process(
-            &scan_at(&Pose2::new(-3.0, -1.5, 0.0), 900_000_000),
-            &Pose2::new(0.5, 0.0, 0.0),
-        );
-        assert!(slam.stats().match_evaluations > before);
-    }
-
     #[test]
     fn sonar_arcs_mark_walls_more_weakly_than_laser_endpoints() {
         // One scan of the room from the start, once as laser and once as sonar:
         // the same free space, but a sonar arc's cells are less sure to be wall.
         let p = Pose2::new(-3.5, -1.5, 0.0);
         let occupancy = |kind: BeamKind| {
-            let mut slam = Rbpf::new(&cfg(1), false);
+            let mut slam = rbpf(&cfg(1));
             let mut scan = scan_at(&p, 0);
             scan.beams.iter_mut().for_each(|b| b.kind = kind);
             slam.process(&scan, &Pose2::default());
@@ -695,7 +566,7 @@ mod tests {
 
     #[test]
     fn systematic_resampling_copies_heavy_particles() {
-        let mut slam = Rbpf::new(&cfg(4), false);
+        let mut slam = rbpf(&cfg(4));
         slam.process(&scan_at(&Pose2::new(-3.5, -1.5, 0.0), 0), &Pose2::default());
         for (i, p) in slam.particles.iter_mut().enumerate() {
             p.pose.x = i as f64;
@@ -718,7 +589,7 @@ mod tests {
             map_update_rad: 0.0,
             ..cfg(30)
         };
-        let mut slam = Rbpf::new(&c, false);
+        let mut slam = rbpf(&c);
         let mut truth = Pose2::new(-3.5, -1.5, 0.0);
         for k in 0..5 {
             slam.process(
@@ -756,7 +627,7 @@ mod tests {
 
     #[test]
     fn maps_are_written_only_after_enough_motion() {
-        let mut slam = Rbpf::new(&cfg(3), false);
+        let mut slam = rbpf(&cfg(3));
         for k in 0..12 {
             let truth = Pose2::new(-3.5 + 0.1 * k as f64, -1.5, 0.0);
             slam.process(
@@ -768,24 +639,5 @@ mod tests {
         // 1.1 m driven, is written into the maps.
         assert_eq!(slam.stats().updates, 12);
         assert_eq!(slam.stats().map_updates, 3);
-    }
-
-    #[test]
-    fn update_thresholds_skip_scans_until_the_robot_moved() {
-        let mut c = cfg(3);
-        c.linear_update_m = 0.5;
-        c.angular_update_rad = 0.8;
-        let mut slam = Rbpf::new(&c, false);
-        let mut processed = 0;
-        for k in 0..12 {
-            let truth = Pose2::new(-3.5 + 0.1 * k as f64, -1.5, 0.0);
-            let u = slam.process(
-                &scan_at(&truth, k * 100_000_000),
-                &Pose2::new(0.1 * k as f64, 0.0, 0.0),
-            );
-            processed += usize::from(u.processed);
-        }
-        // The first scan, then every 0.5 m of the 1.1 m driven.
-        assert_eq!(processed, 3);
     }
 }

@@ -14,9 +14,9 @@
 //! steps, `iterations` times (GMapping's optimiser).
 
 use crate::grid::{TILE, TILE_SHIFT, Tile, TiledGrid};
-use crate::pose::Pose2;
-use crate::scan::{BeamKind, RangeScan};
+use crate::scan::{BeamKind, Endpoint, EndpointLimits, RangeScan};
 use smokenav_platform_config::SlamSection;
+use smokenav_shared_types::Pose2;
 
 /// An endpoint prepared for matching, in the robot frame.
 #[derive(Debug, Clone, Copy)]
@@ -53,6 +53,7 @@ pub struct PreparedScan {
     pub sensor: Pose2,
     pub points: Vec<MatchPoint>,
     pub beams: Vec<RobotBeam>,
+    endpoints: Vec<Endpoint>,
 }
 
 /// The parameters of matching, taken from the config once.
@@ -94,19 +95,29 @@ impl MatchParams {
 /// Hill-climbing moves tried per round before the steps are halved, at most.
 const MAX_CLIMB_ROUNDS: u32 = 80;
 
+impl MatchParams {
+    /// The endpoints matching uses.
+    pub fn endpoint_limits(&self) -> EndpointLimits {
+        EndpointLimits {
+            max_range: self.max_range,
+            max_urange: self.max_urange,
+            lskip: self.lskip,
+            min_spacing: self.resolution,
+        }
+    }
+}
+
 impl PreparedScan {
     pub fn prepare(&mut self, scan: &RangeScan, p: &MatchParams) {
         self.sensor = scan.sensor_pose;
         self.points.clear();
         self.beams.clear();
         let back = p.resolution * std::f64::consts::SQRT_2;
-        let min_spacing2 = p.resolution * p.resolution;
         let laser_factor = if scan.laser_noise_factor.is_finite() && scan.laser_noise_factor > 0.0 {
             scan.laser_noise_factor
         } else {
             1.0
         };
-        let mut used = 0usize;
         for beam in &scan.beams {
             let Some(r) = beam.range else { continue };
             let r = r as f64;
@@ -122,38 +133,25 @@ impl PreparedScan {
                 hit: !cropped,
                 sonar: beam.kind == BeamKind::Sonar,
             });
-            if cropped {
-                continue;
-            }
-            let skip = !used.is_multiple_of(p.lskip + 1);
-            used += 1;
-            if skip {
-                continue;
-            }
-            let (hx, hy) = (self.sensor.x + c * r, self.sensor.y + s * r);
-            // Endpoints closer than a cell to the last kept one add cost but no
-            // information (and would count the same evidence twice in the likelihood).
-            if let Some(last) = self.points.last()
-                && (last.hx - hx).powi(2) + (last.hy - hy).powi(2) < min_spacing2
-            {
-                continue;
-            }
-            let (sigma, lsigma) = match beam.kind {
+        }
+        scan.endpoints(&p.endpoint_limits(), &mut self.endpoints);
+        for e in &self.endpoints {
+            let (sigma, lsigma) = match e.kind {
                 BeamKind::Laser => (p.sigma * laser_factor, p.lsigma * laser_factor),
                 BeamKind::Sonar => (p.sonar_sigma, p.sonar_sigma.max(p.lsigma)),
             };
             // Wider beams search further, within bounds that keep the cost predictable.
             let kernel = ((sigma / p.resolution).round() as i32).clamp(p.kernel, p.kernel + 3);
-            let rb = (r - back).max(0.0);
+            let rb = (e.range - back).max(0.0);
             self.points.push(MatchPoint {
-                hx,
-                hy,
-                fx: self.sensor.x + c * rb,
-                fy: self.sensor.y + s * rb,
+                hx: e.x,
+                hy: e.y,
+                fx: self.sensor.x + e.cos * rb,
+                fy: self.sensor.y + e.sin * rb,
                 score_k: 1.0 / (2.0 * sigma * sigma),
                 lik_k: 1.0 / (2.0 * lsigma * lsigma),
                 kernel,
-                from_laser: beam.kind == BeamKind::Laser,
+                from_laser: e.kind == BeamKind::Laser,
             });
         }
     }

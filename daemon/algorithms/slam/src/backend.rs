@@ -1,0 +1,107 @@
+//! What a SLAM algorithm is to the pipeline: scans paired with odometry in,
+//! a pose with its uncertainty and a map out.
+//!
+//! The pipeline ([`crate::pipeline`]) does everything around the algorithm
+//! once for all of them (odometry pairing and resets, scan conversion, the
+//! smoke noise model, the front end, the motion filter), so a back-end only
+//! sees scans it should use ([`SlamBackend::process`]) and the odometry of the
+//! scans the motion filter held back ([`SlamBackend::predict`]). The shape is
+//! meant for the back-ends to come as well: a pose graph with loop closure
+//! (which revises its whole trajectory and map at once: see
+//! [`SlamBackend::map_revision`]), a fuzzy-map registration, and a vote over
+//! several back-ends (which needs each one's covariance and a cheap way to
+//! tell whether its map changed).
+
+use crate::rbpf::{Rbpf, RbpfParams};
+use crate::scan::RangeScan;
+use nalgebra::Matrix3;
+use smokenav_platform_config::{SlamBackendKind, SlamSection};
+use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Pose2;
+
+/// A pose with the stamp of the scan it belongs to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StampedPose {
+    pub stamp_ns: u64,
+    pub pose: Pose2,
+}
+
+/// What a back-end reports after each scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlamUpdate {
+    /// Stamp of the scan.
+    pub stamp_ns: u64,
+    /// Best estimate of the robot pose in the map frame.
+    pub pose: Pose2,
+    /// Covariance of (x, y, θ) of the estimate (m², m·rad, rad²).
+    pub covariance: Matrix3<f64>,
+    /// Effective number of hypotheses behind the estimate (a particle
+    /// filter's N_eff; 1 for a back-end that keeps one estimate).
+    pub n_eff: f64,
+    /// Hypotheses kept (particles; 1 for a single-estimate back-end).
+    pub particles: usize,
+    /// The scan was used (matched and weighed); false when only the odometry
+    /// moved the estimate (the motion filter held the scan back).
+    pub processed: bool,
+    /// The filter resampled its particles at this scan.
+    pub resampled: bool,
+}
+
+impl SlamUpdate {
+    /// The covariance row-major, as `PoseEstimate::covariance` carries it.
+    pub fn covariance_row_major(&self) -> [f64; 9] {
+        let c = &self.covariance;
+        std::array::from_fn(|i| c[(i / 3, i % 3)])
+    }
+}
+
+/// A SLAM algorithm: scans and odometry in, poses and a map out. `odom` is
+/// always the odometry pose of the robot at the scan's stamp, in a frame that
+/// only jumps where [`SlamBackend::odometry_reset`] says so.
+pub trait SlamBackend: Send {
+    /// Short name for logs and health (`rbpf`).
+    fn name(&self) -> &'static str;
+    /// Uses one scan (the first one starts the map).
+    fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate;
+    /// A scan the motion filter held back: only its odometry moves the estimate.
+    fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate;
+    /// The odometry frame jumped: the next odometry must not be compared with the last.
+    fn odometry_reset(&mut self);
+    /// Where the first scan is placed in the map frame (default: the origin).
+    /// Only has an effect before the first scan.
+    fn set_initial_pose(&mut self, pose: Pose2);
+    /// The current best pose, once a scan was processed.
+    fn pose(&self) -> Option<Pose2>;
+    /// Changes whenever the map would export differently (a write, a
+    /// resampling that picked another particle, a loop closure): cheap, so a
+    /// caller can skip [`SlamBackend::map`] while it stays the same.
+    fn map_revision(&self) -> u64;
+    /// The current best map, once a scan was processed (an export: costs a copy).
+    fn map(&self) -> Option<OccupancyGrid>;
+    /// The best estimate of the whole trajectory so far (smoothed where the
+    /// back-end can; empty if it keeps no history).
+    fn trajectory(&self) -> Vec<StampedPose>;
+    /// The back-end's own counters (cheap: called for every health report),
+    /// as `(name, value)`.
+    fn metrics(&self, emit: &mut dyn FnMut(&'static str, f64));
+    /// For tools that know the concrete back-end (benches, summaries).
+    fn as_any(&self) -> &dyn std::any::Any;
+}
+
+/// How a back-end is built beyond its `[slam]` keys.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BackendOptions {
+    /// Keep the whole trajectory for [`SlamBackend::trajectory`] (offline
+    /// runs; memory grows with the number of scans).
+    pub keep_trajectory: bool,
+}
+
+/// The back-end `[slam] backend` names, with its parameters from the section.
+pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Box<dyn SlamBackend> {
+    match cfg.backend {
+        SlamBackendKind::Rbpf => Box::new(Rbpf::new(
+            RbpfParams::from_config(cfg),
+            opts.keep_trajectory,
+        )),
+    }
+}

@@ -1,0 +1,320 @@
+//! The SLAM pipeline: what the SLAM process, `smokenav slam` and the demo's
+//! offline comparison all run, so a replay does exactly what the robot did.
+//!
+//! Bus messages in, in the order they were received:
+//!
+//! 1. odometry goes into a bounded history ([`OdomBuffer`]); a reading
+//!    flagged `OdometryFlags::RESET` empties it and tells the front end (or,
+//!    without one, the motion filter and the back-end) that the odometry
+//!    frame jumped;
+//! 2. a scan (fused or laser) is converted into a [`RangeScan`] with the
+//!    laser noise of the smoke it was taken in ([`LaserNoiseModel`]); only
+//!    the newest scan waits for its odometry, an older one still waiting is
+//!    superseded and counted (nothing queues without bound);
+//! 3. [`SlamPipeline::poll`] pairs the waiting scan with the odometry
+//!    interpolated to its stamp — waiting up to [`OdomPolicy::wait_ns`] for
+//!    odometry that may still arrive, holding the newest reading up to
+//!    [`OdomPolicy::max_gap_ns`] old, and the last odometry used (counted)
+//!    beyond that;
+//! 4. the front end corrects the odometry by correlative matching against the
+//!    last scans ([`FrontEnd`]);
+//! 5. the motion filter decides whether the scan is used
+//!    ([`SlamBackend::process`]) or only moves the estimate
+//!    ([`SlamBackend::predict`]).
+//!
+//! Time is passed in (`now_ns`), never read: a replay at any speed gives the
+//! same result as the live run when the same scans were processed.
+
+use crate::backend::{self, BackendOptions, SlamBackend, SlamUpdate, StampedPose};
+use crate::frontend::{FrontEnd, FrontEndParams};
+use crate::motion_filter::{MotionFilter, MotionFilterParams};
+use crate::noise::LaserNoiseModel;
+use crate::odom_buffer::{OdomAt, OdomBuffer};
+use crate::scan::{BeamKind, Endpoint, EndpointLimits, RangeScan};
+use smokenav_platform_config::SlamSection;
+use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Pose2;
+use smokenav_shared_types::{FusedScan, LaserScan, Odometry, OdometryFlags};
+
+/// How long a scan waits for its odometry, and how much odometry is kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OdomPolicy {
+    /// Odometry newer than a scan may still be on its way: wait this long for it, ns.
+    pub wait_ns: u64,
+    /// A scan up to this far past the newest odometry uses that odometry, ns.
+    pub max_gap_ns: u64,
+    /// Odometry readings kept for interpolation.
+    pub history: usize,
+}
+
+impl Default for OdomPolicy {
+    fn default() -> Self {
+        Self {
+            wait_ns: 100_000_000,
+            max_gap_ns: 300_000_000,
+            // ~10 s at the Pioneer's 50 Hz.
+            history: 512,
+        }
+    }
+}
+
+/// What the pipeline did with its input so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PipelineStats {
+    /// Scans handed to the back-end (used or held back by the motion filter).
+    pub scans: u64,
+    /// Scans the motion filter held back (odometry only).
+    pub held_back: u64,
+    /// Scans superseded by a newer one before their odometry was known.
+    pub superseded: u64,
+    /// Scans without odometry at their stamp (the last odometry used was held).
+    pub no_odometry: u64,
+    /// Odometry readings flagged as a reset of the odometry frame.
+    pub odom_resets: u64,
+    /// Odometry readings dropped because their stamp went backwards (or was not finite).
+    pub odom_out_of_order: u64,
+    /// Scans without a usable endpoint (odometry and free space only).
+    pub empty_scans: u64,
+    /// Scans whose front-end match was not trusted (its prediction was used).
+    pub frontend_fallbacks: u64,
+}
+
+pub struct SlamPipeline {
+    sensor_pose: Pose2,
+    noise: LaserNoiseModel,
+    limits: EndpointLimits,
+    policy: OdomPolicy,
+    odom: OdomBuffer,
+    frontend: Option<FrontEnd>,
+    motion_filter: MotionFilter,
+    backend: Box<dyn SlamBackend>,
+    /// The newest scan, waiting for its odometry while `pending`.
+    scan: RangeScan,
+    pending: bool,
+    endpoints: Vec<Endpoint>,
+    /// Odometry of the last scan paired (held when a scan has none).
+    last_odom: Option<Pose2>,
+    /// Front-end corrected odometry of the last scan handed on.
+    last_corrected: Option<Pose2>,
+    stats: PipelineStats,
+    last_update: Option<SlamUpdate>,
+}
+
+impl SlamPipeline {
+    /// A pipeline with `cfg`'s front end, motion filter and noise model around `backend`.
+    pub fn new(cfg: &SlamSection, backend: Box<dyn SlamBackend>) -> Self {
+        let policy = OdomPolicy::default();
+        Self {
+            sensor_pose: Pose2::default(),
+            noise: LaserNoiseModel::from_config(cfg),
+            limits: EndpointLimits::from_config(cfg),
+            policy,
+            odom: OdomBuffer::new(policy.history),
+            frontend: cfg.frontend.then(|| {
+                FrontEnd::new(FrontEndParams {
+                    resolution: cfg.resolution_m,
+                    window_m: cfg.frontend_window_m,
+                    window_rad: cfg.frontend_window_rad,
+                    max_scans: cfg.frontend_scans as usize,
+                })
+            }),
+            motion_filter: MotionFilter::new(MotionFilterParams::from_config(cfg)),
+            backend,
+            scan: RangeScan::default(),
+            pending: false,
+            endpoints: Vec::new(),
+            last_odom: None,
+            last_corrected: None,
+            stats: PipelineStats::default(),
+            last_update: None,
+        }
+    }
+
+    /// A pipeline around the back-end `[slam] backend` names.
+    pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Self {
+        Self::new(cfg, backend::from_config(cfg, opts))
+    }
+
+    /// Where the laser sits on the robot (bus scans carry no mount).
+    pub fn with_sensor_pose(mut self, mount: Pose2) -> Self {
+        self.sensor_pose = mount;
+        self
+    }
+
+    pub fn with_odom_policy(mut self, policy: OdomPolicy) -> Self {
+        self.policy = policy;
+        self.odom = OdomBuffer::new(policy.history);
+        self
+    }
+
+    pub fn noise_model(&self) -> &LaserNoiseModel {
+        &self.noise
+    }
+
+    /// An odometry reading arrived.
+    pub fn push_odom(&mut self, o: &Odometry) {
+        if o.flags & OdometryFlags::RESET != 0 {
+            // The odometry frame jumped: poses before and after must not be mixed.
+            self.odom.clear();
+            self.stats.odom_resets += 1;
+            match &mut self.frontend {
+                // The front end bridges the jump by matching: its output stays continuous.
+                Some(fe) => fe.odometry_reset(),
+                None => {
+                    self.motion_filter.odometry_reset();
+                    self.backend.odometry_reset();
+                }
+            }
+        }
+        self.odom
+            .push(o.header.stamp_ns, Pose2::new(o.x, o.y, o.theta));
+    }
+
+    fn supersede(&mut self) {
+        self.stats.superseded += u64::from(self.pending);
+        self.pending = true;
+    }
+
+    /// A fused scan arrived: it replaces a scan still waiting for odometry.
+    pub fn push_fused(&mut self, f: &FusedScan) {
+        self.supersede();
+        let factor = self.noise.factor(f64::from(f.smoke_level));
+        self.scan.fill_from_fused(f, self.sensor_pose, factor);
+    }
+
+    /// A laser scan arrived: it replaces a scan still waiting for odometry.
+    pub fn push_laser(&mut self, l: &LaserScan) {
+        self.supersede();
+        self.scan.fill_from_laser(l, self.sensor_pose);
+    }
+
+    /// A scan is waiting for its odometry.
+    pub fn pending(&self) -> bool {
+        self.pending
+    }
+
+    /// The newest scan converted from the bus (waiting while [`Self::pending`]).
+    pub fn scan(&self) -> &RangeScan {
+        &self.scan
+    }
+
+    /// The odometry the last bus scan was paired with.
+    pub fn last_odometry(&self) -> Option<Pose2> {
+        self.last_odom
+    }
+
+    /// At `now_ns`: the waiting scan, if its odometry is known (or will not
+    /// come), through the front end, the motion filter and the back-end.
+    pub fn poll(&mut self, now_ns: u64) -> Option<SlamUpdate> {
+        if !self.pending {
+            return None;
+        }
+        let odom = match self.odom.at(
+            self.scan.stamp_ns,
+            now_ns,
+            self.policy.wait_ns,
+            self.policy.max_gap_ns,
+        ) {
+            OdomAt::NotYet => return None,
+            OdomAt::Missing => {
+                self.stats.no_odometry += 1;
+                self.last_odom.unwrap_or_default()
+            }
+            OdomAt::Interpolated(p) | OdomAt::Held(p) | OdomAt::Oldest(p) => p,
+        };
+        self.pending = false;
+        self.last_odom = Some(odom);
+        let scan = std::mem::take(&mut self.scan);
+        let update = self.process(&scan, &odom);
+        self.scan = scan;
+        Some(update)
+    }
+
+    /// End of the input: the waiting scan with the odometry there is.
+    pub fn flush(&mut self) -> Option<SlamUpdate> {
+        self.poll(u64::MAX)
+    }
+
+    /// A scan whose odometry is known already (a CARMEN log pairs them), through
+    /// the front end, the motion filter and the back-end.
+    pub fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
+        self.stats.scans += 1;
+        scan.endpoints(&self.limits, &mut self.endpoints);
+        if self.endpoints.is_empty() {
+            self.stats.empty_scans += 1;
+        }
+        let odom = if odom.is_finite() {
+            *odom
+        } else {
+            self.last_corrected.unwrap_or_default()
+        };
+        let corrected = match &mut self.frontend {
+            Some(fe) => {
+                let laser = self
+                    .endpoints
+                    .iter()
+                    .filter(|e| e.kind == BeamKind::Laser)
+                    .map(|e| (e.x, e.y));
+                let tracked = fe.track(laser, &odom, scan.stamp_ns);
+                if tracked.score.is_none() && self.last_corrected.is_some() {
+                    self.stats.frontend_fallbacks += 1;
+                }
+                tracked.pose
+            }
+            None => odom,
+        };
+        self.last_corrected = Some(corrected);
+        let update = if self.motion_filter.check(&corrected, scan.stamp_ns) {
+            self.backend.process(scan, &corrected)
+        } else {
+            self.stats.held_back += 1;
+            self.backend.predict(scan.stamp_ns, &corrected)
+        };
+        self.last_update = Some(update);
+        update
+    }
+
+    /// Where the first scan is placed in the map frame (before the first scan only).
+    pub fn set_initial_pose(&mut self, pose: Pose2) {
+        self.backend.set_initial_pose(pose);
+    }
+
+    pub fn stats(&self) -> PipelineStats {
+        PipelineStats {
+            odom_out_of_order: self.odom.out_of_order,
+            ..self.stats
+        }
+    }
+
+    pub fn last_update(&self) -> Option<&SlamUpdate> {
+        self.last_update.as_ref()
+    }
+
+    /// The front end's corrected odometry of the last scan (its own drifting frame), if enabled.
+    pub fn frontend_pose(&self) -> Option<Pose2> {
+        self.frontend.as_ref().and(self.last_corrected)
+    }
+
+    pub fn backend(&self) -> &dyn SlamBackend {
+        self.backend.as_ref()
+    }
+
+    pub fn pose(&self) -> Option<Pose2> {
+        self.backend.pose()
+    }
+
+    pub fn map_revision(&self) -> u64 {
+        self.backend.map_revision()
+    }
+
+    pub fn map(&self) -> Option<OccupancyGrid> {
+        self.backend.map()
+    }
+
+    pub fn trajectory(&self) -> Vec<StampedPose> {
+        self.backend.trajectory()
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,343 @@
+//! The pipeline on the test room: the filter behind the front end and the
+//! motion filter, and the odometry pairing policy (resets, stale and
+//! missing odometry, superseded scans).
+
+use super::*;
+use crate::rbpf::Rbpf;
+use crate::testkit::scan_at;
+use smokenav_shared_types::{BeamReading, Header, SectionSource};
+
+fn pipeline(c: &SlamSection, keep_trajectory: bool) -> SlamPipeline {
+    SlamPipeline::from_config(c, BackendOptions { keep_trajectory })
+}
+
+fn rbpf(p: &SlamPipeline) -> &Rbpf {
+    p.backend()
+        .as_any()
+        .downcast_ref()
+        .expect("the default back-end is the particle filter")
+}
+
+fn cfg(particles: usize) -> SlamSection {
+    SlamSection {
+        particles,
+        ..SlamSection::default()
+    }
+}
+
+/// Drives an arc through the room; odometry over-reads distance by 5 % and
+/// turns by 3 %, so it drifts while the filter should not.
+fn drive(slam: &mut SlamPipeline, steps: usize) -> (Pose2, Pose2) {
+    let start_truth = Pose2::new(-3.5, -1.5, 0.0);
+    let mut truth = start_truth;
+    let mut odom = Pose2::new(10.0, 20.0, 1.0);
+    for k in 0..steps {
+        slam.process(&scan_at(&truth, k as u64 * 100_000_000), &odom);
+        let step = Pose2::new(0.1, 0.0, if k < 40 { 0.0 } else { 0.05 });
+        truth = truth.compose(&step);
+        odom = odom.compose(&Pose2::new(step.x * 1.05, 0.0, step.theta * 1.03));
+    }
+    // The map frame is the pose of the first scan: express the last scan's pose in it.
+    let previous_truth = {
+        // `truth` has advanced one step past the last scan; step back.
+        let step = Pose2::new(0.1, 0.0, if steps - 1 < 40 { 0.0 } else { 0.05 });
+        truth.compose(&step.inverse())
+    };
+    (start_truth.between(&previous_truth), slam.pose().unwrap())
+}
+
+#[test]
+fn filter_tracks_a_robot_whose_odometry_drifts() {
+    let mut slam = pipeline(&cfg(10), true);
+    let (truth, est) = drive(&mut slam, 70);
+    // 7 m driven with odometry 5 % long and turns 3 % wide (0.35 m, 0.1 rad of drift).
+    assert!(
+        (est.x - truth.x).abs() < 0.05 && (est.y - truth.y).abs() < 0.05,
+        "{est:?} vs {truth:?}"
+    );
+    assert!(
+        (est.theta - truth.theta).abs() < 0.02,
+        "{est:?} vs {truth:?}"
+    );
+    assert_eq!(slam.trajectory().len(), 70);
+    assert_eq!(rbpf(&slam).stats().updates, 70);
+    let map = slam.map().unwrap();
+    // The map shows the inner wall at x = 0 (3.5 m right of the start), y from 1 to 3.
+    let (cx, cy) = map.world_to_cell(3.5, 3.5).unwrap();
+    let near_wall = (cx.saturating_sub(2)..cx + 3).any(|x| map.get(x, cy).is_some_and(|v| v > 50));
+    assert!(near_wall);
+}
+
+#[test]
+fn scan_without_ranges_moves_the_particles_by_odometry() {
+    let mut slam = pipeline(&cfg(5), false);
+    let p = Pose2::new(-3.5, -1.5, 0.0);
+    slam.process(&scan_at(&p, 0), &Pose2::default());
+    let mut empty = scan_at(&p, 100_000_000);
+    empty.beams.iter_mut().for_each(|b| b.range = None);
+    let u = slam.process(&empty, &Pose2::new(0.2, 0.0, 0.0));
+    assert!(u.pose.is_finite());
+    assert!((u.pose.x - 0.2).abs() < 0.1, "{u:?}");
+    assert_eq!(slam.stats().empty_scans, 1);
+    // No beams at all, and a NaN odometry reading: still no panic, pose kept finite.
+    let none = RangeScan {
+        stamp_ns: 200_000_000,
+        ..Default::default()
+    };
+    let u = slam.process(&none, &Pose2::new(f64::NAN, 0.0, 0.0));
+    assert!(u.pose.is_finite());
+}
+
+#[test]
+fn sonar_only_scans_weigh_but_do_not_drag_the_particles() {
+    // In dense smoke the fused scan is sonar arcs only. Here they show the
+    // room as seen from the start while the wheels report 0.5 m of travel:
+    // a matcher would pull the pose back; the filter must follow the odometry.
+    let mut slam = pipeline(&cfg(10), false);
+    let p = Pose2::new(-3.5, -1.5, 0.0);
+    for k in 0..3 {
+        slam.process(&scan_at(&p, k * 100_000_000), &Pose2::default());
+    }
+    let mut stale = scan_at(&p, 0);
+    stale
+        .beams
+        .iter_mut()
+        .for_each(|b| b.kind = BeamKind::Sonar);
+    for k in 1..=5u64 {
+        stale.stamp_ns = (3 + k) * 100_000_000;
+        slam.process(&stale, &Pose2::new(0.1 * k as f64, 0.0, 0.0));
+    }
+    let est = slam.pose().unwrap();
+    assert!((est.x - 0.5).abs() < 0.15, "{est:?}");
+    assert!(
+        rbpf(&slam).stats().unmatched_updates >= 1,
+        "{:?}",
+        rbpf(&slam).stats()
+    );
+    // Laser scans are matched again as soon as they return.
+    let before = rbpf(&slam).stats().match_evaluations;
+    slam.process(
+        &scan_at(&Pose2::new(-3.0, -1.5, 0.0), 900_000_000),
+        &Pose2::new(0.5, 0.0, 0.0),
+    );
+    assert!(rbpf(&slam).stats().match_evaluations > before);
+}
+
+#[test]
+fn update_thresholds_skip_scans_until_the_robot_moved() {
+    let mut c = cfg(3);
+    c.linear_update_m = 0.5;
+    c.angular_update_rad = 0.8;
+    let mut slam = pipeline(&c, false);
+    let mut processed = 0;
+    for k in 0..12 {
+        let truth = Pose2::new(-3.5 + 0.1 * k as f64, -1.5, 0.0);
+        let u = slam.process(
+            &scan_at(&truth, k * 100_000_000),
+            &Pose2::new(0.1 * k as f64, 0.0, 0.0),
+        );
+        processed += usize::from(u.processed);
+    }
+    // The first scan, then every 0.5 m of the 1.1 m driven.
+    assert_eq!(processed, 3);
+}
+
+const MS: u64 = 1_000_000;
+
+/// The room scan at `truth` as a laser would publish it.
+fn laser_at(truth: &Pose2, stamp_ns: u64) -> LaserScan {
+    let s = scan_at(truth, stamp_ns);
+    let mut l = LaserScan {
+        header: Header::new(stamp_ns, 0, "laser"),
+        angle_min: s.beams[0].angle,
+        angle_increment: s.beams[1].angle - s.beams[0].angle,
+        range_min: 0.02,
+        range_max: 30.0,
+        count: s.beams.len() as u32,
+        ..Default::default()
+    };
+    for (i, b) in s.beams.iter().enumerate() {
+        l.set_beam(i, b.range.map_or(BeamReading::NoReturn, BeamReading::Range));
+    }
+    l
+}
+
+fn odom(stamp_ns: u64, p: Pose2, flags: u32) -> Odometry {
+    Odometry {
+        header: Header::new(stamp_ns, 0, "odom"),
+        x: p.x,
+        y: p.y,
+        theta: p.theta,
+        flags,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn odometry_is_interpolated_at_the_scan_stamp() {
+    let room = Pose2::new(-3.5, -1.5, 0.0);
+    let mut slam = pipeline(&cfg(2), false);
+    slam.push_odom(&odom(100, Pose2::new(0.0, 0.0, 0.0), 0));
+    slam.push_odom(&odom(200, Pose2::new(1.0, 0.0, 0.2), 0));
+    slam.push_laser(&laser_at(&room, 150));
+    assert!(slam.poll(150).is_some(), "bracketed: no need to wait");
+    let p = slam.last_odometry().unwrap();
+    assert!((p.x - 0.5).abs() < 1e-12 && (p.theta - 0.1).abs() < 1e-12);
+    // Before the oldest reading kept: that reading; after the newest: it is held.
+    slam.push_laser(&laser_at(&room, 50));
+    slam.poll(150).unwrap();
+    assert_eq!(slam.last_odometry().unwrap().x, 0.0);
+    slam.push_laser(&laser_at(&room, 900));
+    slam.poll(900 + 200 * MS).unwrap();
+    assert_eq!(slam.last_odometry().unwrap().x, 1.0);
+    assert_eq!(slam.stats().no_odometry, 0);
+    // No odometry at all (none received yet): the scan is used at once, and counted.
+    let mut none = pipeline(&cfg(2), false);
+    none.push_laser(&laser_at(&room, 5));
+    assert!(none.poll(5).is_some());
+    assert_eq!(none.stats().no_odometry, 1);
+    assert_eq!(none.last_odometry(), Some(Pose2::default()));
+}
+
+#[test]
+fn stale_odometry_is_waited_for_then_held_then_given_up() {
+    let room = Pose2::new(-3.5, -1.5, 0.0);
+    let mut slam = pipeline(&cfg(2), false);
+    slam.push_odom(&odom(1000 * MS, Pose2::new(0.3, 0.0, 0.0), 0));
+    slam.push_laser(&laser_at(&room, 1000 * MS));
+    slam.poll(1000 * MS).unwrap();
+    // The wheels go quiet. A scan 50 ms on waits up to 100 ms for odometry…
+    slam.push_odom(&odom(1010 * MS, Pose2::new(0.31, 0.0, 0.0), 0));
+    slam.push_laser(&laser_at(&room, 1060 * MS));
+    assert!(slam.poll(1100 * MS).is_none());
+    assert!(slam.pending());
+    // … then holds the newest reading (50 ms old: within the 300 ms gap).
+    let u = slam.poll(1161 * MS).unwrap();
+    assert_eq!(u.stamp_ns, 1060 * MS);
+    assert_eq!(slam.last_odometry(), Some(Pose2::new(0.31, 0.0, 0.0)));
+    assert_eq!(slam.stats().no_odometry, 0);
+    // 500 ms past the newest reading: no odometry, the last one used is held and counted.
+    slam.push_laser(&laser_at(&room, 1510 * MS));
+    slam.poll(2000 * MS).unwrap();
+    assert_eq!(slam.stats().no_odometry, 1);
+    assert_eq!(slam.last_odometry(), Some(Pose2::new(0.31, 0.0, 0.0)));
+    // A reading older than the newest is dropped and counted.
+    slam.push_odom(&odom(1005 * MS, Pose2::new(9.0, 9.0, 0.0), 0));
+    assert_eq!(slam.stats().odom_out_of_order, 1);
+    assert_eq!(slam.stats().scans, 3);
+}
+
+#[test]
+fn only_the_newest_scan_waits_older_ones_are_superseded() {
+    let room = Pose2::new(-3.5, -1.5, 0.0);
+    let mut slam = pipeline(&cfg(2), false);
+    slam.push_odom(&odom(0, Pose2::default(), 0));
+    for k in 1..=3 {
+        slam.push_laser(&laser_at(&room, k * 100 * MS));
+        assert!(slam.poll(k * 100 * MS).is_none(), "waiting for odometry");
+    }
+    slam.push_odom(&odom(400 * MS, Pose2::default(), 0));
+    let u = slam.poll(400 * MS).unwrap();
+    assert_eq!(u.stamp_ns, 300 * MS, "the newest scan");
+    assert!(slam.poll(400 * MS).is_none(), "one update per scan");
+    let s = slam.stats();
+    assert_eq!((s.superseded, s.scans), (2, 1));
+}
+
+#[test]
+fn held_back_scans_only_move_the_estimate() {
+    let c = SlamSection {
+        linear_update_m: 0.5,
+        angular_update_rad: 0.8,
+        ..cfg(3)
+    };
+    let mut slam = pipeline(&c, false);
+    for k in 0..12 {
+        let truth = Pose2::new(-3.5 + 0.1 * k as f64, -1.5, 0.0);
+        let u = slam.process(
+            &scan_at(&truth, k * 100 * MS),
+            &Pose2::new(0.1 * k as f64, 0.0, 0.0),
+        );
+        // Every scan moves the estimate, used or not.
+        assert!((u.pose.x - 0.1 * k as f64).abs() < 0.05, "{k}: {u:?}");
+    }
+    assert_eq!(slam.stats().held_back, 9);
+    assert_eq!(rbpf(&slam).stats().updates, 3);
+    assert_eq!(rbpf(&slam).stats().predictions, 9);
+}
+
+/// Drives 2 m along x through the room: odometry at 20 Hz, scans at 10 Hz
+/// (stamped between readings). At 1 s the odometry frame jumps to
+/// (50, -20, 2 rad), flagged as a reset when `flag_reset`. Returns the final
+/// estimate's error against the truth (the map frame is the start pose).
+fn drive_through_a_reset(frontend: bool, flag_reset: bool) -> (f64, PipelineStats) {
+    let start = Pose2::new(-3.5, -1.5, 0.0);
+    let jump = Pose2::new(50.0, -20.0, 2.0);
+    let mut slam = pipeline(
+        &SlamSection {
+            frontend,
+            ..cfg(10)
+        },
+        false,
+    );
+    let truth_at = |t_ms: u64| Pose2::new(-3.5 + 0.001 * t_ms as f64, -1.5, 0.0);
+    // Odometry since the start, in the frame the wheels report it.
+    let odom_at = |t_ms: u64| {
+        if t_ms >= 1050 {
+            jump.compose(&truth_at(1050).between(&truth_at(t_ms)))
+        } else {
+            start.between(&truth_at(t_ms))
+        }
+    };
+    let mut last = None;
+    for t in (0..=2000).step_by(50) {
+        let flags = if t == 1050 && flag_reset {
+            OdometryFlags::RESET
+        } else {
+            0
+        };
+        slam.push_odom(&odom(t * MS, odom_at(t), flags));
+        // The scan 25 ms before this reading: bracketed by it and the one before.
+        if t % 100 == 50 {
+            slam.push_laser(&laser_at(&truth_at(t - 25), (t - 25) * MS));
+            last = slam.poll(t * MS).or(last);
+        }
+    }
+    let est = last.unwrap().pose;
+    let truth = start.between(&truth_at(1925));
+    ((est.x - truth.x).hypot(est.y - truth.y), slam.stats())
+}
+
+#[test]
+fn odometry_reset_is_not_taken_as_motion() {
+    for frontend in [false, true] {
+        let (error, stats) = drive_through_a_reset(frontend, true);
+        assert!(error < 0.1, "front end {frontend}: {error} m off");
+        assert_eq!(stats.odom_resets, 1);
+        assert_eq!(stats.scans, 20);
+    }
+    // The same jump unflagged is driven as 50 m of motion.
+    let (error, stats) = drive_through_a_reset(false, false);
+    assert!(error > 10.0, "{error}");
+    assert_eq!(stats.odom_resets, 0);
+}
+
+#[test]
+fn fused_scans_carry_the_smoke_noise_and_the_beam_sources() {
+    let mut slam = pipeline(&cfg(2), false);
+    let mut f = FusedScan {
+        scan: laser_at(&Pose2::new(-3.5, -1.5, 0.0), 0),
+        smoke_level: 300.0,
+        ..Default::default()
+    };
+    f.beam_source[1] = SectionSource::Sonar as u8;
+    f.beam_source[2] = SectionSource::Neither as u8;
+    slam.push_fused(&f);
+    let s = slam.scan();
+    let fog = slam.noise_model().factor(300.0);
+    assert!((fog - (13.75f64 / 5.0).sqrt()).abs() < 1e-9);
+    assert_eq!(s.laser_noise_factor, fog);
+    assert_eq!(s.beams[1].kind, BeamKind::Sonar);
+    assert_eq!(s.beams[2].range, None);
+    assert_eq!(s.beams[0].kind, BeamKind::Laser);
+}

@@ -1,0 +1,222 @@
+//! Live == offline for SLAM: the same recording of fused scans and odometry
+//! through the real `smokenav-slam` process over iceoryx2 and through the
+//! offline path (`offline::replay` into a `SlamPipeline`, what the demo's
+//! comparison runs) gives the same poses, bit for bit.
+//!
+//! The recording is the first 200 scans of the MIT CSAIL log made into what
+//! the robot's bus carries: each laser scan as a fused scan (a smoke level
+//! rising from clear air to fog, so the smoke noise model changes the
+//! matcher; some beams marked as painted from sonar), stamped 20 ms before the
+//! odometry reading of its scan (so its odometry is interpolated), and an
+//! odometry reset halfway (the frame jumps, flagged `RESET`).
+//!
+//! The test publisher replays in lock step (each pose comes back before the
+//! next scan goes out), so the process never has two scans waiting and skips
+//! none: every pose must be bit-identical. `recording_e2e`'s replay of a
+//! live run at full speed is the test that allows for skips under load.
+
+use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_algorithms_slam::offline::{Received, replay};
+use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
+use smokenav_platform_bus::{Publisher, Waiter, topics};
+use smokenav_platform_config::{MountPose, RobotConfig, SlamInput};
+use smokenav_shared_types::{
+    BeamReading, Clock, FusedScan, Header, MonotonicClock, Odometry, OdometryFlags, PoseEstimate,
+    SectionSource,
+};
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
+use std::io::BufReader;
+use std::time::{Duration, Instant};
+
+/// CARMEN max-range readings are 81.91: beyond the scan's range_max, i.e. no return.
+const RANGE_MAX: f32 = 81.9;
+/// The scan is stamped this long before the odometry reading of its record.
+const SCAN_LEAD_NS: u64 = 20_000_000;
+/// Record whose odometry starts a new frame.
+const RESET_AT: usize = 100;
+
+fn records() -> Vec<LaserRecord> {
+    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
+    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
+        .filter_map(|r| match r {
+            Ok(Record::Laser(l)) => Some(l),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The recording: (odometry, fused scan) per log record, stamped from `base_ns`.
+fn recording(records: &[LaserRecord], base_ns: u64) -> Vec<(Odometry, Box<FusedScan>)> {
+    let ipc0 = records[0].ipc_timestamp_ns;
+    let jump = Pose2::new(40.0, -12.0, 2.5);
+    let reset_pose = records[RESET_AT].robot_pose;
+    records
+        .iter()
+        .enumerate()
+        .map(|(k, rec)| {
+            let stamp = base_ns + SCAN_LEAD_NS + (rec.ipc_timestamp_ns - ipc0);
+            // After the reset the wheels count from another origin.
+            let pose = if k >= RESET_AT {
+                jump.compose(&reset_pose.between(&rec.robot_pose))
+            } else {
+                rec.robot_pose
+            };
+            let odom = Odometry {
+                header: Header::new(stamp, 0, "odom"),
+                x: pose.x,
+                y: pose.y,
+                theta: pose.theta,
+                flags: if k == RESET_AT {
+                    OdometryFlags::RESET
+                } else {
+                    0
+                },
+                ..Default::default()
+            };
+            let mut f = Box::<FusedScan>::default();
+            let s = &mut f.scan;
+            s.header = Header::new(stamp - SCAN_LEAD_NS, 0, "laser");
+            s.angle_min = rec.start_angle as f32;
+            s.angle_increment = rec.angular_resolution as f32;
+            s.range_min = 0.02;
+            s.range_max = RANGE_MAX;
+            s.count = rec.ranges.len() as u32;
+            for (i, &r) in rec.ranges.iter().enumerate() {
+                let beam = if r > 0.0 && r < RANGE_MAX {
+                    BeamReading::Range(r)
+                } else {
+                    BeamReading::BeyondMax
+                };
+                s.set_beam(i, beam);
+            }
+            // Clear air to beyond SmokeNav's dense threshold over the log.
+            f.smoke_level = 300.0 * k as f32 / records.len() as f32;
+            if (60..140).contains(&k) {
+                for i in (0..rec.ranges.len()).step_by(12) {
+                    f.beam_source[i] = SectionSource::Sonar as u8;
+                }
+            }
+            (odom, f)
+        })
+        .collect()
+}
+
+/// Waits for the pose of the scan stamped `stamp_ns`.
+fn pose_for(
+    poses: &smokenav_platform_bus::Subscriber<PoseEstimate>,
+    waiter: &Waiter,
+    stamp_ns: u64,
+) -> anyhow::Result<PoseEstimate> {
+    let end = Instant::now() + Duration::from_secs(30);
+    loop {
+        while let Some(p) = poses.receive()? {
+            if p.header.stamp_ns == stamp_ns {
+                return Ok(*p);
+            }
+        }
+        let now = Instant::now();
+        anyhow::ensure!(now < end, "no slam/pose for the scan stamped {stamp_ns}");
+        waiter.wait(Some((end - now).min(Duration::from_millis(200))))?;
+    }
+}
+
+#[test]
+fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()> {
+    let instance = unique_instance("slam_pipeline_e2e");
+    let dir = tempfile::tempdir()?;
+    let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Fused;
+        // Few particles keep a debug build quick.
+        c.slam.particles = 10;
+        // The CARMEN laser pose is the robot pose.
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
+    let mut slam = Child::spawn(
+        &bin("smokenav-slam"),
+        &["--config", cfg_path.to_str().unwrap(), "--backend", "rbpf"],
+        &instance,
+    )?;
+    slam.wait_for_line(
+        "rbpf with 10 particles on fusion/scan",
+        Duration::from_secs(30),
+    )?;
+
+    let bus = open_bus(&instance);
+    let mut odom_pub: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
+    let mut scan_pub: Publisher<FusedScan> = bus.publisher(topics::FUSION_SCAN)?;
+    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
+    let waiter = Waiter::new()?;
+    let _g = waiter.attach(&poses)?;
+
+    let records = records();
+    assert_eq!(records.len(), 200);
+    let recorded = recording(&records, MonotonicClock.now_ns());
+    // Live, in lock step; what was sent and when is the recording replayed offline.
+    let mut received: Vec<(u64, Received<'_>)> = Vec::with_capacity(2 * recorded.len());
+    let mut live = Vec::with_capacity(recorded.len());
+    for (odom, fused) in &recorded {
+        odom_pub.publish(odom)?;
+        received.push((MonotonicClock.now_ns(), Received::Odometry(odom)));
+        scan_pub.publish(fused)?;
+        received.push((MonotonicClock.now_ns(), Received::Fused(fused)));
+        live.push(pose_for(&poses, &waiter, fused.scan.header.stamp_ns)?);
+    }
+    let status = slam.terminate(Duration::from_secs(10))?;
+    assert!(status.success(), "{status:?}");
+    assert_eq!(
+        live.last().unwrap().scans_skipped,
+        0,
+        "lock step skips nothing"
+    );
+
+    // Offline: the profile the process read, the pipeline the process runs.
+    let cfg = RobotConfig::load(&cfg_path)?;
+    let m = &cfg.laser.mount;
+    let mut pipeline = SlamPipeline::from_config(&cfg.slam, BackendOptions::default())
+        .with_sensor_pose(Pose2::new(m.x, m.y, m.yaw_rad()));
+    let mut offline: Vec<SlamUpdate> = Vec::new();
+    replay(&mut pipeline, received, |u| offline.push(*u));
+    let stats = pipeline.stats();
+    assert_eq!(stats.odom_resets, 1);
+    assert_eq!(
+        (stats.scans, stats.superseded, stats.no_odometry),
+        (200, 0, 0)
+    );
+
+    assert_eq!(offline.len(), live.len());
+    for (i, (o, l)) in offline.iter().zip(&live).enumerate() {
+        assert_eq!(o.stamp_ns, l.header.stamp_ns, "scan {i}");
+        assert_eq!(
+            [o.pose.x, o.pose.y, o.pose.theta].map(f64::to_bits),
+            [l.x, l.y, l.theta].map(f64::to_bits),
+            "scan {i}: offline {:?}, live ({}, {}, {})",
+            o.pose,
+            l.x,
+            l.y,
+            l.theta
+        );
+        assert_eq!(
+            o.covariance_row_major().map(f64::to_bits),
+            l.covariance.map(f64::to_bits),
+            "scan {i}"
+        );
+        assert_eq!((o.n_eff as f32).to_bits(), l.n_eff.to_bits(), "scan {i}");
+    }
+    // A trajectory, not one pose repeated, carried across the odometry reset:
+    // the SLAM pose moves on smoothly where the odometry jumped 40 m.
+    let (a, b) = (&offline[RESET_AT - 1].pose, &offline[RESET_AT].pose);
+    assert!(
+        (a.x - b.x).hypot(a.y - b.y) < 1.0,
+        "the odometry jump leaked into SLAM: {a:?} → {b:?}"
+    );
+    let (first, last) = (&offline[0].pose, &offline[offline.len() - 1].pose);
+    assert!(
+        (last.x - first.x).hypot(last.y - first.y) > 5.0,
+        "{first:?} → {last:?}"
+    );
+    Ok(())
+}
