@@ -24,6 +24,7 @@ pub mod carmen;
 pub mod eval;
 pub mod filter;
 pub mod frontend;
+pub mod graph;
 pub mod grid;
 pub mod matcher;
 pub mod motion;
