@@ -5,8 +5,11 @@
 //!
 //! - [`pose_graph`]: the SE(2) pose graph and its Levenberg–Marquardt optimiser.
 //! - [`g2o`]: reading and writing 2D g2o files.
+//! - [`slam`]: [`GraphSlam`], the back-end behind `SlamBackend`.
 
 pub mod g2o;
 pub mod pose_graph;
+pub mod slam;
 
 pub use pose_graph::{Edge, GraphError, OptimizeParams, OptimizeReport, PoseGraph, RobustKernel};
+pub use slam::{GraphParams, GraphSlam, GraphStats};
