@@ -104,3 +104,42 @@ fn under_constrained_vertex_and_bad_lines_are_named() {
     assert!(!ok);
     assert!(stderr.contains("line 2"), "{stderr}");
 }
+
+#[test]
+fn slam_with_the_graph_back_end_saves_a_graph_that_optimises() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../algorithms/slam/tests/data");
+    let graph = dir.path().join("run.g2o");
+    let (ok, stdout, stderr) = smokenav(&[
+        "slam",
+        "--carmen",
+        data.join("csail-prefix-200.clf").to_str().unwrap(),
+        "--backend",
+        "graph",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--reference",
+        data.join("csail-reference-poses.txt").to_str().unwrap(),
+        "--save-graph",
+        graph.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("backend            Graph"), "{stdout}");
+    assert!(stdout.contains("loop closures"), "{stdout}");
+    assert!(dir.path().join("map.png").exists());
+    let (ok, out, stderr) = smokenav(&["graph", "optimize", graph.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert!(out.contains("chi2      after"), "{out}");
+    // The particle filter keeps no graph to save.
+    let (ok, _, stderr) = smokenav(&[
+        "slam",
+        "--carmen",
+        data.join("csail-prefix-200.clf").to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--save-graph",
+        graph.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("--backend graph"), "{stderr}");
+}
