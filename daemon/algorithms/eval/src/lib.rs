@@ -10,7 +10,7 @@ pub mod trajectory;
 
 pub use map::{Alignment, DistanceStats, MapMetricError, MapOptions, MapReport, evaluate_maps};
 pub use trajectory::{
-    ErrorStats, StampedPose, TrajectoryError, TrajectoryMetricError, TrajectoryOptions,
+    ErrorStats, MeanStd, StampedPose, TrajectoryError, TrajectoryMetricError, TrajectoryOptions,
     TrajectoryReport, evaluate_trajectories, load_trajectory, parse_trajectory,
 };
 
