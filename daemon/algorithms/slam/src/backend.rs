@@ -12,6 +12,7 @@
 //! several back-ends (which needs each one's covariance and a cheap way to
 //! tell whether its map changed).
 
+use crate::graph::{GraphParams, GraphSlam};
 use crate::rbpf::{Rbpf, RbpfParams};
 use crate::scan::RangeScan;
 use nalgebra::Matrix3;
@@ -103,5 +104,6 @@ pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Box<dyn SlamBacke
             RbpfParams::from_config(cfg),
             opts.keep_trajectory,
         )),
+        SlamBackendKind::Graph => Box::new(GraphSlam::new(cfg, GraphParams::default())),
     }
 }

@@ -201,6 +201,45 @@ impl FrontEnd {
         }
     }
 
+    /// Matches `endpoints` (robot frame) against `map` (map-frame points of
+    /// other scans) around `guess` within ± `window_m` and ± `window_rad`,
+    /// without a prior: the branch-and-bound search the tracker uses, for
+    /// verifying a loop closure. Returns the pose and its mean table value
+    /// (0–1). The tracker's own local map and state are left as they were.
+    pub fn match_against(
+        &mut self,
+        map: &[&[(f32, f32)]],
+        endpoints: impl Iterator<Item = (f64, f64)>,
+        guess: &Pose2,
+        window_m: f64,
+        window_rad: f64,
+    ) -> Option<(Pose2, f64)> {
+        let history =
+            std::mem::replace(&mut self.history, map.iter().map(|s| s.to_vec()).collect());
+        let saved = (
+            self.p.window_m,
+            self.p.window_rad,
+            self.prior_t,
+            self.prior_r,
+        );
+        let points = std::mem::take(&mut self.points);
+        self.decimate(endpoints);
+        self.p.window_m = window_m;
+        self.p.window_rad = window_rad;
+        self.prior_t = 0.0;
+        self.prior_r = 0.0;
+        let found = self.search(guess);
+        self.history = history;
+        self.points = points;
+        (
+            self.p.window_m,
+            self.p.window_rad,
+            self.prior_t,
+            self.prior_r,
+        ) = saved;
+        found
+    }
+
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
         if !stale {
             return match &self.fresh {

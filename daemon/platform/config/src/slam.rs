@@ -59,10 +59,10 @@ pub enum SlamInput {
 }
 
 /// The SLAM algorithm behind the pipeline (`[slam] backend`, and `--backend`
-/// of `smokenav-slam` and `smokenav slam` with the `clap` feature). Only the
-/// particle filter exists today; `graph` (pose-graph SLAM with loop
-/// closure), `fuzzy` (fuzzy-map registration) and `vote` (a vote over
-/// several back-ends) are the next ones. Unknown names are rejected.
+/// of `smokenav-slam` and `smokenav slam` with the `clap` feature): the
+/// particle filter or the pose graph with loop closure; `fuzzy` (fuzzy-map
+/// registration) and `vote` (a vote over several back-ends) are the next
+/// ones. Unknown names are rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum SlamBackendKind {
@@ -70,12 +70,16 @@ pub enum SlamBackendKind {
     #[default]
     #[serde(rename = "rbpf")]
     Rbpf,
+    /// Pose graph with loop closure (Karto / Cartographer class).
+    #[serde(rename = "graph")]
+    Graph,
 }
 
 impl SlamBackendKind {
     pub fn as_str(self) -> &'static str {
         match self {
             SlamBackendKind::Rbpf => "rbpf",
+            SlamBackendKind::Graph => "graph",
         }
     }
 }
@@ -421,9 +425,13 @@ mod tests {
             section("backend = \"rbpf\"\n").backend,
             SlamBackendKind::Rbpf
         );
-        let err = parse_toml::<SlamSection>("backend = \"graph\"\n", Path::new("slam.toml"))
+        assert_eq!(
+            section("backend = \"graph\"\n").backend,
+            SlamBackendKind::Graph
+        );
+        let err = parse_toml::<SlamSection>("backend = \"karto\"\n", Path::new("slam.toml"))
             .unwrap_err()
             .to_string();
-        assert!(err.contains("backend") && err.contains("graph"), "{err}");
+        assert!(err.contains("backend") && err.contains("karto"), "{err}");
     }
 }

@@ -172,6 +172,15 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
             r.rpe_rotation_deg.max,
             r.rpe_pairs
         );
+        let _ = writeln!(
+            s,
+            "  relations     translation {:.4} ± {:.4} m;  rotation {:.3} ± {:.3}°  ({} relations, Kümmerle et al. 2009)",
+            r.relations_translation_m.mean,
+            r.relations_translation_m.std,
+            r.relations_rotation_deg.mean,
+            r.relations_rotation_deg.std,
+            r.relations
+        );
     }
     Ok(s)
 }

@@ -9,6 +9,7 @@ mod arcos;
 mod drive;
 mod eval;
 mod fuse;
+mod graph;
 mod play;
 mod record;
 mod scip;
@@ -56,6 +57,9 @@ enum Command {
     Record(record::RecordArgs),
     /// Republish a recording onto the bus, with its original timing or as fast as possible.
     Play(play::PlayArgs),
+    /// Pose-graph tools: `graph optimize IN.g2o [--out OUT.g2o]`.
+    #[command(subcommand)]
+    Graph(graph::GraphCommand),
     /// Score an estimated map (and trajectory) against ground truth: k-NN error, pixel error, ATE, RPE.
     Eval(eval::EvalArgs),
 }
@@ -89,6 +93,7 @@ fn main() -> anyhow::Result<std::process::ExitCode> {
         Command::Record(args) => record::run(args),
         Command::Play(args) => play::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Graph(cmd) => graph::run(cmd),
     };
     done.map(|()| std::process::ExitCode::SUCCESS)
 }

@@ -1,0 +1,126 @@
+//! Both SLAM back-ends over the MIT CSAIL log, side by side in one run, each
+//! through the one SLAM pipeline (as the SLAM process and `smokenav slam` run
+//! them): total thread CPU time, per-scan CPU p50/p99/max and ATE of the final
+//! trajectory against GMapping's corrected poses (after the best rigid
+//! alignment), plus the graph's loop-closure counters.
+//!
+//! `cargo bench -p smokenav-algorithms-slam --bench backends`
+//! Environment: `CSAIL_DIR` (the folder of the log; required), `BACKENDS` (`rbpf,graph` by default), `CSAIL_LOG` / `CSAIL_REFERENCE`
+//! (other log and reference files in that folder), `CSAIL_OUT` (folder for
+//! each back-end's map PNG and trajectory).
+
+use smokenav_algorithms_eval::{
+    StampedPose as EvalPose, TrajectoryOptions, evaluate_trajectories, format_trajectory,
+    load_trajectory,
+};
+use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam};
+use smokenav_algorithms_slam::offline::LogScans;
+use smokenav_algorithms_slam::rbpf::RbpfParams;
+use smokenav_algorithms_slam::{Rbpf, SlamBackend, SlamPipeline, StampedPose};
+use smokenav_platform_config::SlamSection;
+use std::io::BufReader;
+use std::path::PathBuf;
+
+fn thread_cpu_ns() -> u64 {
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID)
+        .map(|t| t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64)
+        .unwrap_or(0)
+}
+
+/// `GRAPH_PARAMS="closure_search_m=6;closure_min_score=0.5"` overrides graph parameters.
+fn graph_params() -> GraphParams {
+    let mut p = GraphParams::default();
+    for kv in std::env::var("GRAPH_PARAMS").unwrap_or_default().split(';') {
+        let Some((k, v)) = kv.split_once('=') else {
+            continue;
+        };
+        let v: f64 = v.trim().parse().expect("GRAPH_PARAMS value");
+        match k.trim() {
+            "node_distance_m" => p.node_distance_m = v,
+            "node_angle_rad" => p.node_angle_rad = v,
+            "closure_search_m" => p.closure_search_m = v,
+            "closure_min_separation" => p.closure_min_separation = v as usize,
+            "closure_neighbours" => p.closure_neighbours = v as usize,
+            "closure_window_m" => p.closure_window_m = v,
+            "closure_window_rad" => p.closure_window_rad = v,
+            "closure_min_score" => p.closure_min_score = v,
+            "closure_max_chi2" => p.closure_max_chi2 = v,
+            "closure_every" => p.closure_every = v as usize,
+            "edge_sigma_t0" => p.edge_sigma_t.0 = v,
+            "edge_sigma_t1" => p.edge_sigma_t.1 = v,
+            "edge_sigma_r0" => p.edge_sigma_r.0 = v,
+            "edge_sigma_r1" => p.edge_sigma_r.1 = v,
+            "closure_sigma_t" => p.closure_sigma.0 = v,
+            "closure_sigma_r" => p.closure_sigma.1 = v,
+            other => panic!("unknown graph parameter {other}"),
+        }
+    }
+    p
+}
+
+fn main() {
+    if std::env::args().any(|a| a == "--list") {
+        return;
+    }
+    let Ok(dir) = std::env::var("CSAIL_DIR").map(PathBuf::from) else {
+        eprintln!(
+            "backends: set CSAIL_DIR to the folder holding mit-csail.clf and csail-reference-poses.txt"
+        );
+        std::process::exit(2);
+    };
+    let log = std::env::var("CSAIL_LOG").unwrap_or_else(|_| "mit-csail.clf".into());
+    let reference =
+        std::env::var("CSAIL_REFERENCE").unwrap_or_else(|_| "csail-reference-poses.txt".into());
+    let reference = load_trajectory(&dir.join(&reference)).unwrap();
+    let which = std::env::var("BACKENDS").unwrap_or_else(|_| "rbpf,graph".into());
+    let cfg = SlamSection::default();
+    for name in which.split(',') {
+        let backend: Box<dyn SlamBackend> = match name {
+            "rbpf" => Box::new(Rbpf::new(RbpfParams::from_config(&cfg), true)),
+            "graph" => Box::new(GraphSlam::new(&cfg, graph_params())),
+            other => panic!("unknown back-end {other}"),
+        };
+        let mut slam = SlamPipeline::new(&cfg, backend);
+        let mut scans = LogScans::new(BufReader::new(std::fs::File::open(dir.join(&log)).unwrap()));
+        let mut times = Vec::new();
+        let start = thread_cpu_ns();
+        while let Some((scan, odom)) = scans.next_scan() {
+            let t0 = thread_cpu_ns();
+            slam.process(scan, &odom);
+            times.push(thread_cpu_ns() - t0);
+        }
+        let traj = slam.trajectory();
+        let total = (thread_cpu_ns() - start) as f64 / 1e9;
+        let map = slam.map();
+        times.sort_unstable();
+        let pct = |q: f64| {
+            times[((q * times.len() as f64).ceil() as usize).clamp(1, times.len()) - 1] as f64 / 1e6
+        };
+        let est: Vec<EvalPose> = traj
+            .iter()
+            .map(|p: &StampedPose| EvalPose::from_ns(p.stamp_ns, &p.pose))
+            .collect();
+        let ate = evaluate_trajectories(&reference, &est, &TrajectoryOptions::same_stamp()).ok();
+        println!(
+            "backends {log} {name:>5}: {} scans, total {total:.2} CPU-s, per scan p50 {:.2} ms p99 {:.2} ms max {:.2} ms; ATE RMS {:.3} m, max {:.3} m over {} poses",
+            times.len(),
+            pct(0.5),
+            pct(0.99),
+            pct(1.0),
+            ate.as_ref().map(|a| a.ate_m.rmse).unwrap_or(f64::NAN),
+            ate.as_ref().map(|a| a.ate_m.max).unwrap_or(f64::NAN),
+            ate.as_ref().map(|a| a.pairs).unwrap_or(0),
+        );
+        if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
+            println!("backends {log} graph: {:?}", g.stats());
+        }
+        if let Ok(out) = std::env::var("CSAIL_OUT") {
+            let out = PathBuf::from(out).join(name);
+            std::fs::create_dir_all(&out).unwrap();
+            std::fs::write(out.join("trajectory.txt"), format_trajectory(&est)).unwrap();
+            if let Some(map) = map {
+                map.save_png(&out.join("map.png")).unwrap();
+            }
+        }
+    }
+}

@@ -1,0 +1,886 @@
+//! A 2D pose graph and its optimiser: sparse nonlinear least squares on SE(2).
+//!
+//! Vertices are robot poses, edges measured relative poses with an
+//! information matrix (g2o's `EDGE_SE2`: the error of edge i→j with
+//! measurement z is `t2v(z⁻¹ · (xᵢ⁻¹ · xⱼ))`, its cost `eᵀ Ω e`). The
+//! optimiser is Levenberg–Marquardt over the poses' (x, y, θ) with a sparse
+//! Cholesky factorisation of the normal equations (`faer`: fill-reducing AMD
+//! ordering, supernodal; the symbolic factorisation is computed once per
+//! graph structure and reused every iteration).
+//!
+//! A robust kernel (Cauchy or Huber, by iteratively reweighted least squares)
+//! can be applied to the edges marked `robust` (loop closures), so a single
+//! false closure is down-weighted instead of bending the whole map.
+//!
+//! What the optimiser refuses: a vertex that no edge ties to a fixed vertex
+//! (its pose is undetermined: the error names it), a non-finite value. On any
+//! failure the poses keep their last good values.
+
+use faer::linalg::solvers::SolveCore;
+use faer::reborrow::Reborrow;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{Pair, SparseColMat, SymbolicSparseColMat};
+use smokenav_shared_types::Pose2;
+use smokenav_shared_types::odom::normalize_angle;
+
+/// The normal equations: dimension, lower-triangle entries (row, col, value), gradient.
+pub type LinearSystem = (usize, Vec<(usize, usize, f64)>, Vec<f64>);
+
+/// A symmetric 3 × 3 information matrix over (x, y, θ), row-major.
+pub type Information = [[f64; 3]; 3];
+
+/// One relative-pose measurement between two vertices (indices into the graph).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Edge {
+    pub from: usize,
+    pub to: usize,
+    /// Pose of `to` in the frame of `from`.
+    pub measurement: Pose2,
+    pub information: Information,
+    /// Apply the robust kernel to this edge (loop closures).
+    pub robust: bool,
+}
+
+/// Down-weights large residuals; `c` is in units of the Mahalanobis distance √(eᵀΩe).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum RobustKernel {
+    #[default]
+    None,
+    /// Quadratic up to `c`, linear beyond.
+    Huber(f64),
+    /// `c²/2 · ln(1 + s/c²)`: a residual far beyond `c` barely counts.
+    Cauchy(f64),
+}
+
+impl RobustKernel {
+    /// (cost, IRLS weight) of a squared Mahalanobis residual `s`; the cost is
+    /// on the χ² scale (s for a quadratic kernel).
+    fn apply(&self, s: f64) -> (f64, f64) {
+        match *self {
+            RobustKernel::None => (s, 1.0),
+            RobustKernel::Huber(c) => {
+                let r = s.sqrt();
+                if r <= c {
+                    (s, 1.0)
+                } else {
+                    (2.0 * c * r - c * c, c / r)
+                }
+            }
+            RobustKernel::Cauchy(c) => {
+                let c2 = c * c;
+                (c2 * (s / c2).ln_1p(), 1.0 / (1.0 + s / c2))
+            }
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OptimizeParams {
+    pub max_iterations: u32,
+    /// Stop once an iteration lowers the cost by less than this share of it.
+    pub relative_tolerance: f64,
+    pub kernel: RobustKernel,
+    /// Initial Levenberg–Marquardt damping, relative to the Hessian's diagonal.
+    pub initial_lambda: f64,
+}
+
+impl Default for OptimizeParams {
+    fn default() -> Self {
+        Self {
+            max_iterations: 500,
+            relative_tolerance: 1e-9,
+            kernel: RobustKernel::None,
+            initial_lambda: 1e-5,
+        }
+    }
+}
+
+/// What one optimisation did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OptimizeReport {
+    /// Σ eᵀΩe over all edges before and after (without the kernel).
+    pub chi2_before: f64,
+    pub chi2_after: f64,
+    /// The kernel-weighted cost that was minimised, before and after.
+    pub cost_before: f64,
+    pub cost_after: f64,
+    /// Linear systems solved (accepted and rejected steps).
+    pub iterations: u32,
+    /// The relative tolerance was reached before `max_iterations`.
+    pub converged: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GraphError {
+    #[error("vertex {vertex} is under-constrained: {reason}")]
+    UnderConstrained { vertex: u64, reason: &'static str },
+    #[error("edge {index} refers to vertex index {vertex}, but the graph has {vertices} vertices")]
+    DanglingEdge {
+        index: usize,
+        vertex: usize,
+        vertices: usize,
+    },
+    #[error("edge {index} ({from} → {to}): {what}")]
+    BadEdge {
+        index: usize,
+        from: u64,
+        to: u64,
+        what: &'static str,
+    },
+    #[error("vertex {vertex} has a non-finite pose")]
+    NonFiniteVertex { vertex: u64 },
+    #[error("the linear system is indeterminate (factorisation failed: {0})")]
+    Indeterminate(String),
+    #[error("the graph has no vertex")]
+    Empty,
+}
+
+/// The poses, their external ids (for messages and files) and the edges.
+#[derive(Debug, Clone, Default)]
+pub struct PoseGraph {
+    poses: Vec<Pose2>,
+    ids: Vec<u64>,
+    fixed: Vec<bool>,
+    edges: Vec<Edge>,
+    /// Cached structure of the normal equations; invalidated by a new vertex or edge.
+    structure: Option<Structure>,
+}
+
+/// The sparsity pattern of the normal equations and its symbolic factorisation.
+#[derive(Debug, Clone)]
+struct Structure {
+    /// Block column of each vertex, `None` for fixed vertices.
+    block: Vec<Option<usize>>,
+    dim: usize,
+    symbolic: SymbolicSparseColMat<usize>,
+    argsort: faer::sparse::Argsort<usize>,
+    llt: SymbolicLlt<usize>,
+    /// Number of (row, col) entries: 6 per free vertex, 9 per edge between two free vertices.
+    entries: usize,
+}
+
+/// Symmetric positive definite (by Cholesky): the test every information matrix must pass.
+pub fn is_positive_definite(m: &Information) -> bool {
+    let sym = (0..3).all(|r| {
+        (0..3).all(|c| {
+            let (a, b) = (m[r][c], m[c][r]);
+            a.is_finite() && (a - b).abs() <= 1e-9 * (a.abs().max(b.abs()).max(1.0))
+        })
+    });
+    if !sym {
+        return false;
+    }
+    let l11 = m[0][0];
+    if l11 <= 0.0 {
+        return false;
+    }
+    let l11 = l11.sqrt();
+    let l21 = m[1][0] / l11;
+    let l31 = m[2][0] / l11;
+    let d2 = m[1][1] - l21 * l21;
+    if d2 <= 0.0 {
+        return false;
+    }
+    let l22 = d2.sqrt();
+    let l32 = (m[2][1] - l31 * l21) / l22;
+    m[2][2] - l31 * l31 - l32 * l32 > 0.0
+}
+
+/// Error of an edge and its Jacobians with respect to (xᵢ, yᵢ, θᵢ) and (xⱼ, yⱼ, θⱼ).
+#[inline]
+fn linearise(xi: &Pose2, xj: &Pose2, z: &Pose2) -> ([f64; 3], [[f64; 3]; 3], [[f64; 3]; 3]) {
+    let (si, ci) = xi.theta.sin_cos();
+    let (sz, cz) = z.theta.sin_cos();
+    let (dx, dy) = (xj.x - xi.x, xj.y - xi.y);
+    // xᵢ⁻¹·xⱼ translation: Rᵢᵀ (tⱼ − tᵢ).
+    let lx = ci * dx + si * dy;
+    let ly = -si * dx + ci * dy;
+    let (ux, uy) = (lx - z.x, ly - z.y);
+    let e = [
+        cz * ux + sz * uy,
+        -sz * ux + cz * uy,
+        normalize_angle(xj.theta - xi.theta - z.theta),
+    ];
+    // d(Rᵢᵀ d)/dθᵢ = (ly, −lx); then through Rzᵀ.
+    let (gx, gy) = (ly, -lx);
+    // Rzᵀ Rᵢᵀ = R(θᵢ + θz)ᵀ.
+    let (s, c) = (xi.theta + z.theta).sin_cos();
+    let ji = [
+        [-c, -s, cz * gx + sz * gy],
+        [s, -c, -sz * gx + cz * gy],
+        [0.0, 0.0, -1.0],
+    ];
+    let jj = [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]];
+    (e, ji, jj)
+}
+
+#[inline]
+fn quad(e: &[f64; 3], o: &Information) -> f64 {
+    let mut s = 0.0;
+    for r in 0..3 {
+        for c in 0..3 {
+            s += e[r] * o[r][c] * e[c];
+        }
+    }
+    s
+}
+
+/// `aᵀ W b` for 3 × 3 blocks.
+#[inline]
+fn at_w_b(a: &[[f64; 3]; 3], w: &Information, b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let mut wb = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            wb[r][c] = w[r][0] * b[0][c] + w[r][1] * b[1][c] + w[r][2] * b[2][c];
+        }
+    }
+    let mut out = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            out[r][c] = a[0][r] * wb[0][c] + a[1][r] * wb[1][c] + a[2][r] * wb[2][c];
+        }
+    }
+    out
+}
+
+impl PoseGraph {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds a vertex with an external id; returns its index.
+    pub fn add_vertex(&mut self, id: u64, pose: Pose2) -> usize {
+        self.poses.push(pose);
+        self.ids.push(id);
+        self.fixed.push(false);
+        self.structure = None;
+        self.poses.len() - 1
+    }
+
+    pub fn add_edge(&mut self, edge: Edge) {
+        self.edges.push(edge);
+        self.structure = None;
+    }
+
+    /// Removes the last edge (e.g. a loop closure the optimisation refused).
+    pub fn pop_edge(&mut self) -> Option<Edge> {
+        self.structure = None;
+        self.edges.pop()
+    }
+
+    /// Holds a vertex where it is (the gauge). Without any fixed vertex the
+    /// optimiser holds the first one.
+    pub fn set_fixed(&mut self, index: usize, fixed: bool) {
+        if let Some(f) = self.fixed.get_mut(index) {
+            *f = fixed;
+            self.structure = None;
+        }
+    }
+
+    pub fn is_fixed(&self, index: usize) -> bool {
+        self.fixed.get(index).copied().unwrap_or(false)
+    }
+
+    pub fn len(&self) -> usize {
+        self.poses.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.poses.is_empty()
+    }
+
+    pub fn poses(&self) -> &[Pose2] {
+        &self.poses
+    }
+
+    pub fn set_pose(&mut self, index: usize, pose: Pose2) {
+        if let Some(p) = self.poses.get_mut(index) {
+            *p = pose;
+        }
+    }
+
+    pub fn ids(&self) -> &[u64] {
+        &self.ids
+    }
+
+    pub fn edges(&self) -> &[Edge] {
+        &self.edges
+    }
+
+    /// Σ eᵀΩe over all edges at the current poses.
+    pub fn chi2(&self) -> f64 {
+        self.edges
+            .iter()
+            .map(|e| {
+                let (r, _, _) = linearise(&self.poses[e.from], &self.poses[e.to], &e.measurement);
+                quad(&r, &e.information)
+            })
+            .sum()
+    }
+
+    /// eᵀΩe of one edge at the current poses.
+    pub fn edge_chi2(&self, edge: &Edge) -> f64 {
+        let (r, _, _) = linearise(
+            &self.poses[edge.from],
+            &self.poses[edge.to],
+            &edge.measurement,
+        );
+        quad(&r, &edge.information)
+    }
+
+    fn cost(&self, poses: &[Pose2], kernel: &RobustKernel) -> (f64, f64) {
+        let (mut chi2, mut cost) = (0.0, 0.0);
+        for e in &self.edges {
+            let (r, _, _) = linearise(&poses[e.from], &poses[e.to], &e.measurement);
+            let s = quad(&r, &e.information);
+            chi2 += s;
+            cost += if e.robust { kernel.apply(s).0 } else { s };
+        }
+        (chi2, cost)
+    }
+
+    /// Checks edges and vertices, and that every vertex is tied to a fixed one.
+    pub fn validate(&self) -> Result<(), GraphError> {
+        if self.poses.is_empty() {
+            return Err(GraphError::Empty);
+        }
+        let n = self.poses.len();
+        for (i, p) in self.poses.iter().enumerate() {
+            if !p.is_finite() {
+                return Err(GraphError::NonFiniteVertex {
+                    vertex: self.ids[i],
+                });
+            }
+        }
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let mut touched = vec![false; n];
+        for (k, e) in self.edges.iter().enumerate() {
+            for v in [e.from, e.to] {
+                if v >= n {
+                    return Err(GraphError::DanglingEdge {
+                        index: k,
+                        vertex: v,
+                        vertices: n,
+                    });
+                }
+            }
+            let bad = |what| GraphError::BadEdge {
+                index: k,
+                from: self.ids[e.from],
+                to: self.ids[e.to],
+                what,
+            };
+            if e.from == e.to {
+                return Err(bad("an edge from a vertex to itself"));
+            }
+            if !e.measurement.is_finite() {
+                return Err(bad("the measurement is not finite"));
+            }
+            if !is_positive_definite(&e.information) {
+                return Err(bad("the information matrix is not positive definite"));
+            }
+            touched[e.from] = true;
+            touched[e.to] = true;
+            let (a, b) = (root(&mut parent, e.from), root(&mut parent, e.to));
+            if a != b {
+                parent[a] = b;
+            }
+        }
+        let gauge = self.gauge();
+        let mut anchored = vec![false; n];
+        for &g in &gauge {
+            let r = root(&mut parent, g);
+            anchored[r] = true;
+        }
+        for (i, &has_edge) in touched.iter().enumerate() {
+            if gauge.contains(&i) {
+                continue;
+            }
+            if !has_edge {
+                return Err(GraphError::UnderConstrained {
+                    vertex: self.ids[i],
+                    reason: "no edge ties it to any other vertex",
+                });
+            }
+            let r = root(&mut parent, i);
+            if !anchored[r] {
+                return Err(GraphError::UnderConstrained {
+                    vertex: self.ids[i],
+                    reason: "no chain of edges ties it to a fixed vertex",
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The fixed vertices, or the first vertex when none is marked.
+    fn gauge(&self) -> Vec<usize> {
+        let fixed: Vec<usize> = (0..self.poses.len()).filter(|&i| self.fixed[i]).collect();
+        if fixed.is_empty() && !self.poses.is_empty() {
+            vec![0]
+        } else {
+            fixed
+        }
+    }
+
+    fn build_structure(&self) -> Result<Structure, GraphError> {
+        let gauge = self.gauge();
+        let mut block = vec![None; self.poses.len()];
+        let mut next = 0;
+        for (i, b) in block.iter_mut().enumerate() {
+            if !gauge.contains(&i) {
+                *b = Some(next);
+                next += 1;
+            }
+        }
+        let dim = 3 * next;
+        let mut pairs = Vec::with_capacity(6 * next + 9 * self.edges.len());
+        for k in 0..next {
+            for r in 0..3 {
+                for c in 0..=r {
+                    pairs.push(Pair::new(3 * k + r, 3 * k + c));
+                }
+            }
+        }
+        for e in &self.edges {
+            if let (Some(a), Some(b)) = (block[e.from], block[e.to]) {
+                let (hi, lo) = if a > b { (a, b) } else { (b, a) };
+                for r in 0..3 {
+                    for c in 0..3 {
+                        pairs.push(Pair::new(3 * hi + r, 3 * lo + c));
+                    }
+                }
+            }
+        }
+        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(dim, dim, &pairs)
+            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
+        let llt = SymbolicLlt::try_new(symbolic.rb(), faer::Side::Lower)
+            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
+        Ok(Structure {
+            block,
+            dim,
+            symbolic,
+            argsort,
+            llt,
+            entries: pairs.len(),
+        })
+    }
+
+    /// Fills the lower triangle of H (in the order of the structure's pairs)
+    /// and the gradient b at `poses`.
+    fn normal_equations(
+        &self,
+        s: &Structure,
+        poses: &[Pose2],
+        kernel: &RobustKernel,
+        values: &mut Vec<f64>,
+        b: &mut [f64],
+    ) {
+        values.clear();
+        values.resize(s.entries, 0.0);
+        b.iter_mut().for_each(|v| *v = 0.0);
+        let free = s.dim / 3;
+        let mut offdiag = 6 * free;
+        let diag_at = |k: usize, r: usize, c: usize| 6 * k + r * (r + 1) / 2 + c;
+        for e in &self.edges {
+            let (r, ji, jj) = linearise(&poses[e.from], &poses[e.to], &e.measurement);
+            let w = if e.robust {
+                kernel.apply(quad(&r, &e.information)).1
+            } else {
+                1.0
+            };
+            let mut o = e.information;
+            o.iter_mut().flatten().for_each(|v| *v *= w);
+            let (bi, bj) = (s.block[e.from], s.block[e.to]);
+            let mut add_grad = |blk: Option<usize>, j: &[[f64; 3]; 3]| {
+                if let Some(k) = blk {
+                    for c in 0..3 {
+                        let mut g = 0.0;
+                        for rr in 0..3 {
+                            let ow = o[rr][0] * r[0] + o[rr][1] * r[1] + o[rr][2] * r[2];
+                            g += j[rr][c] * ow;
+                        }
+                        b[3 * k + c] += g;
+                    }
+                }
+            };
+            add_grad(bi, &ji);
+            add_grad(bj, &jj);
+            for (blk, j) in [(bi, &ji), (bj, &jj)] {
+                if let Some(k) = blk {
+                    let h = at_w_b(j, &o, j);
+                    for rr in 0..3 {
+                        for c in 0..=rr {
+                            values[diag_at(k, rr, c)] += h[rr][c];
+                        }
+                    }
+                }
+            }
+            if let (Some(a), Some(bb)) = (bi, bj) {
+                // Block (hi, lo) of the lower triangle.
+                let h = if a > bb {
+                    at_w_b(&ji, &o, &jj)
+                } else {
+                    at_w_b(&jj, &o, &ji)
+                };
+                for rr in 0..3 {
+                    for c in 0..3 {
+                        values[offdiag + 3 * rr + c] = h[rr][c];
+                    }
+                }
+                offdiag += 9;
+            }
+        }
+    }
+
+    /// The Gauss–Newton normal equations at the current poses (no kernel, no
+    /// damping): the lower triangle of H as (row, col, value) with repeated
+    /// positions to be summed, and the gradient b. For inspection and for
+    /// comparing linear solvers.
+    pub fn linear_system(&self) -> Result<LinearSystem, GraphError> {
+        self.validate()?;
+        let s = self.build_structure()?;
+        let mut values = Vec::new();
+        let mut b = vec![0.0; s.dim];
+        self.normal_equations(&s, &self.poses, &RobustKernel::None, &mut values, &mut b);
+        let free = s.dim / 3;
+        let mut out = Vec::with_capacity(values.len());
+        for k in 0..free {
+            for r in 0..3 {
+                for c in 0..=r {
+                    out.push((3 * k + r, 3 * k + c, values[6 * k + r * (r + 1) / 2 + c]));
+                }
+            }
+        }
+        let mut at = 6 * free;
+        for e in &self.edges {
+            if let (Some(a), Some(bb)) = (s.block[e.from], s.block[e.to]) {
+                let (hi, lo) = if a > bb { (a, bb) } else { (bb, a) };
+                for r in 0..3 {
+                    for c in 0..3 {
+                        out.push((3 * hi + r, 3 * lo + c, values[at + 3 * r + c]));
+                    }
+                }
+                at += 9;
+            }
+        }
+        Ok((s.dim, out, b))
+    }
+
+    /// Levenberg–Marquardt from the current poses. On success the poses are
+    /// replaced by the optimum; on failure they are left as they were.
+    pub fn optimize(&mut self, p: &OptimizeParams) -> Result<OptimizeReport, GraphError> {
+        self.validate()?;
+        if self.structure.is_none() {
+            self.structure = Some(self.build_structure()?);
+        }
+        let s = self.structure.take().expect("built above");
+        let result = self.optimize_with(&s, p);
+        self.structure = Some(s);
+        let (poses, report) = result?;
+        self.poses = poses;
+        Ok(report)
+    }
+
+    fn optimize_with(
+        &self,
+        s: &Structure,
+        p: &OptimizeParams,
+    ) -> Result<(Vec<Pose2>, OptimizeReport), GraphError> {
+        let mut poses = self.poses.clone();
+        let (chi2_before, cost_before) = self.cost(&poses, &p.kernel);
+        let mut report = OptimizeReport {
+            chi2_before,
+            chi2_after: chi2_before,
+            cost_before,
+            cost_after: cost_before,
+            iterations: 0,
+            converged: false,
+        };
+        if s.dim == 0 || self.edges.is_empty() {
+            report.converged = true;
+            return Ok((poses, report));
+        }
+        let mut values = Vec::new();
+        let mut damped = Vec::new();
+        let mut b = vec![0.0; s.dim];
+        let mut step = vec![0.0; s.dim];
+        let mut cost = cost_before;
+        let mut lambda = p.initial_lambda.max(0.0);
+        let mut nu = 2.0;
+        let mut relinearise = true;
+        let mut trial = poses.clone();
+        let free = s.dim / 3;
+        while report.iterations < p.max_iterations {
+            if relinearise {
+                self.normal_equations(s, &poses, &p.kernel, &mut values, &mut b);
+                relinearise = false;
+            }
+            damped.clone_from(&values);
+            for k in 0..free {
+                for r in 0..3 {
+                    let i = 6 * k + r * (r + 1) / 2 + r;
+                    damped[i] += lambda * values[i].max(1e-9);
+                }
+            }
+            let h = SparseColMat::new_from_argsort(s.symbolic.clone(), &s.argsort, &damped)
+                .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
+            report.iterations += 1;
+            let llt = match Llt::try_new_with_symbolic(s.llt.clone(), h.rb(), faer::Side::Lower) {
+                Ok(l) => l,
+                Err(e) => {
+                    // A damped system that is still not positive definite.
+                    if lambda > 1e12 {
+                        return Err(GraphError::Indeterminate(format!("{e:?}")));
+                    }
+                    lambda = (lambda * nu).max(1e-6);
+                    nu *= 2.0;
+                    continue;
+                }
+            };
+            for (d, g) in step.iter_mut().zip(&b) {
+                *d = -g;
+            }
+            llt.solve_in_place_with_conj(
+                faer::Conj::No,
+                faer::MatMut::from_column_major_slice_mut(&mut step, s.dim, 1),
+            );
+            if step.iter().any(|v| !v.is_finite()) {
+                return Err(GraphError::Indeterminate("non-finite step".into()));
+            }
+            for (i, pose) in poses.iter().enumerate() {
+                trial[i] = match s.block[i] {
+                    Some(k) => Pose2::new(
+                        pose.x + step[3 * k],
+                        pose.y + step[3 * k + 1],
+                        normalize_angle(pose.theta + step[3 * k + 2]),
+                    ),
+                    None => *pose,
+                };
+            }
+            let (_, new_cost) = self.cost(&trial, &p.kernel);
+            // Predicted decrease of the damped quadratic model: Δᵀ(λD Δ − b).
+            let mut predicted = 0.0;
+            for k in 0..free {
+                for r in 0..3 {
+                    let i = 3 * k + r;
+                    let d = lambda * values[6 * k + r * (r + 1) / 2 + r].max(1e-9);
+                    predicted += step[i] * (d * step[i] - b[i]);
+                }
+            }
+            if new_cost.is_finite() && new_cost < cost {
+                let gain = (cost - new_cost) / predicted.max(1e-300);
+                let improvement = (cost - new_cost) / cost.max(1e-300);
+                std::mem::swap(&mut poses, &mut trial);
+                cost = new_cost;
+                relinearise = true;
+                lambda *= (1.0f64 / 3.0).max(1.0 - (2.0 * gain - 1.0).powi(3));
+                nu = 2.0;
+                if improvement < p.relative_tolerance {
+                    report.converged = true;
+                    break;
+                }
+            } else {
+                let small = step.iter().map(|v| v.abs()).fold(0.0, f64::max) < 1e-12;
+                if small {
+                    report.converged = true;
+                    break;
+                }
+                lambda = (lambda * nu).max(1e-9);
+                nu *= 2.0;
+                if lambda > 1e16 {
+                    report.converged = true;
+                    break;
+                }
+            }
+        }
+        let (chi2_after, cost_after) = self.cost(&poses, &p.kernel);
+        report.chi2_after = chi2_after;
+        report.cost_after = cost_after;
+        Ok((poses, report))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn info(xy: f64, t: f64) -> Information {
+        [[xy, 0.0, 0.0], [0.0, xy, 0.0], [0.0, 0.0, t]]
+    }
+
+    fn edge(from: usize, to: usize, z: Pose2) -> Edge {
+        Edge {
+            from,
+            to,
+            measurement: z,
+            information: info(100.0, 400.0),
+            robust: false,
+        }
+    }
+
+    /// A square of four 2 m legs with left turns, odometry initial guess bent by 0.1 rad per leg.
+    fn square() -> PoseGraph {
+        let mut g = PoseGraph::new();
+        let leg = Pose2::new(2.0, 0.0, std::f64::consts::FRAC_PI_2);
+        let mut guess = Pose2::default();
+        for i in 0..4 {
+            g.add_vertex(i, guess);
+            guess = guess.compose(&Pose2::new(2.1, 0.05, std::f64::consts::FRAC_PI_2 + 0.1));
+        }
+        for i in 0..3 {
+            g.add_edge(edge(i, i + 1, leg));
+        }
+        g.add_edge(edge(3, 0, leg));
+        g
+    }
+
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let xi = Pose2::new(1.0, -2.0, 0.7);
+        let xj = Pose2::new(3.0, 0.5, -2.9);
+        let z = Pose2::new(0.4, 1.1, 2.6);
+        let (_, ji, jj) = linearise(&xi, &xj, &z);
+        let h = 1e-6;
+        for k in 0..3 {
+            let bump = |p: &Pose2, d: f64| {
+                let mut q = *p;
+                match k {
+                    0 => q.x += d,
+                    1 => q.y += d,
+                    _ => q.theta += d,
+                }
+                q
+            };
+            let (ep, _, _) = linearise(&bump(&xi, h), &xj, &z);
+            let (em, _, _) = linearise(&bump(&xi, -h), &xj, &z);
+            let (fp, _, _) = linearise(&xi, &bump(&xj, h), &z);
+            let (fm, _, _) = linearise(&xi, &bump(&xj, -h), &z);
+            for r in 0..3 {
+                let ni = normalize_angle(ep[r] - em[r]) / (2.0 * h);
+                let nj = normalize_angle(fp[r] - fm[r]) / (2.0 * h);
+                assert!(
+                    (ni - ji[r][k]).abs() < 1e-6,
+                    "Ji[{r}][{k}] {ni} vs {}",
+                    ji[r][k]
+                );
+                assert!(
+                    (nj - jj[r][k]).abs() < 1e-6,
+                    "Jj[{r}][{k}] {nj} vs {}",
+                    jj[r][k]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn consistent_square_closes_exactly() {
+        let mut g = square();
+        let before = g.chi2();
+        let r = g.optimize(&OptimizeParams::default()).unwrap();
+        assert!(before > 1.0, "{before}");
+        assert!(r.chi2_after < 1e-12, "{r:?}");
+        assert!(r.converged);
+        let p2 = g.poses()[2];
+        assert!(
+            (p2.x - 2.0).abs() < 1e-6 && (p2.y - 2.0).abs() < 1e-6,
+            "{p2:?}"
+        );
+        assert_eq!(
+            g.poses()[0],
+            Pose2::default(),
+            "the first vertex holds the gauge"
+        );
+    }
+
+    #[test]
+    fn cauchy_kernel_keeps_one_false_closure_from_bending_the_chain() {
+        // A straight 10-pose corridor with tight odometry, and one false closure
+        // that claims pose 9 is back at pose 0.
+        let build = |kernel| {
+            let mut g = PoseGraph::new();
+            for i in 0..10 {
+                g.add_vertex(i, Pose2::new(i as f64, 0.0, 0.0));
+            }
+            for i in 0..9 {
+                g.add_edge(edge(i, i + 1, Pose2::new(1.0, 0.0, 0.0)));
+            }
+            g.add_edge(Edge {
+                robust: true,
+                ..edge(0, 9, Pose2::new(0.5, 0.0, 0.0))
+            });
+            g.optimize(&OptimizeParams {
+                kernel,
+                ..OptimizeParams::default()
+            })
+            .unwrap();
+            g.poses()[9].x
+        };
+        let plain = build(RobustKernel::None);
+        let robust = build(RobustKernel::Cauchy(1.0));
+        assert!(
+            plain < 8.0,
+            "least squares is pulled by the closure: {plain}"
+        );
+        assert!(
+            (robust - 9.0).abs() < 0.05,
+            "the kernel ignores it: {robust}"
+        );
+    }
+
+    #[test]
+    fn vertex_without_edges_is_named() {
+        let mut g = square();
+        g.add_vertex(77, Pose2::new(5.0, 5.0, 0.0));
+        let before = g.poses().to_vec();
+        let err = g.optimize(&OptimizeParams::default()).unwrap_err();
+        assert_eq!(
+            err,
+            GraphError::UnderConstrained {
+                vertex: 77,
+                reason: "no edge ties it to any other vertex"
+            }
+        );
+        assert!(err.to_string().contains("vertex 77"), "{err}");
+        assert_eq!(g.poses(), &before[..], "the last good solution is kept");
+    }
+
+    #[test]
+    fn island_not_tied_to_the_fixed_vertex_is_named() {
+        let mut g = square();
+        let a = g.add_vertex(100, Pose2::new(9.0, 0.0, 0.0));
+        let b = g.add_vertex(101, Pose2::new(10.0, 0.0, 0.0));
+        g.add_edge(edge(a, b, Pose2::new(1.0, 0.0, 0.0)));
+        let err = g.optimize(&OptimizeParams::default()).unwrap_err();
+        assert!(
+            matches!(err, GraphError::UnderConstrained { vertex: 100, .. }),
+            "{err}"
+        );
+        // Fixing the island makes it well posed.
+        g.set_fixed(0, true);
+        g.set_fixed(a, true);
+        g.optimize(&OptimizeParams::default()).unwrap();
+    }
+
+    #[test]
+    fn non_positive_definite_information_is_refused() {
+        let mut g = square();
+        g.add_edge(Edge {
+            information: [[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            ..edge(0, 2, Pose2::new(2.0, 2.0, std::f64::consts::PI))
+        });
+        assert!(matches!(
+            g.optimize(&OptimizeParams::default()),
+            Err(GraphError::BadEdge { index: 4, .. })
+        ));
+        assert!(!is_positive_definite(&info(1.0, 0.0)));
+        assert!(is_positive_definite(&info(1.0, 1e-9)));
+    }
+}
