@@ -12,6 +12,8 @@
 //! Rust values with serde support: what `smokenav topic echo --json` prints
 //! and `smokenav fuse` reads back.
 
+#![warn(missing_docs)]
+
 pub mod catalog;
 pub mod clock;
 pub mod fused;

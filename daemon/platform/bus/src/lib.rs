@@ -73,6 +73,8 @@
 //! # let _ = ODOMETRY;
 //! ```
 
+#![warn(missing_docs)]
+
 mod bus;
 mod error;
 mod map;
