@@ -110,6 +110,7 @@ impl Default for LatencyWindow {
 /// Counters that show themselves in `smokenav status`: each struct writes
 /// its own fields as metrics, so no process lists them by hand.
 pub trait Report {
+    /// Writes these counters into `health` as metrics.
     fn report(&self, health: &mut HealthReporter);
 }
 
