@@ -13,10 +13,12 @@ use std::time::Duration;
 /// Nanoseconds of the host monotonic clock.
 pub type Stamp = u64;
 
+/// A source of monotonic time stamps (ns), injected into whatever needs the time.
 pub trait Clock: Send + Sync {
     /// Current time in nanoseconds of the monotonic time base.
     fn now_ns(&self) -> Stamp;
 
+    /// Time elapsed since `earlier` (zero if `earlier` is in the future).
     fn elapsed_since(&self, earlier: Stamp) -> Duration {
         Duration::from_nanos(self.now_ns().saturating_sub(earlier))
     }
@@ -52,16 +54,19 @@ pub struct MockClock {
 }
 
 impl MockClock {
+    /// A mock clock that reads `start_ns` until moved.
     pub fn new(start_ns: Stamp) -> Self {
         Self {
             now: Arc::new(AtomicU64::new(start_ns)),
         }
     }
 
+    /// Sets the time (every clone sees it).
     pub fn set_ns(&self, ns: Stamp) {
         self.now.store(ns, Ordering::SeqCst);
     }
 
+    /// Moves the time forward by `d` (every clone sees it).
     pub fn advance(&self, d: Duration) {
         self.now.fetch_add(d.as_nanos() as u64, Ordering::SeqCst);
     }

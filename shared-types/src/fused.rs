@@ -22,6 +22,7 @@ pub enum SectionSource {
 }
 
 impl SectionSource {
+    /// The source a `u8` field holds; unknown values read as `Laser`.
     pub fn from_u8(v: u8) -> Self {
         match v {
             1 => SectionSource::Sonar,
@@ -31,6 +32,7 @@ impl SectionSource {
         }
     }
 
+    /// Its name in JSON records and logs (`laser`, `sonar`, `both`, `neither`).
     pub fn as_str(self) -> &'static str {
         match self {
             SectionSource::Laser => "laser",
@@ -40,6 +42,7 @@ impl SectionSource {
         }
     }
 
+    /// The source named `s`, as [`SectionSource::as_str`] spells it.
     pub fn parse(s: &str) -> Option<Self> {
         Some(match s {
             "laser" => SectionSource::Laser,
@@ -70,6 +73,7 @@ pub enum FusionMethod {
 }
 
 impl FusionMethod {
+    /// The method a `u8` field holds; unknown values read as `LaserOnly`.
     pub fn from_u8(v: u8) -> Self {
         match v {
             1 => FusionMethod::V1,
@@ -78,6 +82,7 @@ impl FusionMethod {
         }
     }
 
+    /// Its name (`laser-only`, `v1`, `v2`).
     pub fn as_str(self) -> &'static str {
         match self {
             FusionMethod::LaserOnly => "laser-only",
@@ -86,6 +91,7 @@ impl FusionMethod {
         }
     }
 
+    /// The method named `s`, as [`FusionMethod::as_str`] spells it.
     pub fn parse(s: &str) -> Option<Self> {
         Some(match s {
             "laser-only" => FusionMethod::LaserOnly,
@@ -110,6 +116,7 @@ pub enum SyncState {
 }
 
 impl SyncState {
+    /// The state a `u8` field holds; unknown values read as `Complete`.
     pub fn from_u8(v: u8) -> Self {
         match v {
             1 => SyncState::LaserOnly,
@@ -118,6 +125,7 @@ impl SyncState {
         }
     }
 
+    /// Its name in JSON records and logs (`complete`, `laser-only`, `sonar-only`).
     pub fn as_str(self) -> &'static str {
         match self {
             SyncState::Complete => "complete",
@@ -139,6 +147,7 @@ pub struct SectionDecision {
     pub sonar_index: u8,
     /// A [`SectionSource`] as `u8`.
     pub source: u8,
+    /// Zero.
     pub _reserved: [u8; 2],
     /// Trust in the sonar, ρS ∈ [0, 1] (v2; 1/0 for v1's crisp choice).
     pub rho_sonar: f32,
@@ -149,6 +158,7 @@ pub struct SectionDecision {
 }
 
 impl SectionDecision {
+    /// The section's [`SectionSource`].
     pub fn source(&self) -> SectionSource {
         SectionSource::from_u8(self.source)
     }
@@ -168,9 +178,11 @@ pub struct FusedScan {
     pub method: u8,
     /// A [`SyncState`] as `u8`.
     pub sync_state: u8,
+    /// Zero.
     pub _reserved: [u8; 2],
     /// Sections in use (`<= MAX_SONARS`).
     pub section_count: u32,
+    /// The decision per section; the first `section_count` are in use.
     pub sections: [SectionDecision; MAX_SONARS],
     /// Smoke level used for the decision (the SmokeNav paper's mV scale; see `SmokeReading::level`).
     pub smoke_level: f32,
@@ -178,6 +190,7 @@ pub struct FusedScan {
     pub laser_spread: f32,
     /// Stamps of the inputs that were fused, ns (0 when absent).
     pub sonar_stamp_ns: u64,
+    /// Stamp of the fused smoke reading, ns (0 when absent).
     pub smoke_stamp_ns: u64,
 }
 
@@ -200,22 +213,27 @@ impl Default for FusedScan {
 }
 
 impl FusedScan {
+    /// The combined scan's header.
     pub fn header(&self) -> &Header {
         &self.scan.header
     }
 
+    /// The sections in use.
     pub fn sections(&self) -> &[SectionDecision] {
         &self.sections[..(self.section_count as usize).min(MAX_SONARS)]
     }
 
+    /// The [`FusionMethod`] that produced the scan.
     pub fn method(&self) -> FusionMethod {
         FusionMethod::from_u8(self.method)
     }
 
+    /// Which inputs were paired.
     pub fn sync_state(&self) -> SyncState {
         SyncState::from_u8(self.sync_state)
     }
 
+    /// The source of beam `i`.
     pub fn beam_source(&self, i: usize) -> SectionSource {
         SectionSource::from_u8(self.beam_source[i])
     }

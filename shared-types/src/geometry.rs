@@ -24,28 +24,36 @@ pub fn normalize_angle(a: f64) -> f64 {
 /// A pose in the plane: position in metres, heading in radians (counter-clockwise from +x).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Pose2 {
+    /// Position along x, m.
     pub x: f64,
+    /// Position along y, m.
     pub y: f64,
+    /// Heading, rad.
     pub theta: f64,
 }
 
 impl Pose2 {
+    /// A pose from its parts (the heading is taken as given).
     pub const fn new(x: f64, y: f64, theta: f64) -> Self {
         Self { x, y, theta }
     }
 
+    /// The position as a vector.
     pub fn translation(&self) -> Vector2<f64> {
         Vector2::new(self.x, self.y)
     }
 
+    /// The heading as a rotation.
     pub fn rotation(&self) -> Rotation2<f64> {
         Rotation2::new(self.theta)
     }
 
+    /// The pose as a rigid transform (robot frame → parent frame).
     pub fn to_isometry(&self) -> Isometry2<f64> {
         Isometry2::new(self.translation(), self.theta)
     }
 
+    /// The pose of a rigid transform.
     pub fn from_isometry(iso: &Isometry2<f64>) -> Self {
         let t = iso.translation.vector;
         Self::new(t.x, t.y, normalize_angle(iso.rotation.angle()))
@@ -94,10 +102,12 @@ impl Pose2 {
         Point2::from(self.translation() + self.rotation() * p.coords)
     }
 
+    /// Distance from the origin, m.
     pub fn translation_norm(&self) -> f64 {
         self.x.hypot(self.y)
     }
 
+    /// No part is NaN or infinite.
     pub fn is_finite(&self) -> bool {
         self.x.is_finite() && self.y.is_finite() && self.theta.is_finite()
     }

@@ -9,6 +9,7 @@ pub const FRAME_ID_LEN: usize = 32;
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+/// Stamp, sequence number and frame: the start of every bus message.
 pub struct Header {
     /// When the data was measured, in nanoseconds of the host `CLOCK_MONOTONIC`.
     /// Drivers correct this for transport delay (e.g. the Hokuyo's clock sync),
@@ -22,6 +23,7 @@ pub struct Header {
 }
 
 impl Header {
+    /// A header with `frame_id` truncated to [`FRAME_ID_LEN`] bytes.
     pub fn new(stamp_ns: u64, seq: u64, frame_id: &str) -> Self {
         Self {
             stamp_ns,

@@ -5,15 +5,21 @@ use crate::text::FixedStr;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
+/// Metrics one health report can hold.
 pub const MAX_METRICS: usize = 24;
+/// Longest metric name, bytes.
 pub const METRIC_NAME_LEN: usize = 28;
+/// Longest role name, bytes.
 pub const ROLE_LEN: usize = 16;
+/// Longest `last_error` text, bytes.
 pub const LAST_ERROR_LEN: usize = 160;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(u8)]
+/// What a process says about itself.
 pub enum HealthState {
     #[default]
+    /// Starting up, not yet working.
     Starting = 0,
     /// Working as configured.
     Ok = 1,
@@ -26,6 +32,7 @@ pub enum HealthState {
 }
 
 impl HealthState {
+    /// The state a `u8` field holds; unknown values read as `Starting`.
     pub fn from_u8(v: u8) -> Self {
         match v {
             1 => HealthState::Ok,
@@ -36,6 +43,7 @@ impl HealthState {
         }
     }
 
+    /// Its name (`starting`, `ok`, `degraded`, `error`, `stopping`).
     pub fn as_str(self) -> &'static str {
         match self {
             HealthState::Starting => "starting",
@@ -51,7 +59,9 @@ impl HealthState {
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct Metric {
+    /// Metric name (`scan_hz`, `checksum_errors`, …).
     pub name: FixedStr<METRIC_NAME_LEN>,
+    /// Its current value.
     pub value: f64,
     /// The value expected in normal operation (a rate's nominal Hz); NaN when none.
     pub expected: f64,
@@ -60,32 +70,42 @@ pub struct Metric {
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 #[type_name("smokenav::Health")]
+/// A process's health report, published periodically on `health/<role>`.
 pub struct Health {
     /// `stamp_ns` = when this report was made; `seq` counts reports.
     pub header: Header,
     /// The process role: `hokuyo`, `pioneer`, `scout`, `smoke`, `fusion`, `slam`, …
     pub role: FixedStr<ROLE_LEN>,
+    /// Process id.
     pub pid: u32,
     /// A [`HealthState`] as `u8`.
     pub state: u8,
+    /// Zero.
     pub _reserved: [u8; 3],
     /// Seconds since the process started.
     pub uptime_s: f64,
     /// Processing latency percentiles over the last reporting window, µs.
     pub latency_p50_us: f32,
+    /// 99th percentile latency of the window, µs.
     pub latency_p99_us: f32,
+    /// Worst latency of the window, µs.
     pub latency_max_us: f32,
+    /// Zero.
     pub _reserved2: u32,
     /// Cycles that missed their deadline since start.
     pub deadline_misses: u64,
+    /// Metrics in use (`<= MAX_METRICS`).
     pub metric_count: u32,
+    /// Zero.
     pub _reserved3: u32,
+    /// The metrics; the first `metric_count` are in use.
     pub metrics: [Metric; MAX_METRICS],
     /// The most recent error, empty when none.
     pub last_error: FixedStr<LAST_ERROR_LEN>,
 }
 
 impl Health {
+    /// An empty report for `role` (truncated to [`ROLE_LEN`] bytes) and process `pid`.
     pub fn new(role: &str, pid: u32) -> Self {
         Self {
             role: FixedStr::from_str_truncate(role),
@@ -94,14 +114,17 @@ impl Health {
         }
     }
 
+    /// The reported [`HealthState`].
     pub fn state(&self) -> HealthState {
         HealthState::from_u8(self.state)
     }
 
+    /// Sets the reported state.
     pub fn set_state(&mut self, s: HealthState) {
         self.state = s as u8;
     }
 
+    /// The metrics in use.
     pub fn metrics(&self) -> &[Metric] {
         &self.metrics[..(self.metric_count as usize).min(MAX_METRICS)]
     }
@@ -130,6 +153,7 @@ impl Health {
         true
     }
 
+    /// The value of metric `name`, if reported.
     pub fn metric(&self, name: &str) -> Option<f64> {
         self.metrics()
             .iter()

@@ -32,6 +32,7 @@ pub enum BeamReading {
 }
 
 impl BeamReading {
+    /// The range, if the beam measured one.
     pub fn range(self) -> Option<f32> {
         match self {
             BeamReading::Range(r) => Some(r),
@@ -67,6 +68,7 @@ impl BeamReading {
 #[repr(C)]
 #[type_name("smokenav::LaserScan")]
 pub struct LaserScan {
+    /// Stamp of the first beam, sequence number, laser frame.
     pub header: Header,
     /// Angle of the first beam, rad.
     pub angle_min: f32,
@@ -117,6 +119,7 @@ impl LaserScan {
         (self.count as usize).min(MAX_BEAMS)
     }
 
+    /// Whether no beam is in use.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -126,6 +129,7 @@ impl LaserScan {
         BeamReading::decode(self.ranges[i], self.beam_error[i])
     }
 
+    /// Writes beam `i` (range and `beam_error` together).
     pub fn set_beam(&mut self, i: usize, reading: BeamReading) {
         let (r, c) = reading.encode();
         self.ranges[i] = r;
@@ -137,6 +141,7 @@ impl LaserScan {
         self.angle_min + i as f32 * self.angle_increment
     }
 
+    /// Angle of the last beam in use, rad.
     pub fn angle_max(&self) -> f32 {
         self.angle(self.len().saturating_sub(1))
     }

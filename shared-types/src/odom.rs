@@ -9,8 +9,11 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 pub struct OdometryFlags;
 
 impl OdometryFlags {
+    /// The motors are powered.
     pub const MOTORS_ENABLED: u32 = 1 << 0;
+    /// The left wheel is stalled.
     pub const LEFT_STALL: u32 = 1 << 1;
+    /// The right wheel is stalled.
     pub const RIGHT_STALL: u32 = 1 << 2;
     /// Odometry was reset (robot reconnected or zeroed); pose jumps are expected.
     pub const RESET: u32 = 1 << 3;
@@ -21,9 +24,11 @@ impl OdometryFlags {
 #[repr(C)]
 #[type_name("smokenav::Odometry")]
 pub struct Odometry {
+    /// Stamp, sequence number, odometry frame (`odom`).
     pub header: Header,
     /// Position in the odometry frame, m.
     pub x: f64,
+    /// Position in the odometry frame, m.
     pub y: f64,
     /// Heading, rad, normalised to (-π, π].
     pub theta: f64,
@@ -37,14 +42,17 @@ pub struct Odometry {
     pub bumpers: u32,
     /// Battery voltage, V (0 when the base does not report it).
     pub battery_v: f32,
+    /// Zero.
     pub _reserved: u32,
 }
 
 impl Odometry {
+    /// Whether the motors are powered.
     pub fn motors_enabled(&self) -> bool {
         self.flags & OdometryFlags::MOTORS_ENABLED != 0
     }
 
+    /// Whether either wheel is stalled.
     pub fn stalled(&self) -> bool {
         self.flags & (OdometryFlags::LEFT_STALL | OdometryFlags::RIGHT_STALL) != 0
     }
@@ -56,6 +64,7 @@ impl Odometry {
 #[repr(C)]
 #[type_name("smokenav::VelocityCommand")]
 pub struct VelocityCommand {
+    /// Stamp, sequence number, frame.
     pub header: Header,
     /// Forward velocity, m/s.
     pub linear: f64,

@@ -2,63 +2,128 @@
 //!
 //! This is the JSON-lines form `smokenav topic echo --json` prints (one
 //! [`TopicRecord`] per line) and offline tools such as `smokenav fuse` read.
-//! JSON has no NaN or infinity, so beams without a range are `null` in
-//! `ranges`, with the reason in `beam_error`.
+//! Each bus type has a record type and a [`JsonForm`] impl; the catalog
+//! ([`crate::catalog`]) ties them to the tagged enum [`Message`].
+//!
+//! Reading a record back gives the message that was written, field for
+//! field: unused capacity and reserved fields come back as their defaults
+//! (what `publish_with` gives every publisher), and a beam without a range
+//! gets the range its reason implies (NaN for a sensor error code, +∞
+//! otherwise), as [`LaserScan::set_beam`] writes it.
+//!
+//! Floats: JSON has no NaN or infinity, so those are the strings `"NaN"`,
+//! `"Infinity"` and `"-Infinity"` (see [`float`]); a `null` float reads as
+//! NaN. Beams without a range are `null` in `ranges`, with the reason in
+//! `beam_error`.
+
+pub mod float;
 
 use crate::ConversionError;
 use crate::fused::{FusedScan, FusionMethod, SectionDecision, SectionSource, SyncState};
 use crate::header::Header;
 use crate::health::{Health, HealthState, MAX_METRICS};
-use crate::laser::{BEAM_OK, LaserScan, MAX_BEAMS};
+use crate::laser::{BEAM_NO_RETURN, BEAM_OK, BEAM_SENSOR_CODE, LaserScan, MAX_BEAMS};
 use crate::odom::{Odometry, VelocityCommand};
 use crate::slam::{MapInfo, PoseEstimate};
 use crate::smoke::{SmokeReading, SmokeSensorState, SmokeTrend};
 use crate::sonar::{MAX_SONARS, SonarReading, SonarRing, SonarStatus};
 use crate::text::FixedStr;
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 /// One line of `topic echo --json`: the topic and the message.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TopicRecord {
+    /// Bus topic the message was received on.
     pub topic: String,
+    /// The message, tagged with its type (`"type": "LaserScan"`).
     #[serde(flatten)]
     pub message: Message,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "type")]
-pub enum Message {
-    LaserScan(LaserScanRecord),
-    SonarRing(SonarRingRecord),
-    Odometry(OdometryRecord),
-    VelocityCommand(VelocityCommandRecord),
-    SmokeReading(SmokeReadingRecord),
-    FusedScan(FusedScanRecord),
-    PoseEstimate(PoseEstimateRecord),
-    MapInfo(MapInfoRecord),
-    Health(HealthRecord),
+/// A bus message type's JSON form.
+pub trait JsonForm: Sized {
+    /// The owned record serde reads and writes.
+    type Record: Serialize + DeserializeOwned + Clone + PartialEq + core::fmt::Debug;
+    /// The record of `self`.
+    fn to_record(&self) -> Self::Record;
+    /// Overwrites every field of `out` from `record` (no large temporary:
+    /// `out` may be a reused buffer).
+    fn write_record(record: &Self::Record, out: &mut Self) -> Result<(), ConversionError>;
 }
 
-impl Message {
-    pub fn header(&self) -> &HeaderRecord {
-        match self {
-            Message::LaserScan(m) => &m.header,
-            Message::SonarRing(m) => &m.header,
-            Message::Odometry(m) => &m.header,
-            Message::VelocityCommand(m) => &m.header,
-            Message::SmokeReading(m) => &m.header,
-            Message::FusedScan(m) => &m.scan.header,
-            Message::PoseEstimate(m) => &m.header,
-            Message::MapInfo(m) => &m.header,
-            Message::Health(m) => &m.header,
+macro_rules! json_enum {
+    (
+        fixed {
+            $(
+                $kind:ident {
+                    doc: $doc:literal,
+                    rust: $ty:ty,
+                    header: [$($h:ident).+],
+                    owned: $owned:ty,
+                    json: $json:ty,
+                    topics: [$($tconst:ident = $topic:literal),*],
+                    family: [$($fconst:ident = $prefix:literal),*],
+                    ros2: $ros2:literal,
+                    companion: $companion:expr,
+                    latched: $latched:literal $(,)?
+                }
+            )*
         }
-    }
+        map {
+            $mkind:ident {
+                name: $mname:ident,
+                doc: $mdoc:literal,
+                info: $mty:ty,
+                cell: $cell:ty,
+                json: $mjson:ty,
+                topics: [$($mtconst:ident = $mtopic:literal),*],
+                ros2: $mros2:literal,
+                companion: $mcompanion:expr,
+                latched: $mlatched:literal $(,)?
+            }
+        }
+    ) => {
+        /// A message in its JSON form, tagged with its type name
+        /// (`"type": "LaserScan"`; the map's is `"MapInfo"`).
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[serde(tag = "type")]
+        pub enum Message {
+            $(#[doc = $doc] $kind($json),)*
+            #[doc = $mdoc]
+            $mname($mjson),
+        }
+
+        impl Message {
+            /// The message's header.
+            pub fn header(&self) -> &HeaderRecord {
+                match self {
+                    $(Message::$kind(m) => &m.$($h).+,)*
+                    Message::$mname(m) => &m.header,
+                }
+            }
+
+            /// The message's type.
+            pub fn kind(&self) -> crate::catalog::MessageKind {
+                match self {
+                    $(Message::$kind(_) => crate::catalog::MessageKind::$kind,)*
+                    Message::$mname(_) => crate::catalog::MessageKind::$mkind,
+                }
+            }
+        }
+    };
 }
 
+crate::for_each_message!(json_enum);
+
+/// [`Header`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct HeaderRecord {
+    /// When the data was measured, ns of the host `CLOCK_MONOTONIC`.
     pub stamp_ns: u64,
+    /// Per-publisher sequence number.
     pub seq: u64,
+    /// Coordinate frame of the data.
     pub frame_id: String,
 }
 
@@ -78,20 +143,40 @@ impl From<&HeaderRecord> for Header {
     }
 }
 
+/// [`LaserScan`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct LaserScanRecord {
+    /// Stamp of the first beam, sequence number, laser frame.
     pub header: HeaderRecord,
+    /// Angle of the first beam, rad.
+    #[serde(with = "float")]
     pub angle_min: f32,
+    /// Angle between beams, rad.
+    #[serde(with = "float")]
     pub angle_increment: f32,
+    /// Time between beams, s.
+    #[serde(with = "float")]
     pub time_increment: f32,
+    /// Time between scans, s.
+    #[serde(with = "float")]
     pub scan_time: f32,
+    /// Shortest measurable range, m.
+    #[serde(with = "float")]
     pub range_min: f32,
+    /// Longest measurable range, m.
+    #[serde(with = "float")]
     pub range_max: f32,
     /// Range per beam, m; `null` where the beam has no range.
+    #[serde(with = "float::vec_option")]
     pub ranges: Vec<Option<f32>>,
     /// Per beam: 0 = range, 1 = no return, 2 = beyond max, 256 + code = sensor error code.
     pub beam_error: Vec<u16>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Reflectance per beam, when the sensor reports it.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "float::option_vec"
+    )]
     pub intensities: Option<Vec<f32>>,
 }
 
@@ -113,8 +198,18 @@ impl From<&LaserScan> for LaserScanRecord {
     }
 }
 
+/// The range a beam without one holds, as [`LaserScan::set_beam`] writes it.
+fn no_range(code: u16) -> f32 {
+    if code & BEAM_SENSOR_CODE != 0 {
+        f32::NAN
+    } else {
+        f32::INFINITY
+    }
+}
+
 impl LaserScanRecord {
-    /// Writes this record into an existing scan (no 10 kB temporary on the stack).
+    /// Writes this record into an existing scan (no 10 kB temporary on the
+    /// stack). Every field is overwritten; beams past the record's are reset.
     pub fn write_into(&self, s: &mut LaserScan) -> Result<(), ConversionError> {
         let n = self.ranges.len();
         if n > MAX_BEAMS {
@@ -155,15 +250,21 @@ impl LaserScanRecord {
                 (BEAM_OK, Some(r)) => r,
                 (BEAM_OK, None) => {
                     // A valid beam without a range is inconsistent; treat as no return.
-                    s.beam_error[i] = crate::laser::BEAM_NO_RETURN;
+                    s.beam_error[i] = BEAM_NO_RETURN;
                     f32::INFINITY
                 }
-                (_, _) => f32::INFINITY,
+                (code, _) => no_range(code),
             };
         }
+        s.ranges[n..].fill(0.0);
+        s.beam_error[n..].fill(BEAM_NO_RETURN);
         s.has_intensities = self.intensities.is_some() as u32;
-        if let Some(int) = &self.intensities {
-            s.intensities[..n].copy_from_slice(int);
+        match &self.intensities {
+            Some(int) => {
+                s.intensities[..n].copy_from_slice(int);
+                s.intensities[n..].fill(0.0);
+            }
+            None => s.intensities.fill(0.0),
         }
         Ok(())
     }
@@ -178,18 +279,37 @@ impl TryFrom<&LaserScanRecord> for LaserScan {
     }
 }
 
+impl JsonForm for LaserScan {
+    type Record = LaserScanRecord;
+    fn to_record(&self) -> LaserScanRecord {
+        self.into()
+    }
+    fn write_record(r: &LaserScanRecord, out: &mut Self) -> Result<(), ConversionError> {
+        r.write_into(out)
+    }
+}
+
+/// One [`SonarReading`] as JSON.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SonarReadingRecord {
+    /// Transducer index, as numbered in the robot profile.
     pub index: u8,
+    /// Range to the nearest echo, m.
+    #[serde(with = "float")]
     pub range: f32,
     /// `valid`, `saturated` or `invalid`.
     pub status: String,
 }
 
+/// [`SonarRing`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct SonarRingRecord {
+    /// Stamp, sequence number, frame.
     pub header: HeaderRecord,
+    /// Maximum range the transducers report, m.
+    #[serde(with = "float")]
     pub max_range: f32,
+    /// The readings in use.
     pub readings: Vec<SonarReadingRecord>,
 }
 
@@ -252,16 +372,43 @@ impl TryFrom<&SonarRingRecord> for SonarRing {
     }
 }
 
+impl JsonForm for SonarRing {
+    type Record = SonarRingRecord;
+    fn to_record(&self) -> SonarRingRecord {
+        self.into()
+    }
+    fn write_record(r: &SonarRingRecord, out: &mut Self) -> Result<(), ConversionError> {
+        *out = r.try_into()?;
+        Ok(())
+    }
+}
+
+/// [`Odometry`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct OdometryRecord {
+    /// Stamp, sequence number, odometry frame.
     pub header: HeaderRecord,
+    /// Position in the odometry frame, m.
+    #[serde(with = "float")]
     pub x: f64,
+    /// Position in the odometry frame, m.
+    #[serde(with = "float")]
     pub y: f64,
+    /// Heading, rad.
+    #[serde(with = "float")]
     pub theta: f64,
+    /// Forward velocity, m/s.
+    #[serde(with = "float")]
     pub linear: f64,
+    /// Turn rate, rad/s.
+    #[serde(with = "float")]
     pub angular: f64,
+    /// [`crate::OdometryFlags`] bits.
     pub flags: u32,
+    /// Pressed bumper segments, one bit each.
     pub bumpers: u32,
+    /// Battery voltage, V.
+    #[serde(with = "float")]
     pub battery_v: f32,
 }
 
@@ -298,10 +445,27 @@ impl From<&OdometryRecord> for Odometry {
     }
 }
 
+impl JsonForm for Odometry {
+    type Record = OdometryRecord;
+    fn to_record(&self) -> OdometryRecord {
+        self.into()
+    }
+    fn write_record(r: &OdometryRecord, out: &mut Self) -> Result<(), ConversionError> {
+        *out = r.into();
+        Ok(())
+    }
+}
+
+/// [`VelocityCommand`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct VelocityCommandRecord {
+    /// Stamp, sequence number, frame.
     pub header: HeaderRecord,
+    /// Forward velocity, m/s.
+    #[serde(with = "float")]
     pub linear: f64,
+    /// Turn rate, rad/s.
+    #[serde(with = "float")]
     pub angular: f64,
 }
 
@@ -325,12 +489,32 @@ impl From<&VelocityCommandRecord> for VelocityCommand {
     }
 }
 
+impl JsonForm for VelocityCommand {
+    type Record = VelocityCommandRecord;
+    fn to_record(&self) -> VelocityCommandRecord {
+        self.into()
+    }
+    fn write_record(r: &VelocityCommandRecord, out: &mut Self) -> Result<(), ConversionError> {
+        *out = r.into();
+        Ok(())
+    }
+}
+
+/// [`SmokeReading`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct SmokeReadingRecord {
+    /// Stamp, sequence number, frame.
     pub header: HeaderRecord,
+    /// Sensor output as read by the ADC, mV.
+    #[serde(with = "float")]
     pub raw_mv: f32,
+    /// Raw ADC counts.
     pub raw_counts: u32,
+    /// Smoke concentration index (mV below the clean-air baseline).
+    #[serde(with = "float")]
     pub level: f32,
+    /// Clean-air baseline, mV.
+    #[serde(with = "float")]
     pub baseline_mv: f32,
     /// `steady`, `rising` or `falling`.
     pub trend: String,
@@ -391,20 +575,43 @@ impl TryFrom<&SmokeReadingRecord> for SmokeReading {
     }
 }
 
+impl JsonForm for SmokeReading {
+    type Record = SmokeReadingRecord;
+    fn to_record(&self) -> SmokeReadingRecord {
+        self.into()
+    }
+    fn write_record(r: &SmokeReadingRecord, out: &mut Self) -> Result<(), ConversionError> {
+        *out = r.try_into()?;
+        Ok(())
+    }
+}
+
+/// One [`SectionDecision`] as JSON.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SectionRecord {
+    /// First beam of the section.
     pub first_beam: u16,
+    /// One past its last beam.
     pub end_beam: u16,
+    /// The sonar that defines it.
     pub sonar_index: u8,
     /// `laser`, `sonar`, `both` or `neither`.
     pub source: String,
+    /// Trust in the sonar, ρS.
+    #[serde(with = "float")]
     pub rho_sonar: f32,
+    /// Trust in the laser, ρL.
+    #[serde(with = "float")]
     pub rho_laser: f32,
+    /// The sonar range used or rejected, m.
+    #[serde(with = "float")]
     pub sonar_range: f32,
 }
 
+/// [`FusedScan`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct FusedScanRecord {
+    /// The combined scan.
     pub scan: LaserScanRecord,
     /// Per beam: 0 laser, 1 sonar, 2 both, 3 neither.
     pub beam_source: Vec<u8>,
@@ -412,12 +619,20 @@ pub struct FusedScanRecord {
     pub method: String,
     /// `complete`, `laser-only` or `sonar-only`.
     pub sync_state: String,
+    /// The per-section decisions.
     pub sections: Vec<SectionRecord>,
+    /// Smoke level the decision used.
+    #[serde(with = "float")]
     pub smoke_level: f32,
+    /// Standard deviation of the valid laser ranges, m.
+    #[serde(with = "float")]
     pub laser_spread: f32,
+    /// Stamp of the fused sonar ring, ns (0 when absent).
     pub sonar_stamp_ns: u64,
+    /// Stamp of the fused smoke reading, ns (0 when absent).
     pub smoke_stamp_ns: u64,
-    /// Share of sections that used the sonar.
+    /// Share of sections that used the sonar (derived; ignored when read back).
+    #[serde(with = "float")]
     pub sonar_usage: f32,
 }
 
@@ -452,9 +667,10 @@ impl From<&FusedScan> for FusedScanRecord {
 }
 
 impl FusedScanRecord {
+    /// Writes this record into an existing fused scan. Every field is
+    /// overwritten; beams and sections past the record's are reset.
     pub fn write_into(&self, f: &mut FusedScan) -> Result<(), ConversionError> {
-        self.scan.write_into(&mut f.scan)?;
-        let n = f.scan.len();
+        let n = self.scan.ranges.len();
         if self.beam_source.len() != n {
             return Err(ConversionError::LengthMismatch {
                 field: "beam_source",
@@ -469,13 +685,12 @@ impl FusedScanRecord {
                 capacity: MAX_SONARS,
             });
         }
-        f.beam_source[..n].copy_from_slice(&self.beam_source);
-        f.method =
+        let method =
             FusionMethod::parse(&self.method).ok_or_else(|| ConversionError::UnknownValue {
                 field: "method",
                 value: self.method.clone(),
-            })? as u8;
-        f.sync_state = match self.sync_state.as_str() {
+            })?;
+        let sync_state = match self.sync_state.as_str() {
             "complete" => SyncState::Complete,
             "laser-only" => SyncState::LaserOnly,
             "sonar-only" => SyncState::SonarOnly,
@@ -485,8 +700,15 @@ impl FusedScanRecord {
                     value: other.to_owned(),
                 });
             }
-        } as u8;
+        };
+        self.scan.write_into(&mut f.scan)?;
+        f.beam_source[..n].copy_from_slice(&self.beam_source);
+        f.beam_source[n..].fill(0);
+        f.method = method as u8;
+        f.sync_state = sync_state as u8;
+        f._reserved = [0; 2];
         f.section_count = self.sections.len() as u32;
+        f.sections.fill(SectionDecision::default());
         for (d, r) in f.sections.iter_mut().zip(&self.sections) {
             *d = SectionDecision {
                 first_beam: r.first_beam,
@@ -512,16 +734,41 @@ impl FusedScanRecord {
     }
 }
 
+impl JsonForm for FusedScan {
+    type Record = FusedScanRecord;
+    fn to_record(&self) -> FusedScanRecord {
+        self.into()
+    }
+    fn write_record(r: &FusedScanRecord, out: &mut Self) -> Result<(), ConversionError> {
+        r.write_into(out)
+    }
+}
+
+/// [`PoseEstimate`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct PoseEstimateRecord {
+    /// Stamp of the scan the pose belongs to, sequence number, map frame.
     pub header: HeaderRecord,
+    /// Position in the map frame, m.
+    #[serde(with = "float")]
     pub x: f64,
+    /// Position in the map frame, m.
+    #[serde(with = "float")]
     pub y: f64,
+    /// Heading, rad.
+    #[serde(with = "float")]
     pub theta: f64,
+    /// Row-major 3×3 covariance of (x, y, θ).
+    #[serde(with = "float::array")]
     pub covariance: [f64; 9],
+    /// Effective sample size of the particle weights.
+    #[serde(with = "float")]
     pub n_eff: f32,
+    /// Particles in the filter.
     pub particles: u32,
+    /// Scans skipped so far.
     pub scans_skipped: u64,
+    /// Processing time of this scan, µs.
     pub processing_us: u32,
 }
 
@@ -558,14 +805,37 @@ impl From<&PoseEstimateRecord> for PoseEstimate {
     }
 }
 
+impl JsonForm for PoseEstimate {
+    type Record = PoseEstimateRecord;
+    fn to_record(&self) -> PoseEstimateRecord {
+        self.into()
+    }
+    fn write_record(r: &PoseEstimateRecord, out: &mut Self) -> Result<(), ConversionError> {
+        *out = r.into();
+        Ok(())
+    }
+}
+
+/// The occupancy grid ([`MapInfo`] and, optionally, its cells) as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct MapInfoRecord {
+    /// Stamp, sequence number, map frame.
     pub header: HeaderRecord,
+    /// Cell edge, m.
+    #[serde(with = "float")]
     pub resolution: f32,
+    /// Cells per row.
     pub width: u32,
+    /// Rows.
     pub height: u32,
+    /// Lower-left corner of cell (0, 0) in the map frame, m.
+    #[serde(with = "float")]
     pub origin_x: f64,
+    /// Lower-left corner of cell (0, 0) in the map frame, m.
+    #[serde(with = "float")]
     pub origin_y: f64,
+    /// Heading of the grid in the map frame, rad.
+    #[serde(with = "float")]
     pub origin_theta: f64,
     /// Cells, row-major from the lower-left corner (-1 unknown, 0..100). Omitted by `echo` unless asked.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -574,6 +844,13 @@ pub struct MapInfoRecord {
 
 impl From<&MapInfo> for MapInfoRecord {
     fn from(m: &MapInfo) -> Self {
+        Self::from_map(m, None)
+    }
+}
+
+impl MapInfoRecord {
+    /// The record of a map, with its cells when given.
+    pub fn from_map(m: &MapInfo, cells: Option<&[i8]>) -> Self {
         Self {
             header: (&m.header).into(),
             resolution: m.resolution,
@@ -582,37 +859,80 @@ impl From<&MapInfo> for MapInfoRecord {
             origin_x: m.origin_x,
             origin_y: m.origin_y,
             origin_theta: m.origin_theta,
-            data: None,
+            data: cells.map(<[i8]>::to_vec),
         }
+    }
+
+    /// The map this record holds: its info and exactly `width × height` cells.
+    pub fn to_map(&self) -> Result<(MapInfo, Vec<i8>), ConversionError> {
+        let info = MapInfo {
+            header: (&self.header).into(),
+            resolution: self.resolution,
+            width: self.width,
+            height: self.height,
+            _reserved: 0,
+            origin_x: self.origin_x,
+            origin_y: self.origin_y,
+            origin_theta: self.origin_theta,
+        };
+        let cells = self.data.clone().unwrap_or_default();
+        if cells.len() != info.cell_count() {
+            return Err(ConversionError::LengthMismatch {
+                field: "data",
+                len: cells.len(),
+                expected: info.cell_count(),
+            });
+        }
+        Ok((info, cells))
     }
 }
 
+/// One health [`crate::Metric`] as JSON.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MetricRecord {
+    /// Metric name.
     pub name: String,
+    /// Its value.
+    #[serde(with = "float")]
     pub value: f64,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// The value expected in normal operation; absent when there is none.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "float::option"
+    )]
     pub expected: Option<f64>,
 }
 
+/// [`Health`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct HealthRecord {
+    /// When the report was made; `seq` counts reports.
     pub header: HeaderRecord,
+    /// The process role.
     pub role: String,
+    /// Process id.
     pub pid: u32,
     /// `starting`, `ok`, `degraded`, `error` or `stopping`.
     pub state: String,
+    /// Seconds since the process started.
+    #[serde(with = "float")]
     pub uptime_s: f64,
+    /// Median processing latency of the last window, µs.
+    #[serde(with = "float")]
     pub latency_p50_us: f32,
+    /// 99th percentile processing latency, µs.
+    #[serde(with = "float")]
     pub latency_p99_us: f32,
+    /// Worst processing latency, µs.
+    #[serde(with = "float")]
     pub latency_max_us: f32,
+    /// Cycles that missed their deadline since start.
     pub deadline_misses: u64,
+    /// Named counters, rates and gauges.
     pub metrics: Vec<MetricRecord>,
+    /// The most recent error, empty when none.
     pub last_error: String,
-}
-
-fn finite(v: f64) -> Option<f64> {
-    v.is_finite().then_some(v)
 }
 
 impl From<&Health> for HealthRecord {
@@ -632,8 +952,9 @@ impl From<&Health> for HealthRecord {
                 .iter()
                 .map(|m| MetricRecord {
                     name: m.name.as_str().to_owned(),
-                    value: if m.value.is_finite() { m.value } else { 0.0 },
-                    expected: finite(m.expected),
+                    value: m.value,
+                    // NaN is how a metric says it has no expected value.
+                    expected: (!m.expected.is_nan()).then_some(m.expected),
                 })
                 .collect(),
             last_error: h.last_error.as_str().to_owned(),
@@ -677,6 +998,17 @@ impl TryFrom<&HealthRecord> for Health {
         }
         h.last_error = FixedStr::from_str_truncate(&r.last_error);
         Ok(h)
+    }
+}
+
+impl JsonForm for Health {
+    type Record = HealthRecord;
+    fn to_record(&self) -> HealthRecord {
+        self.into()
+    }
+    fn write_record(r: &HealthRecord, out: &mut Self) -> Result<(), ConversionError> {
+        *out = r.try_into()?;
+        Ok(())
     }
 }
 

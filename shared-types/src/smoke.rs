@@ -9,12 +9,16 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 #[repr(u8)]
 pub enum SmokeTrend {
     #[default]
+    /// Neither rising nor falling.
     Steady = 0,
+    /// The level is rising.
     Rising = 1,
+    /// The level is falling.
     Falling = 2,
 }
 
 impl SmokeTrend {
+    /// The trend a `u8` field holds; unknown values read as `Steady`.
     pub fn from_u8(v: u8) -> Self {
         match v {
             1 => SmokeTrend::Rising,
@@ -23,6 +27,7 @@ impl SmokeTrend {
         }
     }
 
+    /// Its name (`steady`, `rising`, `falling`).
     pub fn as_str(self) -> &'static str {
         match self {
             SmokeTrend::Steady => "steady",
@@ -39,6 +44,7 @@ pub enum SmokeSensorState {
     /// The MQ303A heater has not reached its working temperature yet.
     #[default]
     WarmingUp = 0,
+    /// Warm and reading.
     Ready = 1,
     /// No signal: the ADC reads the rail or nothing arrives.
     Disconnected = 2,
@@ -47,6 +53,7 @@ pub enum SmokeSensorState {
 }
 
 impl SmokeSensorState {
+    /// The state a `u8` field holds; unknown values read as `WarmingUp`.
     pub fn from_u8(v: u8) -> Self {
         match v {
             1 => SmokeSensorState::Ready,
@@ -56,6 +63,7 @@ impl SmokeSensorState {
         }
     }
 
+    /// Its name (`warming_up`, `ready`, `disconnected`, `saturated`).
     pub fn as_str(self) -> &'static str {
         match self {
             SmokeSensorState::WarmingUp => "warming_up",
@@ -69,7 +77,9 @@ impl SmokeSensorState {
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 #[type_name("smokenav::SmokeReading")]
+/// One smoke sensor reading, published on `smoke/level`.
 pub struct SmokeReading {
+    /// Stamp, sequence number, sensor frame.
     pub header: Header,
     /// Sensor output as read by the ADC, mV. The MQ303A's output falls as the
     /// concentration rises.
@@ -87,18 +97,22 @@ pub struct SmokeReading {
     pub trend: u8,
     /// A [`SmokeSensorState`] as `u8`.
     pub state: u8,
+    /// Zero.
     pub _reserved: [u8; 6],
 }
 
 impl SmokeReading {
+    /// The [`SmokeTrend`].
     pub fn trend(&self) -> SmokeTrend {
         SmokeTrend::from_u8(self.trend)
     }
 
+    /// The [`SmokeSensorState`].
     pub fn state(&self) -> SmokeSensorState {
         SmokeSensorState::from_u8(self.state)
     }
 
+    /// Whether the sensor is warm and reading.
     pub fn is_ready(&self) -> bool {
         self.state() == SmokeSensorState::Ready
     }

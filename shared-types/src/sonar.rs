@@ -9,6 +9,7 @@ pub const MAX_SONARS: usize = 32;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(u8)]
+/// What one sonar reading says.
 pub enum SonarStatus {
     /// An echo at `range`.
     #[default]
@@ -21,6 +22,7 @@ pub enum SonarStatus {
 }
 
 impl SonarStatus {
+    /// The status a `u8` field holds; unknown values read as `Invalid`.
     pub fn from_u8(v: u8) -> Self {
         match v {
             0 => SonarStatus::Valid,
@@ -32,6 +34,7 @@ impl SonarStatus {
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
+/// One transducer's reading.
 pub struct SonarReading {
     /// Range to the nearest echo, m (the sonar's max range when saturated).
     pub range: f32,
@@ -39,10 +42,12 @@ pub struct SonarReading {
     pub index: u8,
     /// A [`SonarStatus`] as `u8`.
     pub status: u8,
+    /// Zero.
     pub _reserved: [u8; 2],
 }
 
 impl SonarReading {
+    /// A reading of transducer `index`.
     pub fn new(index: u8, range: f32, status: SonarStatus) -> Self {
         Self {
             range,
@@ -52,6 +57,7 @@ impl SonarReading {
         }
     }
 
+    /// The reading's [`SonarStatus`].
     pub fn status(&self) -> SonarStatus {
         SonarStatus::from_u8(self.status)
     }
@@ -68,23 +74,28 @@ impl SonarReading {
 #[repr(C)]
 #[type_name("smokenav::SonarRing")]
 pub struct SonarRing {
+    /// Stamp, sequence number, frame of the ring.
     pub header: Header,
     /// Maximum range the transducers report, m.
     pub max_range: f32,
     /// Readings in use (`<= MAX_SONARS`).
     pub count: u32,
+    /// The readings; the first `count` are in use.
     pub readings: [SonarReading; MAX_SONARS],
 }
 
 impl SonarRing {
+    /// Readings in use, clamped to the capacity (a peer could send anything).
     pub fn len(&self) -> usize {
         (self.count as usize).min(MAX_SONARS)
     }
 
+    /// Whether no reading is in use.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
 
+    /// The readings in use.
     pub fn readings(&self) -> &[SonarReading] {
         &self.readings[..self.len()]
     }

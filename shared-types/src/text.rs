@@ -14,6 +14,7 @@ pub struct FixedStr<const N: usize> {
 }
 
 impl<const N: usize> FixedStr<N> {
+    /// The empty string.
     pub const fn new() -> Self {
         Self {
             len: 0,
@@ -28,6 +29,7 @@ impl<const N: usize> FixedStr<N> {
         out
     }
 
+    /// Replaces the text with `s`, truncated at the last character boundary that fits.
     pub fn set(&mut self, s: &str) {
         let mut end = s.len().min(N);
         while !s.is_char_boundary(end) {
@@ -38,6 +40,7 @@ impl<const N: usize> FixedStr<N> {
         self.len = end as u32;
     }
 
+    /// The text (a peer's invalid UTF-8 is cut at the first bad byte).
     pub fn as_str(&self) -> &str {
         let len = (self.len as usize).min(N);
         // A peer process could in principle write any bytes here; never trust them.
@@ -47,6 +50,7 @@ impl<const N: usize> FixedStr<N> {
         }
     }
 
+    /// Whether the text is empty.
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }

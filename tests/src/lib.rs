@@ -14,7 +14,7 @@
 //! - [`wait_for`]: receive messages of a topic until a predicate holds or a timeout passes.
 
 use anyhow::{Context, bail};
-use smokenav_platform_bus::{Bus, BusOptions, Message, Waiter};
+use smokenav_platform_bus::{Bus, BusOptions, Message, Topic, Waiter};
 use smokenav_platform_config::RobotConfig;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -92,11 +92,11 @@ pub fn open_bus(instance: &str) -> Bus {
 /// Returns every message received (copied out of shared memory).
 pub fn wait_for<T: Message>(
     bus: &Bus,
-    topic: &str,
+    topic: Topic<T>,
     timeout: Duration,
     mut done: impl FnMut(&T) -> bool,
 ) -> anyhow::Result<Vec<T>> {
-    let sub = bus.subscriber::<T>(topic)?;
+    let sub = bus.subscriber(topic.clone())?;
     let waiter = Waiter::new()?;
     let _g = waiter.attach(&sub)?;
     let end = Instant::now() + timeout;

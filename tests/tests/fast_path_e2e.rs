@@ -159,7 +159,7 @@ fn fast_path_gives_the_real_drivers_messages_for_the_same_simulated_instant() {
         )
         .unwrap();
         let pid = p.pid();
-        wait_for::<Health>(&bus, &topics::health(role), Duration::from_secs(30), |h| {
+        wait_for::<Health>(&bus, topics::health(role), Duration::from_secs(30), |h| {
             h.pid == pid && h.state() == HealthState::Ok
         })
         .unwrap_or_else(|e| panic!("{role} not ready: {e}\n{}", p.output()));

@@ -255,7 +255,7 @@ fn dense_smoke_sections_use_the_sonar_and_a_replay_gives_the_same_scans() {
     // Health: method v2, a third of the sections used the sonar, nothing dropped.
     let h = wait_for::<Health>(
         &rig.bus,
-        &topics::health("fusion"),
+        topics::health("fusion"),
         Duration::from_secs(5),
         |h: &Health| h.metric("fused_total") == Some(30.0),
     )
@@ -282,7 +282,7 @@ fn silent_sonar_degrades_to_the_laser_alone_and_health_says_so() {
     }
     let h = wait_for::<Health>(
         &rig.bus,
-        &topics::health("fusion"),
+        topics::health("fusion"),
         Duration::from_secs(5),
         |h: &Health| h.state() == HealthState::Degraded,
     )

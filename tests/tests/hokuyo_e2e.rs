@@ -69,7 +69,7 @@ impl Rig {
     }
 
     fn health(&self, timeout: Duration, done: impl FnMut(&Health) -> bool) -> Health {
-        let hs = wait_for::<Health>(&self.bus, &topics::health("hokuyo"), timeout, done)
+        let hs = wait_for::<Health>(&self.bus, topics::health("hokuyo"), timeout, done)
             .unwrap_or_else(|e| panic!("{e}\n{}", self.output()));
         *hs.last().unwrap()
     }

@@ -113,7 +113,7 @@ fn keep_driving(instance: &str, linear: f64) -> (Arc<AtomicBool>, std::thread::J
 fn health_metric(r: &Rig, name: &str, pred: impl Fn(f64) -> bool) -> Health {
     let hs = wait_for::<Health>(
         &r.bus,
-        &topics::health("pioneer"),
+        topics::health("pioneer"),
         Duration::from_secs(5),
         |h| h.metric(name).is_some_and(&pred),
     )

@@ -13,9 +13,9 @@
 //! The Python packages are required, not optional: without them the
 //! recording tests fail and say how to install them.
 
-use smokenav_platform_bus::{Message as BusMsg, Subscriber, Waiter};
+use smokenav_platform_bus::{Message as BusMsg, Subscriber, Topic, Waiter, topics};
 use smokenav_platform_config::slam::SlamInput;
-use smokenav_platform_recording::{BitIdentical, EndOfData, McapSource, Message, Playback};
+use smokenav_platform_recording::{AnyMessage, BitIdentical, EndOfData, McapSource, Playback};
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::laser::BEAM_SENSOR_CODE;
 use smokenav_shared_types::{
@@ -109,16 +109,16 @@ fn make_smoke(base: u64, seq: u64) -> SmokeReading {
     }
 }
 
-fn expected(base: u64, topic: &str, seq: u64) -> Message {
+fn expected(base: u64, topic: &str, seq: u64) -> AnyMessage {
     match topic {
         "laser/scan" => {
             let mut s = Box::<LaserScan>::default();
             make_scan(base, seq, &mut s);
-            Message::LaserScan(s)
+            AnyMessage::LaserScan(s)
         }
-        "base/odom" => Message::Odometry(make_odom(base, seq)),
-        "base/sonar" => Message::SonarRing(make_sonar(base, seq)),
-        "smoke/level" => Message::SmokeReading(make_smoke(base, seq)),
+        "base/odom" => AnyMessage::Odometry(make_odom(base, seq)),
+        "base/sonar" => AnyMessage::SonarRing(make_sonar(base, seq)),
+        "smoke/level" => AnyMessage::SmokeReading(make_smoke(base, seq)),
         other => panic!("no generator for {other}"),
     }
 }
@@ -129,11 +129,10 @@ const TOPICS: [&str; 4] = ["laser/scan", "base/odom", "base/sonar", "smoke/level
 
 fn run_publisher(instance: &str, role: &str, count: u64, base: u64) {
     let bus = open_bus(instance);
-    let mut scans = (role == "laser").then(|| bus.publisher::<LaserScan>("laser/scan").unwrap());
-    let mut odom = (role == "base").then(|| bus.publisher::<Odometry>("base/odom").unwrap());
-    let mut sonar = (role == "base").then(|| bus.publisher::<SonarRing>("base/sonar").unwrap());
-    let mut smoke =
-        (role == "smoke").then(|| bus.publisher::<SmokeReading>("smoke/level").unwrap());
+    let mut scans = (role == "laser").then(|| bus.publisher(topics::LASER_SCAN).unwrap());
+    let mut odom = (role == "base").then(|| bus.publisher(topics::BASE_ODOM).unwrap());
+    let mut sonar = (role == "base").then(|| bus.publisher(topics::BASE_SONAR).unwrap());
+    let mut smoke = (role == "smoke").then(|| bus.publisher(topics::SMOKE_LEVEL).unwrap());
     // Connect to the recorder before the first message (iceoryx2 connects lazily).
     if let Some(p) = &scans {
         p.update_connections().unwrap();
@@ -149,7 +148,7 @@ fn run_publisher(instance: &str, role: &str, count: u64, base: u64) {
     }
     println!("publishing as {role}");
     for seq in 0..count {
-        // Message `seq` is stamped base + seq × 100 ms (host CLOCK_MONOTONIC,
+        // AnyMessage `seq` is stamped base + seq × 100 ms (host CLOCK_MONOTONIC,
         // shared by all processes) and published at that instant, like a
         // driver stamping on arrival: every publisher of a test is in step.
         sleep_until_monotonic(base + seq * 100_000_000);
@@ -494,7 +493,7 @@ fn live_run_recorded_decodes_in_python_and_replays_bit_identical() {
     check_python_dump(&dump, COUNT, base);
 
     // The library reads the file back into exactly what was published.
-    let mut recorded: BTreeMap<String, Vec<Message>> = BTreeMap::new();
+    let mut recorded: BTreeMap<String, Vec<AnyMessage>> = BTreeMap::new();
     let mut playback = Playback::open(&file).unwrap();
     while let Some(p) = playback.read_next().unwrap() {
         recorded.entry(p.topic).or_default().push(p.message);
@@ -515,10 +514,10 @@ fn live_run_recorded_decodes_in_python_and_replays_bit_identical() {
     // (b) Replay onto a fresh instance; every message arrives as published.
     let fresh = unique_instance("rec_play");
     let bus = open_bus(&fresh);
-    let scans: Subscriber<LaserScan> = bus.subscriber("laser/scan").unwrap();
-    let odom: Subscriber<Odometry> = bus.subscriber("base/odom").unwrap();
-    let sonar: Subscriber<SonarRing> = bus.subscriber("base/sonar").unwrap();
-    let smoke: Subscriber<SmokeReading> = bus.subscriber("smoke/level").unwrap();
+    let scans: Subscriber<LaserScan> = bus.subscriber(topics::LASER_SCAN).unwrap();
+    let odom: Subscriber<Odometry> = bus.subscriber(topics::BASE_ODOM).unwrap();
+    let sonar: Subscriber<SonarRing> = bus.subscriber(topics::BASE_SONAR).unwrap();
+    let smoke: Subscriber<SmokeReading> = bus.subscriber(topics::SMOKE_LEVEL).unwrap();
     let waiter = Waiter::new().unwrap();
     let _g = [
         waiter.attach(&scans).unwrap(),
@@ -531,8 +530,12 @@ fn live_run_recorded_decodes_in_python_and_replays_bit_identical() {
         &["play", str_path(&file), "--rate", "2", "--instance", &fresh],
         &fresh,
     );
-    let mut got: BTreeMap<&str, Vec<Message>> = BTreeMap::new();
-    fn take<T: BusMsg>(sub: &Subscriber<T>, into: &mut Vec<Message>, wrap: impl Fn(&T) -> Message) {
+    let mut got: BTreeMap<&str, Vec<AnyMessage>> = BTreeMap::new();
+    fn take<T: BusMsg>(
+        sub: &Subscriber<T>,
+        into: &mut Vec<AnyMessage>,
+        wrap: impl Fn(&T) -> AnyMessage,
+    ) {
         while let Some(s) = sub.receive().unwrap() {
             into.push(wrap(&s));
         }
@@ -546,16 +549,16 @@ fn live_run_recorded_decodes_in_python_and_replays_bit_identical() {
         );
         waiter.wait(Some(Duration::from_millis(200))).unwrap();
         take(&scans, got.entry("laser/scan").or_default(), |s| {
-            Message::LaserScan(Box::new(*s))
+            AnyMessage::LaserScan(Box::new(*s))
         });
         take(&odom, got.entry("base/odom").or_default(), |o| {
-            Message::Odometry(*o)
+            AnyMessage::Odometry(*o)
         });
         take(&sonar, got.entry("base/sonar").or_default(), |r| {
-            Message::SonarRing(*r)
+            AnyMessage::SonarRing(*r)
         });
         take(&smoke, got.entry("smoke/level").or_default(), |s| {
-            Message::SmokeReading(*s)
+            AnyMessage::SmokeReading(*s)
         });
     }
     let elapsed = started.elapsed();
@@ -708,7 +711,7 @@ fn recorder_killed_with_sigkill_leaves_every_message_of_its_finished_chunks() {
 /// `quiet` passes without a message (the consumer caught up with its input).
 fn collect<T: BusMsg + Send>(
     instance: &str,
-    topic: &'static str,
+    topic: Topic<T>,
     stop: &Arc<AtomicBool>,
     quiet: Duration,
 ) -> std::thread::JoinHandle<Vec<T>> {
@@ -717,7 +720,7 @@ fn collect<T: BusMsg + Send>(
     let (ready_tx, ready) = std::sync::mpsc::channel();
     let handle = std::thread::spawn(move || {
         let bus = open_bus(&instance);
-        let sub: Subscriber<T> = bus.subscriber(topic).unwrap();
+        let sub: Subscriber<T> = bus.subscriber(topic.clone()).unwrap();
         let waiter = Waiter::new().unwrap();
         let _g = waiter.attach(&sub).unwrap();
         ready_tx.send(()).unwrap();
@@ -799,7 +802,8 @@ fn replayed_inputs_give_fusion_and_slam_the_same_output_as_live() {
         .unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     // Only to know when SLAM has caught up before the recorder stops.
-    let live_watch = collect::<PoseEstimate>(&live, "slam/pose", &stop, Duration::from_secs(1));
+    let live_watch =
+        collect::<PoseEstimate>(&live, topics::SLAM_POSE, &stop, Duration::from_secs(1));
     let (publishers, _) = publish_all(&live, Duration::from_secs(3));
     stop.store(true, Ordering::Relaxed);
     let watched = live_watch.join().unwrap();
@@ -823,9 +827,9 @@ fn replayed_inputs_give_fusion_and_slam_the_same_output_as_live() {
     let mut playback = Playback::open(&file).unwrap();
     while let Some(p) = playback.read_next().unwrap() {
         match p.message {
-            Message::FusedScan(f) => live_fused.push(*f),
-            Message::PoseEstimate(e) => live_poses.push(e),
-            Message::Odometry(_) => odom_recorded += 1,
+            AnyMessage::FusedScan(f) => live_fused.push(*f),
+            AnyMessage::PoseEstimate(e) => live_poses.push(e),
+            AnyMessage::Odometry(_) => odom_recorded += 1,
             _ => {}
         }
     }
@@ -863,8 +867,8 @@ fn replayed_inputs_give_fusion_and_slam_the_same_output_as_live() {
     let (mut fusion, mut slam) = spawn_fusion_and_slam(&cfg, &offline);
     let stop = Arc::new(AtomicBool::new(false));
     let quiet = Duration::from_millis(1_500);
-    let fused_collector = collect::<FusedScan>(&offline, "fusion/scan", &stop, quiet);
-    let pose_collector = collect::<PoseEstimate>(&offline, "slam/pose", &stop, quiet);
+    let fused_collector = collect::<FusedScan>(&offline, topics::FUSION_SCAN, &stop, quiet);
+    let pose_collector = collect::<PoseEstimate>(&offline, topics::SLAM_POSE, &stop, quiet);
     // --restamp: the synchroniser drops inputs older than its timeout and SLAM
     // waits for odometry relative to now, so the replay must look measured
     // now; the shift is one constant for all stamps.
@@ -892,9 +896,9 @@ fn replayed_inputs_give_fusion_and_slam_the_same_output_as_live() {
         replayed[0].scan.header.stamp_ns as i64 - live_fused[0].scan.header.stamp_ns as i64;
     assert!(offset > 0, "replayed stamps are later than the live ones");
     for (i, (a, b)) in replayed.iter().zip(&live_fused).enumerate() {
-        let mut a = Message::FusedScan(Box::new(*a));
+        let mut a = AnyMessage::FusedScan(Box::new(*a));
         a.shift_stamps(-offset);
-        let Message::FusedScan(a) = a else {
+        let AnyMessage::FusedScan(a) = a else {
             unreachable!()
         };
         assert!(

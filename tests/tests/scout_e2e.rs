@@ -161,7 +161,7 @@ fn odometry_and_all_16_sonars_match_what_the_emulator_was_fed() {
     // Health reports the link as fine.
     let h = wait_for::<Health>(
         &r.bus,
-        &topics::health("scout"),
+        topics::health("scout"),
         Duration::from_secs(5),
         |h| {
             h.state() == HealthState::Ok && h.metrics().iter().any(|m| m.name.as_str() == "odom_hz")
@@ -252,7 +252,7 @@ fn link_pulled_and_restored_resumes_within_1_s() {
     assert_eq!(snap.stats.define, 2);
     let h = wait_for::<Health>(
         &r.bus,
-        &topics::health("scout"),
+        topics::health("scout"),
         Duration::from_secs(5),
         |h| {
             h.metrics()
@@ -278,7 +278,7 @@ fn corrupted_replies_are_counted_and_odometry_keeps_flowing() {
     assert!(corrupted > 0);
     let h = wait_for::<Health>(
         &r.bus,
-        &topics::health("scout"),
+        topics::health("scout"),
         Duration::from_secs(5),
         |h| {
             h.metrics()

@@ -8,7 +8,7 @@
 //! stamped when the world measured it (checked against a second, identical
 //! world stepped here: same scenario and seed ⇒ same sensor data).
 
-use smokenav_platform_bus::{Bus, Publisher, Subscriber, Waiter, topics};
+use smokenav_platform_bus::{Bus, Publisher, Subscriber, Topic, Waiter, topics};
 use smokenav_shared_types::{
     BeamReading, FusedScan, Health, HealthState, LaserScan, Odometry, PoseEstimate, SmokeReading,
     SonarRing, SonarStatus, SyncState, VelocityCommand,
@@ -56,7 +56,7 @@ fn start(test: &str, scenario: Scenario, fusion: bool) -> (Rig, SimLink) {
     }
     for (role, p) in roles.iter().zip(&procs) {
         let pid = p.pid();
-        wait_for::<Health>(&bus, &topics::health(role), Duration::from_secs(30), |h| {
+        wait_for::<Health>(&bus, topics::health(role), Duration::from_secs(30), |h| {
             h.pid == pid && matches!(h.state(), HealthState::Ok | HealthState::Degraded)
         })
         .unwrap_or_else(|e| panic!("{role} not ready: {e}\n{}", p.output()));
@@ -100,7 +100,7 @@ struct Tap<T: smokenav_platform_bus::Message> {
 }
 
 impl<T: smokenav_platform_bus::Message> Tap<T> {
-    fn new(bus: &Bus, topic: &str) -> Self {
+    fn new(bus: &Bus, topic: Topic<T>) -> Self {
         Self {
             sub: bus.subscriber(topic).unwrap(),
             got: Default::default(),
@@ -158,7 +158,7 @@ fn scout_world_reaches_the_bus_through_the_real_drivers_at_device_rates() {
     let odom = Tap::<Odometry>::new(&rig.bus, topics::BASE_ODOM);
     let smoke = Tap::<SmokeReading>::new(&rig.bus, topics::SMOKE_LEVEL);
     let fused = Tap::<FusedScan>::new(&rig.bus, topics::FUSION_SCAN);
-    let truth = Tap::<PoseEstimate>::new(&rig.bus, TRUTH_TOPIC);
+    let truth = Tap::<PoseEstimate>::new(&rig.bus, Topic::new(TRUTH_TOPIC));
     let waiter = Waiter::new().unwrap();
     let _g = [
         waiter.attach(&laser.sub).unwrap(),
@@ -356,7 +356,7 @@ fn without_a_route_the_drivers_velocity_commands_move_the_world() {
     let start_pose = scenario.start;
     let (rig, link) = start("sim_driven", scenario, false);
     assert!(link.driven_by_commands());
-    let truth = Tap::<PoseEstimate>::new(&rig.bus, TRUTH_TOPIC);
+    let truth = Tap::<PoseEstimate>::new(&rig.bus, Topic::new(TRUTH_TOPIC));
     let waiter = Waiter::new().unwrap();
     let _g = waiter.attach(&truth.sub).unwrap();
     let mut cmd: Publisher<VelocityCommand> = rig.bus.publisher(topics::BASE_CMD_VEL).unwrap();

@@ -8,7 +8,7 @@
 use smokenav_algorithms_eval::{StampedPose, TrajectoryOptions, evaluate_trajectories};
 use smokenav_algorithms_slam::Pose2;
 use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
-use smokenav_platform_bus::{MapSubscriber, Publisher, Waiter, topics};
+use smokenav_platform_bus::{Publisher, Waiter, topics};
 use smokenav_platform_config::MountPose;
 use smokenav_platform_config::slam::SlamInput;
 use smokenav_shared_types::{
@@ -190,7 +190,7 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
         "{occupied} occupied, {free} free cells"
     );
     assert!(saved.join("map.png").exists());
-    let sub = MapSubscriber::create(&bus, topics::SLAM_MAP)?;
+    let sub = bus.map_subscriber(topics::SLAM_MAP)?;
     let _m = waiter.attach(&sub)?;
 
     // SIGUSR1 makes the process write its own map.

@@ -94,7 +94,7 @@ impl Rig {
     }
 
     fn health_until(&self, timeout: Duration, done: impl FnMut(&Health) -> bool) -> Vec<Health> {
-        wait_for(&self.bus, &topics::health("smoke"), timeout, done)
+        wait_for(&self.bus, topics::health("smoke"), timeout, done)
             .unwrap_or_else(|e| panic!("{e}\n{}", self.driver.output()))
     }
 }

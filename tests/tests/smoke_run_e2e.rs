@@ -118,7 +118,7 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
         .collect();
     for (role, p) in roles.iter().zip(&procs) {
         let pid = p.pid();
-        wait_for::<Health>(&bus, &topics::health(role), Duration::from_secs(60), |h| {
+        wait_for::<Health>(&bus, topics::health(role), Duration::from_secs(60), |h| {
             h.pid == pid && matches!(h.state(), HealthState::Ok | HealthState::Degraded)
         })
         .unwrap_or_else(|e| panic!("{role} not ready: {e}\n{}", p.output()));
@@ -165,12 +165,10 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
         drain(&pose_sub, &mut poses);
     }
     let health = |role: &str| {
-        wait_for::<Health>(&bus, &topics::health(role), Duration::from_secs(5), |_| {
-            true
-        })
-        .unwrap()
-        .pop()
-        .unwrap()
+        wait_for::<Health>(&bus, topics::health(role), Duration::from_secs(5), |_| true)
+            .unwrap()
+            .pop()
+            .unwrap()
     };
     let fusion_health = health("fusion");
     let slam_health = health("slam");

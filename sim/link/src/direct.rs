@@ -68,10 +68,10 @@ pub enum DirectMessage {
 impl DirectMessage {
     pub fn topic(&self) -> &'static str {
         match self {
-            DirectMessage::Laser(_) => smokenav_platform_bus::topics::LASER_SCAN,
-            DirectMessage::Odometry(_) => smokenav_platform_bus::topics::BASE_ODOM,
-            DirectMessage::Sonar(_) => smokenav_platform_bus::topics::BASE_SONAR,
-            DirectMessage::Smoke(_) => smokenav_platform_bus::topics::SMOKE_LEVEL,
+            DirectMessage::Laser(_) => smokenav_shared_types::catalog::topic_names::LASER_SCAN,
+            DirectMessage::Odometry(_) => smokenav_shared_types::catalog::topic_names::BASE_ODOM,
+            DirectMessage::Sonar(_) => smokenav_shared_types::catalog::topic_names::BASE_SONAR,
+            DirectMessage::Smoke(_) => smokenav_shared_types::catalog::topic_names::SMOKE_LEVEL,
         }
     }
 

@@ -34,7 +34,7 @@ pub struct TruthPublisher {
 impl TruthPublisher {
     pub fn new(bus: &Bus) -> Result<Self, BusError> {
         Ok(Self {
-            publisher: bus.publisher(TRUTH_TOPIC)?,
+            publisher: bus.publisher(smokenav_platform_bus::Topic::new(TRUTH_TOPIC))?,
         })
     }
 

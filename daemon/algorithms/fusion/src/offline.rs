@@ -10,14 +10,15 @@
 
 use crate::engine::StepReport;
 use crate::pipeline::FusionPipeline;
+use smokenav_shared_types::catalog::topic_names;
 use smokenav_shared_types::record::{FusedScanRecord, Message, TopicRecord};
 use smokenav_shared_types::{ConversionError, FusedScan, LaserScan, SmokeReading, SonarRing};
 use std::io::{self, BufRead, Write};
 
-pub const LASER_TOPIC: &str = "laser/scan";
-pub const SONAR_TOPIC: &str = "base/sonar";
-pub const SMOKE_TOPIC: &str = "smoke/level";
-pub const FUSED_TOPIC: &str = "fusion/scan";
+pub const LASER_TOPIC: &str = topic_names::LASER_SCAN;
+pub const SONAR_TOPIC: &str = topic_names::BASE_SONAR;
+pub const SMOKE_TOPIC: &str = topic_names::SMOKE_LEVEL;
+pub const FUSED_TOPIC: &str = topic_names::FUSION_SCAN;
 
 /// Longest line accepted: a full 1081-beam scan is about 30 kB of JSON.
 pub const MAX_LINE_BYTES: usize = 4 << 20;
@@ -59,20 +60,6 @@ pub struct OfflineReport {
     pub ignored: u64,
     pub bad: u64,
     pub written: u64,
-}
-
-fn type_name(m: &Message) -> &'static str {
-    match m {
-        Message::LaserScan(_) => "LaserScan",
-        Message::SonarRing(_) => "SonarRing",
-        Message::Odometry(_) => "Odometry",
-        Message::VelocityCommand(_) => "VelocityCommand",
-        Message::SmokeReading(_) => "SmokeReading",
-        Message::FusedScan(_) => "FusedScan",
-        Message::PoseEstimate(_) => "PoseEstimate",
-        Message::MapInfo(_) => "MapInfo",
-        Message::Health(_) => "Health",
-    }
 }
 
 /// Reads one line of at most `max` bytes into `buf` (without the newline).
@@ -202,7 +189,7 @@ fn feed(
     let wrong = |topic, expected, m: &Message| LineError::WrongType {
         topic,
         expected,
-        got: type_name(m),
+        got: m.kind().name(),
     };
     match (rec.topic.as_str(), &rec.message) {
         (LASER_TOPIC, Message::LaserScan(m)) => {

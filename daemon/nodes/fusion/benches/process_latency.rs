@@ -87,7 +87,7 @@ fn main() {
         .subscriber::<FusedScan>(topics::FUSION_SCAN)
         .expect("sub");
     let health = bus
-        .subscriber::<Health>(&topics::health("fusion"))
+        .subscriber::<Health>(topics::health("fusion"))
         .expect("health");
     let mut laser = bus.publisher::<LaserScan>(topics::LASER_SCAN).expect("pub");
     let mut sonar = bus.publisher::<SonarRing>(topics::BASE_SONAR).expect("pub");

@@ -20,7 +20,7 @@
 use anyhow::Context;
 use clap::Parser;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
-use smokenav_platform_bus::{MapPublisher, Publisher, Subscriber, WaitOutcome, Waiter, topics};
+use smokenav_platform_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
 use smokenav_platform_config::{SlamBackendKind, SlamInput};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_runtime::{CommonArgs, Process};
@@ -95,8 +95,8 @@ impl Scans {
 
     fn topic(&self) -> &'static str {
         match self {
-            Scans::Fused(_) => topics::FUSION_SCAN,
-            Scans::Laser(_) => topics::LASER_SCAN,
+            Scans::Fused(_) => smokenav_shared_types::catalog::topic_names::FUSION_SCAN,
+            Scans::Laser(_) => smokenav_shared_types::catalog::topic_names::LASER_SCAN,
         }
     }
 }
@@ -154,7 +154,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     };
     let odom_sub = p.bus.subscriber::<Odometry>(topics::BASE_ODOM)?;
     let mut poses: Publisher<PoseEstimate> = p.bus.publisher(topics::SLAM_POSE)?;
-    let mut maps = MapPublisher::create(&p.bus, topics::SLAM_MAP)?;
+    let mut maps = p.bus.map_publisher(topics::SLAM_MAP)?;
     let waiter = Waiter::new()?;
     let _attached = match &scans {
         Scans::Fused(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],

@@ -5,14 +5,14 @@
 //! subscriber is this binary re-executed with `SMOKENAV_BENCH_ROLE=subscriber`;
 //! latency is CLOCK_MONOTONIC at receive minus the stamp written just before send.
 
-use smokenav_platform_bus::{Bus, BusOptions, WaitOutcome, Waiter};
+use smokenav_platform_bus::{Bus, BusOptions, Topic, WaitOutcome, Waiter};
 use smokenav_shared_types::LaserScan;
 use smokenav_shared_types::clock::monotonic_now_ns;
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-const TOPIC: &str = "test/latency";
+const TOPIC: Topic<LaserScan> = Topic::new("test/latency");
 const SAMPLES: u64 = 20_000;
 const WARMUP: u64 = 500;
 /// 2 kHz: fast enough to finish in ~10 s, slow enough that every sample
@@ -21,7 +21,7 @@ const PERIOD: Duration = Duration::from_micros(500);
 
 fn subscriber(instance: &str) {
     let bus = Bus::open(&BusOptions::new(instance, "bench-sub")).expect("bus");
-    let sub = bus.subscriber::<LaserScan>(TOPIC).expect("subscriber");
+    let sub = bus.subscriber(TOPIC).expect("subscriber");
     let waiter = Waiter::new().expect("waiter");
     let _g = waiter.attach(&sub).expect("attach");
     let mut hist = hdrhistogram::Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3).unwrap();
@@ -69,7 +69,7 @@ fn main() {
     assert_eq!(lines.next().and_then(Result::ok).as_deref(), Some("ready"));
 
     let bus = Bus::open(&BusOptions::new(&instance, "bench-pub")).expect("bus");
-    let mut publisher = bus.publisher::<LaserScan>(TOPIC).expect("publisher");
+    let mut publisher = bus.publisher(TOPIC).expect("publisher");
     publisher.update_connections().expect("connect");
     let mut scan = LaserScan {
         count: 1081,

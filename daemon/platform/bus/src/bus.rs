@@ -1,13 +1,15 @@
 //! The bus handle: one iceoryx2 node per process, named services per instance.
 
 use crate::error::BusError;
-use crate::message::Message;
+use crate::map::{MapPublisher, MapSubscriber};
 use crate::publisher::Publisher;
+use crate::service::Endpoint;
 use crate::subscriber::Subscriber;
-use crate::topics;
+use crate::topics::Topic;
 use iceoryx2::config::Config;
 use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
+use smokenav_shared_types::{MapInfo, Message};
 
 /// How to open the bus.
 #[derive(Debug, Clone)]
@@ -23,6 +25,7 @@ pub struct BusOptions {
 }
 
 impl BusOptions {
+    /// Options for node `node_name` on `instance`, with iceoryx2's default root path.
     pub fn new(instance: &str, node_name: &str) -> Self {
         Self {
             instance: instance.to_owned(),
@@ -31,6 +34,7 @@ impl BusOptions {
         }
     }
 
+    /// Sets the iceoryx2 root path (`None`: the default).
     pub fn with_root_path(mut self, root: Option<String>) -> Self {
         self.root_path = root;
         self
@@ -68,8 +72,7 @@ pub struct ServiceInfo {
 
 /// One process's connection to the bus.
 pub struct Bus {
-    node: Node<ipc::Service>,
-    instance: String,
+    endpoint: Endpoint,
     config: Config,
 }
 
@@ -97,45 +100,44 @@ impl Bus {
                 reason: format!("{e:?}"),
             })?;
         Ok(Self {
-            node,
-            instance: opts.instance.clone(),
+            endpoint: Endpoint::new(node, opts.instance.clone()),
             config,
         })
     }
 
+    /// The instance this bus connects to.
     pub fn instance(&self) -> &str {
-        &self.instance
+        self.endpoint.instance()
     }
 
     /// The full iceoryx2 service name of a topic.
     pub fn service_name(&self, topic: &str) -> String {
-        format!("{}/{}", self.instance, topic)
+        self.endpoint.service_name(topic)
     }
 
-    pub(crate) fn node(&self) -> &Node<ipc::Service> {
-        &self.node
+    /// A publisher of `topic`'s type on `topic`.
+    pub fn publisher<T: Message>(&self, topic: Topic<T>) -> Result<Publisher<T>, BusError> {
+        Publisher::create(&self.endpoint, topic.name())
     }
 
-    pub(crate) fn iox_name(&self, topic: &str) -> Result<(String, ServiceName), BusError> {
-        let full = self.service_name(topic);
-        let name = ServiceName::new(&full).map_err(|e| BusError::InvalidName {
-            name: full.clone(),
-            reason: format!("{e:?}"),
-        })?;
-        Ok((full, name))
+    /// A subscriber of `topic`'s type on `topic`.
+    pub fn subscriber<T: Message>(&self, topic: Topic<T>) -> Result<Subscriber<T>, BusError> {
+        Subscriber::create(&self.endpoint, topic.name())
     }
 
-    pub fn publisher<T: Message>(&self, topic: &str) -> Result<Publisher<T>, BusError> {
-        Publisher::create(self, topic)
+    /// A publisher of occupancy grids on `topic` (`topics::SLAM_MAP`).
+    pub fn map_publisher(&self, topic: Topic<MapInfo>) -> Result<MapPublisher, BusError> {
+        MapPublisher::create(&self.endpoint, topic.name())
     }
 
-    pub fn subscriber<T: Message>(&self, topic: &str) -> Result<Subscriber<T>, BusError> {
-        Subscriber::create(self, topic)
+    /// A subscriber of occupancy grids on `topic` (`topics::SLAM_MAP`).
+    pub fn map_subscriber(&self, topic: Topic<MapInfo>) -> Result<MapSubscriber, BusError> {
+        MapSubscriber::create(&self.endpoint, topic.name())
     }
 
     /// The services of this instance, as topics.
     pub fn list(&self) -> Result<Vec<ServiceInfo>, BusError> {
-        list_services(&self.config, &self.instance)
+        list_services(&self.config, self.instance())
     }
 }
 
@@ -180,28 +182,4 @@ fn validate_instance(instance: &str) -> Result<(), BusError> {
             reason: "an instance is 1–48 characters of [A-Za-z0-9_-]".into(),
         })
     }
-}
-
-pub(crate) fn qos(topic: &str) -> topics::Qos {
-    topics::qos(topic)
-}
-
-/// Applies a topic's QoS to a publish–subscribe service builder, so every
-/// port kind opens the service with identical settings.
-pub(crate) fn with_qos<P, H>(
-    builder: iceoryx2::service::builder::publish_subscribe::Builder<P, H, ipc::Service>,
-    topic: &str,
-) -> iceoryx2::service::builder::publish_subscribe::Builder<P, H, ipc::Service>
-where
-    P: core::fmt::Debug + iceoryx2::prelude::IceoryxSend + ?Sized,
-    H: core::fmt::Debug + ZeroCopySend,
-{
-    let q = qos(topic);
-    builder
-        .history_size(q.history)
-        .subscriber_max_buffer_size(q.buffer)
-        .max_publishers(q.max_publishers)
-        .max_subscribers(q.max_subscribers)
-        .max_nodes(32)
-        .enable_safe_overflow(true)
 }

@@ -1,20 +1,44 @@
+//! The bus's one error type.
+
 use thiserror::Error;
 
 /// Errors from the bus. Each says which service and which operation.
 #[derive(Debug, Error)]
 pub enum BusError {
+    /// An instance, node or service name iceoryx2 cannot use.
     #[error("invalid bus name `{name}`: {reason}")]
-    InvalidName { name: String, reason: String },
-    #[error("cannot create the bus node `{node}`: {reason}")]
-    Node { node: String, reason: String },
-    #[error("service `{service}`: cannot {op}: {reason}")]
-    Service {
-        service: String,
-        op: &'static str,
+    InvalidName {
+        /// The name.
+        name: String,
+        /// Why it is refused.
         reason: String,
     },
+    /// This process's node could not be created.
+    #[error("cannot create the bus node `{node}`: {reason}")]
+    Node {
+        /// The node's name.
+        node: String,
+        /// iceoryx2's reason.
+        reason: String,
+    },
+    /// An operation on one service failed.
+    #[error("service `{service}`: cannot {op}: {reason}")]
+    Service {
+        /// The full service name, `<instance>/<topic>`.
+        service: String,
+        /// What was attempted.
+        op: &'static str,
+        /// iceoryx2's reason.
+        reason: String,
+    },
+    /// Waiting failed.
     #[error("waitset: {op}: {reason}")]
-    WaitSet { op: &'static str, reason: String },
+    WaitSet {
+        /// What was attempted.
+        op: &'static str,
+        /// iceoryx2's reason.
+        reason: String,
+    },
 }
 
 impl BusError {

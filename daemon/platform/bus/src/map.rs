@@ -1,10 +1,9 @@
 //! The occupancy-grid topic: a variable-length `i8` slice with a `MapInfo` user header.
 
-use crate::bus::{Bus, with_qos};
 use crate::error::BusError;
-use crate::subscriber::open_event;
+use crate::port::{Inbox, Outbox, SubscriberStats};
+use crate::service::{Endpoint, TopicService};
 use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::prelude::*;
@@ -19,58 +18,40 @@ const INITIAL_CELLS: usize = 256 * 256;
 
 type MapService =
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, [i8], MapInfo>;
-type EventService = iceoryx2::service::port_factory::event::PortFactory<ipc::Service>;
 
-fn open_map_service(
-    bus: &Bus,
-    topic: &str,
-) -> Result<(String, MapService, EventService), BusError> {
-    let (full, name) = bus.iox_name(topic)?;
-    let builder = bus
-        .node()
-        .service_builder(&name)
-        .publish_subscribe::<[i8]>()
-        .user_header::<MapInfo>();
-    let pubsub = with_qos(builder, topic)
+fn open_map_service(service: &TopicService<'_>) -> Result<MapService, BusError> {
+    let builder = service.publish_subscribe::<[i8]>().user_header::<MapInfo>();
+    service
+        .with_qos(builder)
         .open_or_create()
-        .map_err(|e| BusError::service(&full, "open map service", e))?;
-    let event = open_event(bus, &full, &name, topic)?;
-    Ok((full, pubsub, event))
+        .map_err(|e| service.error("open map service", e))
 }
 
+/// Publishes maps on one topic and wakes its subscribers.
 pub struct MapPublisher {
-    service: String,
     publisher: IoxPublisher<ipc::Service, [i8], MapInfo>,
-    notifier: Notifier<ipc::Service>,
-    next_seq: u64,
+    outbox: Outbox,
 }
 
 impl MapPublisher {
-    pub fn create(bus: &Bus, topic: &str) -> Result<Self, BusError> {
-        let (full, pubsub, event) = open_map_service(bus, topic)?;
+    pub(crate) fn create(endpoint: &Endpoint, topic: &str) -> Result<Self, BusError> {
+        let service = endpoint.service(topic)?;
+        let pubsub = open_map_service(&service)?;
+        let outbox = Outbox::create(&service, &service.event()?)?;
         let publisher = pubsub
             .publisher_builder()
             .initial_max_slice_len(INITIAL_CELLS)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(|e| BusError::service(&full, "create map publisher", e))?;
-        let notifier = event
-            .notifier_builder()
-            .create()
-            .map_err(|e| BusError::service(&full, "create notifier", e))?;
-        Ok(Self {
-            service: full,
-            publisher,
-            notifier,
-            next_seq: 0,
-        })
+            .map_err(|e| service.error("create map publisher", e))?;
+        Ok(Self { publisher, outbox })
     }
 
     /// Publishes `cells` (row-major, `info.width × info.height`) with `info`; `header.seq` is set here.
     pub fn publish(&mut self, info: &MapInfo, cells: &[i8]) -> Result<u64, BusError> {
         if cells.len() != info.cell_count() {
             return Err(BusError::Service {
-                service: self.service.clone(),
+                service: self.outbox.service().to_owned(),
                 op: "publish map",
                 reason: format!(
                     "{} cells given for a {}×{} map",
@@ -83,56 +64,63 @@ impl MapPublisher {
         let mut sample = self
             .publisher
             .loan_slice_uninit(cells.len())
-            .map_err(|e| BusError::service(&self.service, "loan map slice", e))?;
-        let seq = self.next_seq;
+            .map_err(|e| self.outbox.error("loan map slice", e))?;
         *sample.user_header_mut() = MapInfo {
-            header: smokenav_shared_types::Header { seq, ..info.header },
+            header: smokenav_shared_types::Header {
+                seq: self.outbox.next_seq(),
+                ..info.header
+            },
             ..*info
         };
         let sample = sample.write_from_slice(cells);
         sample
             .send()
-            .map_err(|e| BusError::service(&self.service, "send map", e))?;
-        self.next_seq += 1;
-        if let Err(e) = self.notifier.notify() {
-            tracing::debug!(service = %self.service, error = ?e, "notify failed");
-        }
-        Ok(seq)
+            .map_err(|e| self.outbox.error("send map", e))?;
+        Ok(self.outbox.sent())
     }
 }
 
+/// Receives maps from one topic, with the same loss accounting as [`crate::Subscriber`].
 pub struct MapSubscriber {
-    service: String,
     subscriber: IoxSubscriber<ipc::Service, [i8], MapInfo>,
-    listener: Listener<ipc::Service>,
+    inbox: Inbox,
 }
 
 impl MapSubscriber {
-    pub fn create(bus: &Bus, topic: &str) -> Result<Self, BusError> {
-        let (full, pubsub, event) = open_map_service(bus, topic)?;
+    pub(crate) fn create(endpoint: &Endpoint, topic: &str) -> Result<Self, BusError> {
+        let service = endpoint.service(topic)?;
+        let pubsub = open_map_service(&service)?;
+        let inbox = Inbox::create(&service, &service.event()?)?;
         let subscriber = pubsub
             .subscriber_builder()
             .create()
-            .map_err(|e| BusError::service(&full, "create map subscriber", e))?;
-        let listener = event
-            .listener_builder()
-            .create()
-            .map_err(|e| BusError::service(&full, "create listener", e))?;
-        Ok(Self {
-            service: full,
-            subscriber,
-            listener,
-        })
+            .map_err(|e| service.error("create map subscriber", e))?;
+        Ok(Self { subscriber, inbox })
     }
 
     pub(crate) fn listener(&self) -> &Listener<ipc::Service> {
-        &self.listener
+        self.inbox.listener()
     }
 
+    /// What this subscriber has received and lost so far.
+    pub fn stats(&self) -> SubscriberStats {
+        self.inbox.stats()
+    }
+
+    /// Takes the next queued map, if any. Never blocks.
     pub fn receive(&self) -> Result<Option<MapSample>, BusError> {
-        let _ = self.listener.try_wait(|_| {});
-        self.subscriber
-            .receive()
-            .map_err(|e| BusError::service(&self.service, "receive map", e))
+        self.inbox.receive(
+            || {
+                self.subscriber
+                    .receive()
+                    .map_err(|e| self.inbox.error("receive map", e))
+            },
+            |s| {
+                (
+                    s.header().publisher_id().value(),
+                    s.user_header().header.seq,
+                )
+            },
+        )
     }
 }

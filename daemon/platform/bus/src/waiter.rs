@@ -2,11 +2,11 @@
 
 use crate::error::BusError;
 use crate::map::MapSubscriber;
-use crate::message::Message;
 use crate::subscriber::Subscriber;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
+use smokenav_shared_types::Message;
 use std::cell::Cell;
 use std::time::Duration;
 
@@ -38,6 +38,7 @@ pub struct Waiter {
 
 /// Anything that can be attached: typed subscribers and the map subscriber.
 pub trait Wakeable {
+    /// The listener the waiter watches.
     fn wake_listener(&self) -> &Listener<ipc::Service>;
 }
 
@@ -54,6 +55,7 @@ impl Wakeable for MapSubscriber {
 }
 
 impl Waiter {
+    /// A waiter with nothing attached.
     pub fn new() -> Result<Self, BusError> {
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::Disabled)

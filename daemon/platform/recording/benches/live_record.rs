@@ -10,7 +10,7 @@
 //! per rate: messages offered and received per second, gaps the recorder
 //! counted (sequence numbers it never saw), its CPU use, and the file size.
 
-use smokenav_platform_bus::{Bus, BusOptions};
+use smokenav_platform_bus::{Bus, BusOptions, topics};
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::{
     BeamReading, Header, LaserScan, Odometry, SmokeReading, SonarReading, SonarRing, SonarStatus,
@@ -75,7 +75,7 @@ fn publish(instance: &str, topic: &'static str, rate: u64, start: u64, end: u64)
     }
     match topic {
         "laser/scan" => run!(
-            bus.publisher::<LaserScan>(topic).unwrap(),
+            bus.publisher(topics::LASER_SCAN).unwrap(),
             |s: &mut LaserScan, t| {
                 s.header = Header::new(t, 0, "laser");
                 s.count = 682;
@@ -89,14 +89,14 @@ fn publish(instance: &str, topic: &'static str, rate: u64, start: u64, end: u64)
             }
         ),
         "base/odom" => run!(
-            bus.publisher::<Odometry>(topic).unwrap(),
+            bus.publisher(topics::BASE_ODOM).unwrap(),
             |o: &mut Odometry, t| {
                 o.header = Header::new(t, 0, "odom");
                 o.x = t as f64 * 1e-9;
             }
         ),
         "base/sonar" => run!(
-            bus.publisher::<SonarRing>(topic).unwrap(),
+            bus.publisher(topics::BASE_SONAR).unwrap(),
             |r: &mut SonarRing, t| {
                 r.header = Header::new(t, 0, "base_link");
                 for i in 0..8 {
@@ -105,7 +105,7 @@ fn publish(instance: &str, topic: &'static str, rate: u64, start: u64, end: u64)
             }
         ),
         _ => run!(
-            bus.publisher::<SmokeReading>(topic).unwrap(),
+            bus.publisher(topics::SMOKE_LEVEL).unwrap(),
             |s: &mut SmokeReading, t| {
                 s.header = Header::new(t, 0, "smoke");
                 s.level = 10.0;

@@ -7,7 +7,7 @@
 //! a health report per second. Written to a real file in a temporary directory.
 
 use smokenav_platform_recording::{
-    BusMessage, Compression, Playback, Recorder, SinkOptions, SinkStats,
+    AnyMessageRef, Compression, Playback, Recorder, SinkOptions, SinkStats,
 };
 use smokenav_shared_types::{
     BeamReading, FusedScan, Header, Health, LaserScan, Odometry, SmokeReading, SonarReading,
@@ -69,33 +69,33 @@ fn record(path: &std::path::Path, seconds: u64, compression: Compression) -> (Si
     for seq in 0..seconds * 10 {
         let now = seq * 100_000_000;
         let s = scan(seq);
-        rec.record("laser/scan", BusMessage::LaserScan(&s), now)
+        rec.record("laser/scan", AnyMessageRef::LaserScan(&s), now)
             .unwrap();
         let o = Odometry {
             header: Header::new(now, seq, "odom"),
             x: seq as f64 * 0.01,
             ..Default::default()
         };
-        rec.record("base/odom", BusMessage::Odometry(&o), now)
+        rec.record("base/odom", AnyMessageRef::Odometry(&o), now)
             .unwrap();
         let r = ring(seq);
-        rec.record("base/sonar", BusMessage::SonarRing(&r), now)
+        rec.record("base/sonar", AnyMessageRef::SonarRing(&r), now)
             .unwrap();
         let k = SmokeReading {
             header: Header::new(now, seq, "smoke"),
             level: 12.0,
             ..Default::default()
         };
-        rec.record("smoke/level", BusMessage::SmokeReading(&k), now)
+        rec.record("smoke/level", AnyMessageRef::SmokeReading(&k), now)
             .unwrap();
         fused.scan = s;
         fused.scan.header.seq = seq;
         fused.section_count = 8;
-        rec.record("fusion/scan", BusMessage::FusedScan(&fused), now)
+        rec.record("fusion/scan", AnyMessageRef::FusedScan(&fused), now)
             .unwrap();
         if seq.is_multiple_of(10) {
             health.header = Header::new(now, seq / 10, "");
-            rec.record("health/hokuyo", BusMessage::Health(&health), now)
+            rec.record("health/hokuyo", AnyMessageRef::Health(&health), now)
                 .unwrap();
         }
     }

@@ -7,21 +7,18 @@
 //! holds complete pairs only.
 
 use crate::codec::{self, SonarPoint, Transform2};
+use crate::ros2;
 use crate::schema::{self, MsgDef};
+use smokenav_shared_types::catalog::ros2_topic_name;
 use smokenav_shared_types::header::FRAME_ID_LEN;
-use smokenav_shared_types::{
-    FixedStr, FusedScan, Health, LaserScan, MapInfo, Odometry, PoseEstimate, SmokeReading,
-    SonarRing, SonarStatus, VelocityCommand,
-};
+use smokenav_shared_types::{AnyMessageRef, FixedStr, MessageKind, SonarRing, SonarStatus};
 use std::collections::HashMap;
 
-/// Suffix of the companion channel of a standard message (`/laser/scan/extras`).
-pub const EXTRAS_SUFFIX: &str = "/extras";
-/// Suffix of the fused scan's companion (`/fusion/scan/decisions`).
-pub const DECISIONS_SUFFIX: &str = "/decisions";
 /// Suffix of the sonar ring's PointCloud2 view (`/base/sonar/points`).
 pub const POINTS_SUFFIX: &str = "/points";
+/// The transforms of odometry and SLAM poses.
 pub const TF_TOPIC: &str = "/tf";
+/// The robot profile's fixed transforms.
 pub const TF_STATIC_TOPIC: &str = "/tf_static";
 
 /// What a channel is for.
@@ -178,40 +175,6 @@ impl RobotGeometry {
     }
 }
 
-/// A bus message borrowed for encoding.
-#[derive(Debug, Clone, Copy)]
-pub enum BusMessage<'a> {
-    LaserScan(&'a LaserScan),
-    FusedScan(&'a FusedScan),
-    Odometry(&'a Odometry),
-    SonarRing(&'a SonarRing),
-    VelocityCommand(&'a VelocityCommand),
-    SmokeReading(&'a SmokeReading),
-    PoseEstimate(&'a PoseEstimate),
-    Map(&'a MapInfo, &'a [i8]),
-    Health(&'a Health),
-}
-
-impl BusMessage<'_> {
-    pub fn seq(&self) -> u64 {
-        self.header().seq
-    }
-
-    pub fn header(&self) -> &smokenav_shared_types::Header {
-        match self {
-            BusMessage::LaserScan(m) => &m.header,
-            BusMessage::FusedScan(m) => &m.scan.header,
-            BusMessage::Odometry(m) => &m.header,
-            BusMessage::SonarRing(m) => &m.header,
-            BusMessage::VelocityCommand(m) => &m.header,
-            BusMessage::SmokeReading(m) => &m.header,
-            BusMessage::PoseEstimate(m) => &m.header,
-            BusMessage::Map(m, _) => &m.header,
-            BusMessage::Health(m) => &m.header,
-        }
-    }
-}
-
 /// The channels of one bus topic: the main one, its companion, a view.
 #[derive(Debug, Clone, Copy)]
 struct TopicChannels {
@@ -264,79 +227,44 @@ impl Encoder {
         i
     }
 
-    /// The channels of `topic` for messages like `msg`, created on first use.
+    /// The channels of `topic` for messages of `kind`, created on first use.
     fn topic_channels(
         &mut self,
         batch: &mut Batch,
         topic: &str,
-        msg: &BusMessage,
+        kind: MessageKind,
     ) -> TopicChannels {
         if let Some(&c) = self.by_topic.get(topic) {
             return c;
         }
-        use ChannelRole::*;
-        let base = format!("/{}", topic.trim_start_matches('/'));
-        type Extra = Option<(&'static str, &'static MsgDef)>;
-        let (main, companion, view, qos): (&'static MsgDef, Extra, Extra, RosQos) = match msg {
-            BusMessage::LaserScan(_) => (
-                &schema::LASER_SCAN,
-                Some((EXTRAS_SUFFIX, &schema::SCAN_EXTRAS)),
-                None,
-                RosQos::Stream,
-            ),
-            BusMessage::FusedScan(_) => (
-                &schema::LASER_SCAN,
-                Some((DECISIONS_SUFFIX, &schema::FUSED_DECISIONS)),
-                None,
-                RosQos::Stream,
-            ),
-            BusMessage::Odometry(_) => (
-                &schema::ODOMETRY,
-                Some((EXTRAS_SUFFIX, &schema::ODOMETRY_EXTRAS)),
-                None,
-                RosQos::Stream,
-            ),
-            BusMessage::SonarRing(_) => (
-                &schema::SONAR_RING,
-                None,
-                self.geometry
-                    .is_some()
-                    .then_some((POINTS_SUFFIX, &schema::POINT_CLOUD2)),
-                RosQos::Stream,
-            ),
-            BusMessage::VelocityCommand(_) => (
-                &schema::TWIST_STAMPED,
-                Some((EXTRAS_SUFFIX, &schema::STAMP_SEQ)),
-                None,
-                RosQos::Stream,
-            ),
-            BusMessage::SmokeReading(_) => (&schema::SMOKE_READING, None, None, RosQos::Stream),
-            BusMessage::PoseEstimate(_) => (
-                &schema::POSE_STAMPED,
-                Some((EXTRAS_SUFFIX, &schema::POSE_EXTRAS)),
-                None,
-                RosQos::Stream,
-            ),
-            BusMessage::Map(..) => (
-                &schema::OCCUPANCY_GRID,
-                Some((EXTRAS_SUFFIX, &schema::MAP_EXTRAS)),
-                None,
-                RosQos::Latched,
-            ),
-            BusMessage::Health(_) => (&schema::HEALTH, None, None, RosQos::Stream),
-        };
-        let main_role = if companion.is_some() {
-            Standard
+        let layout = ros2::layout(kind);
+        let base = ros2_topic_name(topic);
+        let qos = if layout.latched {
+            RosQos::Latched
         } else {
-            Complete
+            RosQos::Stream
+        };
+        let view = (kind == MessageKind::SonarRing && self.geometry.is_some())
+            .then_some((POINTS_SUFFIX, &schema::POINT_CLOUD2));
+        let main_role = if layout.companion.is_some() {
+            ChannelRole::Standard
+        } else {
+            ChannelRole::Complete
         };
         let c = TopicChannels {
-            main: self.add_channel(batch, base.clone(), main, main_role, qos),
-            companion: companion.map(|(sfx, def)| {
-                self.add_channel(batch, format!("{base}{sfx}"), def, Companion, qos)
+            main: self.add_channel(batch, base.clone(), layout.standard, main_role, qos),
+            companion: layout.companion.map(|(sfx, def)| {
+                self.add_channel(
+                    batch,
+                    format!("{base}{sfx}"),
+                    def,
+                    ChannelRole::Companion,
+                    qos,
+                )
             }),
-            view: view
-                .map(|(sfx, def)| self.add_channel(batch, format!("{base}{sfx}"), def, View, qos)),
+            view: view.map(|(sfx, def)| {
+                self.add_channel(batch, format!("{base}{sfx}"), def, ChannelRole::View, qos)
+            }),
         };
         self.by_topic.insert(topic.to_owned(), c);
         c
@@ -384,36 +312,16 @@ impl Encoder {
     }
 
     /// Appends the channels for `msg`, published on bus topic `topic`, to `batch`.
-    pub fn encode(&mut self, topic: &str, msg: BusMessage, log_time: u64, batch: &mut Batch) {
-        let ids = self.topic_channels(batch, topic, &msg);
+    pub fn encode(&mut self, topic: &str, msg: AnyMessageRef, log_time: u64, batch: &mut Batch) {
+        let ids = self.topic_channels(batch, topic, msg.kind());
         let h = msg.header();
         let (seq, stamp) = (h.seq as u32, h.stamp_ns);
-        let main = batch.slot(ids.main, seq, log_time, stamp);
-        match msg {
-            BusMessage::LaserScan(s) => codec::encode_laser_scan(s, main),
-            BusMessage::FusedScan(f) => codec::encode_laser_scan(&f.scan, main),
-            BusMessage::Odometry(o) => codec::encode_odometry(o, main),
-            BusMessage::SonarRing(r) => codec::encode_sonar_ring(r, main),
-            BusMessage::VelocityCommand(c) => codec::encode_twist_stamped(c, main),
-            BusMessage::SmokeReading(s) => codec::encode_smoke_reading(s, main),
-            BusMessage::PoseEstimate(p) => codec::encode_pose_stamped(p, main),
-            BusMessage::Map(info, cells) => codec::encode_occupancy_grid(info, cells, main),
-            BusMessage::Health(h) => codec::encode_health(h, main),
-        }
+        ros2::encode_standard(msg, batch.slot(ids.main, seq, log_time, stamp));
         if let Some(c) = ids.companion {
-            let out = batch.slot(c, seq, log_time, stamp);
-            match msg {
-                BusMessage::LaserScan(s) => codec::encode_scan_extras(s, out),
-                BusMessage::FusedScan(f) => codec::encode_fused_decisions(f, out),
-                BusMessage::Odometry(o) => codec::encode_odometry_extras(o, out),
-                BusMessage::VelocityCommand(c) => codec::encode_stamp_seq(&c.header, out),
-                BusMessage::PoseEstimate(p) => codec::encode_pose_extras(p, out),
-                BusMessage::Map(info, _) => codec::encode_map_extras(info, out),
-                BusMessage::SonarRing(_) | BusMessage::SmokeReading(_) | BusMessage::Health(_) => {}
-            }
+            ros2::encode_companion(msg, batch.slot(c, seq, log_time, stamp));
         }
         match msg {
-            BusMessage::SonarRing(r) => {
+            AnyMessageRef::SonarRing(r) => {
                 if let Some(v) = ids.view {
                     self.sonar_points(r);
                     codec::encode_sonar_points(
@@ -423,7 +331,7 @@ impl Encoder {
                     );
                 }
             }
-            BusMessage::Odometry(o) => {
+            AnyMessageRef::Odometry(o) => {
                 let pose = Pose2::new(o.x, o.y, o.theta);
                 self.last_odom = Some((pose, o.header.frame_id));
                 let t = Transform2 {
@@ -437,7 +345,7 @@ impl Encoder {
                 let tf = self.tf_channel(batch);
                 codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, stamp));
             }
-            BusMessage::PoseEstimate(p) => {
+            AnyMessageRef::PoseEstimate(p) => {
                 // map → odom needs the odometry the pose was estimated against;
                 // the latest one is the best estimate the recorder has.
                 if let Some((odom, odom_frame)) = self.last_odom {
@@ -494,6 +402,7 @@ pub fn map_to_odom(map_base: Pose2, odom_base: Pose2) -> Pose2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use smokenav_shared_types::{LaserScan, Odometry};
 
     #[test]
     fn map_to_odom_composes_back_to_the_slam_pose() {
@@ -516,7 +425,7 @@ mod tests {
             count: 3,
             ..Default::default()
         };
-        enc.encode("laser/scan", BusMessage::LaserScan(&scan), 9, &mut batch);
+        enc.encode("laser/scan", AnyMessageRef::LaserScan(&scan), 9, &mut batch);
         let topics: Vec<&str> = batch
             .messages()
             .iter()
@@ -526,7 +435,12 @@ mod tests {
         assert!(batch.messages().iter().all(|m| m.sequence == 7));
         assert_eq!(batch.new_channels.len(), 2);
         batch.clear();
-        enc.encode("laser/scan", BusMessage::LaserScan(&scan), 10, &mut batch);
+        enc.encode(
+            "laser/scan",
+            AnyMessageRef::LaserScan(&scan),
+            10,
+            &mut batch,
+        );
         assert!(batch.new_channels.is_empty(), "channels are announced once");
     }
 
@@ -539,7 +453,7 @@ mod tests {
             x: 1.0,
             ..Default::default()
         };
-        enc.encode("base/odom", BusMessage::Odometry(&o), 1, &mut batch);
+        enc.encode("base/odom", AnyMessageRef::Odometry(&o), 1, &mut batch);
         let last = batch.messages().last().unwrap();
         assert_eq!(enc.channels()[last.channel].topic, "/tf");
         assert_eq!(enc.channels()[last.channel].role, ChannelRole::View);

@@ -7,6 +7,9 @@
 //! holding Statistics. Each bus message maps to a standard ROS 2 message
 //! where one exists, and to a `smokenav_msgs` message for what the standard
 //! one cannot carry, so [`Playback`] reproduces the original exactly.
+//! The message catalog (`smokenav_shared_types::catalog`) names each
+//! type's ROS 2 type and companion; [`ros2`] resolves them to schemas and
+//! holds the CDR of each, for the recorder here and for live bridges alike.
 //!
 //! | bus topic (type)             | MCAP channel              | schema                              | role       |
 //! |------------------------------|---------------------------|-------------------------------------|------------|
@@ -59,14 +62,15 @@
 pub mod cdr;
 pub mod codec;
 pub mod encoder;
-pub mod identical;
 pub mod reader;
+pub mod ros2;
 pub mod schema;
 pub mod writer;
 
-pub use encoder::{Batch, BusMessage, ChannelRole, ChannelSpec, Encoder, Pose2, RobotGeometry};
-pub use identical::BitIdentical;
-pub use reader::{EndOfData, McapSource, Message, Playback, PlaybackStats, Played, ReadError};
+pub use encoder::{Batch, ChannelRole, ChannelSpec, Encoder, Pose2, RobotGeometry};
+pub use reader::{EndOfData, McapSource, Playback, PlaybackStats, Played, ReadError};
+pub use ros2::{Ros2Codec, Ros2Layout};
+pub use smokenav_shared_types::{AnyMessage, AnyMessageRef, BitIdentical};
 pub use writer::{Compression, McapSink, SinkOptions, SinkStats, WriteError};
 
 use std::collections::BTreeMap;
@@ -104,7 +108,7 @@ impl<W: Write + Seek> Recorder<W> {
     pub fn record(
         &mut self,
         topic: &str,
-        msg: BusMessage,
+        msg: AnyMessageRef,
         log_time: u64,
     ) -> Result<(), WriteError> {
         self.batch.clear();

@@ -7,17 +7,13 @@
 //! SIGKILL yields exactly the messages of its complete chunks and then
 //! reports [`EndOfData::Truncated`].
 
-use crate::codec;
-use crate::encoder::{DECISIONS_SUFFIX, EXTRAS_SUFFIX};
+use crate::ros2;
 use crate::schema;
 use crate::writer::{MAPPING_VERSION, METADATA_NAME};
 use mcap::McapError;
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
-use smokenav_shared_types::{
-    FusedScan, Health, LaserScan, MapInfo, Odometry, PoseEstimate, SmokeReading, SonarRing,
-    VelocityCommand,
-};
+use smokenav_shared_types::AnyMessage;
 use std::collections::{BTreeMap, HashMap};
 use std::io::Read;
 use std::path::Path;
@@ -200,68 +196,6 @@ impl<R: Read> McapSource<R> {
     }
 }
 
-/// A smokenav message as it was published.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Message {
-    LaserScan(Box<LaserScan>),
-    FusedScan(Box<FusedScan>),
-    Odometry(Odometry),
-    SonarRing(SonarRing),
-    VelocityCommand(VelocityCommand),
-    SmokeReading(SmokeReading),
-    PoseEstimate(PoseEstimate),
-    Map(MapInfo, Vec<i8>),
-    Health(Box<Health>),
-}
-
-impl Message {
-    pub fn header(&self) -> &smokenav_shared_types::Header {
-        match self {
-            Message::LaserScan(m) => &m.header,
-            Message::FusedScan(m) => &m.scan.header,
-            Message::Odometry(m) => &m.header,
-            Message::SonarRing(m) => &m.header,
-            Message::VelocityCommand(m) => &m.header,
-            Message::SmokeReading(m) => &m.header,
-            Message::PoseEstimate(m) => &m.header,
-            Message::Map(m, _) => &m.header,
-            Message::Health(m) => &m.header,
-        }
-    }
-}
-
-impl Message {
-    pub fn header_mut(&mut self) -> &mut smokenav_shared_types::Header {
-        match self {
-            Message::LaserScan(m) => &mut m.header,
-            Message::FusedScan(m) => &mut m.scan.header,
-            Message::Odometry(m) => &mut m.header,
-            Message::SonarRing(m) => &mut m.header,
-            Message::VelocityCommand(m) => &mut m.header,
-            Message::SmokeReading(m) => &mut m.header,
-            Message::PoseEstimate(m) => &mut m.header,
-            Message::Map(m, _) => &mut m.header,
-            Message::Health(m) => &mut m.header,
-        }
-    }
-
-    /// Moves every stamp the message carries by `offset_ns` (saturating), so
-    /// a replay looks recorded "now" to processes that compare stamps with
-    /// their clock. Zero stamps (absent inputs of a fused scan) stay zero.
-    pub fn shift_stamps(&mut self, offset_ns: i64) {
-        fn shift(t: &mut u64, offset: i64) {
-            if *t != 0 {
-                *t = t.saturating_add_signed(offset);
-            }
-        }
-        shift(&mut self.header_mut().stamp_ns, offset_ns);
-        if let Message::FusedScan(f) = self {
-            shift(&mut f.sonar_stamp_ns, offset_ns);
-            shift(&mut f.smoke_stamp_ns, offset_ns);
-        }
-    }
-}
-
 /// One message of a recording, ready to republish.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Played {
@@ -269,7 +203,8 @@ pub struct Played {
     pub topic: String,
     /// When the recorder received it (ns of its monotonic clock).
     pub log_time: u64,
-    pub message: Message,
+    /// The message, as it was published.
+    pub message: AnyMessage,
 }
 
 /// What playback skipped, and why.
@@ -288,19 +223,22 @@ pub struct PlaybackStats {
     pub last_error: Option<String>,
 }
 
-enum Pending {
-    Scan(Box<LaserScan>),
-    Odometry(Odometry),
-    Twist(VelocityCommand),
-    Pose(PoseEstimate),
-    Map(MapInfo, Vec<i8>),
+/// The standard message of one ROS topic waiting for its companion: its
+/// sequence number, schema and payload. Kept per topic once seen, so
+/// holding a payload allocates nothing after the first.
+#[derive(Default)]
+struct Pending {
+    held: bool,
+    sequence: u32,
+    schema: &'static str,
+    data: Vec<u8>,
 }
 
 /// Reads a recording and yields the smokenav messages in recorded order.
 pub struct Playback<R: Read> {
     source: McapSource<R>,
     /// Standard messages waiting for their companion, by ROS topic.
-    pending: HashMap<String, (u32, Pending)>,
+    pending: HashMap<String, Pending>,
     stats: PlaybackStats,
 }
 
@@ -349,7 +287,7 @@ impl<R: Read> Playback<R> {
             match step {
                 None => {
                     // Standard messages still waiting never got their companion.
-                    self.stats.orphans += self.pending.len() as u64;
+                    self.stats.orphans += self.pending.values().filter(|p| p.held).count() as u64;
                     self.pending.clear();
                     return Ok(None);
                 }
@@ -375,8 +313,11 @@ fn bus_topic(ros_topic: &str) -> String {
     ros_topic.trim_start_matches('/').to_owned()
 }
 
+/// One stored message: a view is counted, a complete message decoded, a
+/// standard message held until its companion joins it (the catalog says
+/// which schemas are which).
 fn decode_step(
-    pending: &mut HashMap<String, (u32, Pending)>,
+    pending: &mut HashMap<String, Pending>,
     stats: &mut PlaybackStats,
     raw: &RawMessage,
 ) -> Result<Option<Played>, crate::cdr::CdrError> {
@@ -385,123 +326,57 @@ fn decode_step(
         stats.foreign += 1;
         return Ok(None);
     }
-    let emit = |topic: &str, message: Message| {
+    let name = ch.schema_name.as_str();
+    let played = |topic: &str, message: AnyMessage| {
         Some(Played {
             topic: bus_topic(topic),
             log_time: raw.log_time,
             message,
         })
     };
-    let mut hold = |value: Pending| {
-        if pending
-            .insert(ch.topic.clone(), (raw.sequence, value))
-            .is_some()
-        {
-            stats.orphans += 1;
-        }
-        Ok(None)
-    };
-    let name = ch.schema_name.as_str();
-    match name {
-        n if n == schema::LASER_SCAN.name => {
-            let mut scan = Box::<LaserScan>::default();
-            codec::decode_laser_scan(raw.data, &mut scan)?;
-            hold(Pending::Scan(scan))
-        }
-        n if n == schema::ODOMETRY.name => {
-            hold(Pending::Odometry(codec::decode_odometry(raw.data)?))
-        }
-        n if n == schema::TWIST_STAMPED.name => {
-            hold(Pending::Twist(codec::decode_twist_stamped(raw.data)?))
-        }
-        n if n == schema::POSE_STAMPED.name => {
-            hold(Pending::Pose(codec::decode_pose_stamped(raw.data)?))
-        }
-        n if n == schema::OCCUPANCY_GRID.name => {
-            let (info, cells) = codec::decode_occupancy_grid(raw.data)?;
-            hold(Pending::Map(info, cells))
-        }
-        n if n == schema::SONAR_RING.name => Ok(emit(
-            &ch.topic,
-            Message::SonarRing(codec::decode_sonar_ring(raw.data)?),
-        )),
-        n if n == schema::SMOKE_READING.name => Ok(emit(
-            &ch.topic,
-            Message::SmokeReading(codec::decode_smoke_reading(raw.data)?),
-        )),
-        n if n == schema::HEALTH.name => {
-            let mut h = Box::<Health>::default();
-            codec::decode_health(raw.data, &mut h)?;
-            Ok(emit(&ch.topic, Message::Health(h)))
-        }
-        n if n == schema::TF_MESSAGE.name || n == schema::POINT_CLOUD2.name => {
-            stats.views += 1;
-            Ok(None)
-        }
-        _ => {
-            let suffix = if name == schema::FUSED_DECISIONS.name {
-                DECISIONS_SUFFIX
-            } else {
-                EXTRAS_SUFFIX
-            };
-            let is_companion = [
-                schema::SCAN_EXTRAS.name,
-                schema::FUSED_DECISIONS.name,
-                schema::ODOMETRY_EXTRAS.name,
-                schema::STAMP_SEQ.name,
-                schema::POSE_EXTRAS.name,
-                schema::MAP_EXTRAS.name,
-            ]
-            .contains(&name);
-            if !is_companion {
-                stats.foreign += 1;
-                return Ok(None);
-            }
-            let Some(std_topic) = ch.topic.strip_suffix(suffix) else {
-                stats.orphans += 1;
-                return Ok(None);
-            };
-            let Some((sequence, value)) = pending.remove(std_topic) else {
-                stats.orphans += 1;
-                return Ok(None);
-            };
-            if sequence != raw.sequence {
-                stats.orphans += 2;
-                return Ok(None);
-            }
-            let message = match (name, value) {
-                (n, Pending::Scan(mut scan)) if n == schema::SCAN_EXTRAS.name => {
-                    codec::apply_scan_extras(raw.data, &mut scan)?;
-                    Message::LaserScan(scan)
-                }
-                (n, Pending::Scan(scan)) if n == schema::FUSED_DECISIONS.name => {
-                    let mut f = Box::<FusedScan>::default();
-                    f.scan = *scan;
-                    codec::apply_fused_decisions(raw.data, &mut f)?;
-                    Message::FusedScan(f)
-                }
-                (n, Pending::Odometry(mut o)) if n == schema::ODOMETRY_EXTRAS.name => {
-                    codec::apply_odometry_extras(raw.data, &mut o)?;
-                    Message::Odometry(o)
-                }
-                (n, Pending::Twist(mut c)) if n == schema::STAMP_SEQ.name => {
-                    codec::apply_stamp_seq(raw.data, &mut c.header)?;
-                    Message::VelocityCommand(c)
-                }
-                (n, Pending::Pose(mut p)) if n == schema::POSE_EXTRAS.name => {
-                    codec::apply_pose_extras(raw.data, &mut p)?;
-                    Message::PoseEstimate(p)
-                }
-                (n, Pending::Map(mut info, cells)) if n == schema::MAP_EXTRAS.name => {
-                    codec::apply_map_extras(raw.data, &mut info)?;
-                    Message::Map(info, cells)
-                }
-                _ => {
-                    stats.orphans += 2;
-                    return Ok(None);
-                }
-            };
-            Ok(emit(std_topic, message))
-        }
+    if name == schema::TF_MESSAGE.name || name == schema::POINT_CLOUD2.name {
+        stats.views += 1;
+        return Ok(None);
     }
+    if let Some(layout) = ros2::kind_with_companion(name) {
+        let std_topic = layout
+            .companion
+            .and_then(|(suffix, _)| ch.topic.strip_suffix(suffix));
+        let Some(held) = std_topic
+            .and_then(|t| pending.get_mut(t))
+            .filter(|p| p.held)
+        else {
+            stats.orphans += 1;
+            return Ok(None);
+        };
+        held.held = false;
+        if held.sequence != raw.sequence || held.schema != layout.standard.name {
+            stats.orphans += 2;
+            return Ok(None);
+        }
+        let message = ros2::decode(layout.kind, &held.data, Some(raw.data))?;
+        return Ok(played(std_topic.unwrap_or_default(), message));
+    }
+    let mut kinds = ros2::kinds_with_standard(name);
+    let Some(first) = kinds.next() else {
+        stats.foreign += 1;
+        return Ok(None);
+    };
+    if first.companion.is_none() {
+        // A complete message (its schema is no other kind's).
+        return ros2::decode(first.kind, raw.data, None).map(|m| played(&ch.topic, m));
+    }
+    let held = match pending.get_mut(ch.topic.as_str()) {
+        Some(p) => p,
+        None => pending.entry(ch.topic.clone()).or_default(),
+    };
+    if held.held {
+        stats.orphans += 1;
+    }
+    held.held = true;
+    held.sequence = raw.sequence;
+    held.schema = first.standard.name;
+    held.data.clear();
+    held.data.extend_from_slice(raw.data);
+    Ok(None)
 }

@@ -14,6 +14,7 @@ pub struct RateMeter {
 }
 
 impl RateMeter {
+    /// A meter that starts counting at `now`.
     pub fn new(now: Instant) -> Self {
         Self {
             count: 0,
@@ -23,11 +24,13 @@ impl RateMeter {
         }
     }
 
+    /// Counts one event.
     pub fn mark(&mut self) {
         self.count += 1;
         self.total += 1;
     }
 
+    /// Events counted since the start.
     pub fn total(&self) -> u64 {
         self.total
     }
@@ -43,6 +46,7 @@ impl RateMeter {
         self.last_rate
     }
 
+    /// The rate over the last completed window, Hz.
     pub fn last_rate(&self) -> f64 {
         self.last_rate
     }
@@ -54,6 +58,7 @@ pub struct LatencyWindow {
 }
 
 impl LatencyWindow {
+    /// An empty window.
     pub fn new() -> Self {
         Self {
             // 1 µs .. 100 s, 3 significant digits: allocated once.
@@ -62,15 +67,18 @@ impl LatencyWindow {
         }
     }
 
+    /// Adds one processing time.
     pub fn record(&mut self, d: Duration) {
         let us = (d.as_micros() as u64).clamp(1, 100_000_000);
         let _ = self.hist.record(us);
     }
 
+    /// Samples in the window.
     pub fn len(&self) -> u64 {
         self.hist.len()
     }
 
+    /// Whether the window is empty.
     pub fn is_empty(&self) -> bool {
         self.hist.is_empty()
     }
@@ -87,6 +95,7 @@ impl LatencyWindow {
         )
     }
 
+    /// Empties the window (after each report).
     pub fn reset(&mut self) {
         self.hist.reset();
     }
@@ -101,6 +110,7 @@ impl Default for LatencyWindow {
 /// Counters that show themselves in `smokenav status`: each struct writes
 /// its own fields as metrics, so no process lists them by hand.
 pub trait Report {
+    /// Writes these counters into `health` as metrics.
     fn report(&self, health: &mut HealthReporter);
 }
 
@@ -120,8 +130,9 @@ pub struct HealthReporter {
 }
 
 impl HealthReporter {
+    /// Publishes on `health/<role>` of `bus` every `period`.
     pub fn new(bus: &Bus, role: &str, period: Duration) -> Result<Self, BusError> {
-        let publisher = bus.publisher::<Health>(&topics::health(role))?;
+        let publisher = bus.publisher(topics::health(role))?;
         let now = Instant::now();
         Ok(Self {
             health: Health::new(role, std::process::id()),
@@ -134,14 +145,17 @@ impl HealthReporter {
         })
     }
 
+    /// The report as it stands.
     pub fn health(&self) -> &Health {
         &self.health
     }
 
+    /// The reported state.
     pub fn state(&self) -> HealthState {
         self.health.state()
     }
 
+    /// Sets the reported state.
     pub fn set_state(&mut self, s: HealthState) {
         self.health.set_state(s);
     }
@@ -167,14 +181,17 @@ impl HealthReporter {
         }
     }
 
+    /// Events counted by rate `id` since the start.
     pub fn rate_total(&self, id: RateId) -> u64 {
         self.rates.get(id.0).map(|(_, m, _)| m.total()).unwrap_or(0)
     }
 
+    /// Adds one cycle's processing time to the latency window.
     pub fn record_latency(&mut self, d: Duration) {
         self.latency.record(d);
     }
 
+    /// Counts a cycle that missed its deadline.
     pub fn deadline_missed(&mut self) {
         self.health.deadline_misses += 1;
     }
@@ -188,6 +205,7 @@ impl HealthReporter {
         self.health.last_error.set(msg);
     }
 
+    /// Clears the last error.
     pub fn clear_error(&mut self) {
         self.health.last_error.set("");
     }
@@ -204,6 +222,7 @@ impl HealthReporter {
         Ok(true)
     }
 
+    /// Publishes the report now (the window restarts).
     pub fn publish_now(&mut self, now: Instant) -> Result<(), BusError> {
         for (name, meter, expected) in &mut self.rates {
             let hz = meter.roll(now);

@@ -36,6 +36,8 @@
 //! }
 //! ```
 
+#![warn(missing_docs)]
+
 mod args;
 mod health;
 pub mod launch;

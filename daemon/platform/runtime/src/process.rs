@@ -16,9 +16,13 @@ pub const EXIT_CONFIG: u8 = 78;
 
 /// A running smokenav process: its config, its bus connection and its health.
 pub struct Process {
+    /// The process role (`hokuyo`, `fusion`, …): its node and health topic name.
     pub role: String,
+    /// The robot profile it was started with.
     pub config: RobotConfig,
+    /// Its connection to the bus.
     pub bus: Bus,
+    /// Its health report, published periodically.
     pub health: HealthReporter,
     /// `--port` if given.
     pub port_override: Option<String>,
@@ -69,6 +73,7 @@ impl Process {
         self.port_override.as_deref().unwrap_or(configured)
     }
 
+    /// Whether SIGTERM or SIGINT arrived.
     pub fn shutdown_requested(&self) -> bool {
         self.shutdown.requested()
     }

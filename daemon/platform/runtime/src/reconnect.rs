@@ -40,6 +40,7 @@ impl ReconnectPolicy {
         }
     }
 
+    /// Reports `Error` (not just `Degraded`) once the link has been down this long.
     pub fn with_error_after(mut self, error_after: Duration) -> Self {
         self.error_after = error_after;
         self
@@ -96,10 +97,12 @@ impl Reconnect {
         }
     }
 
+    /// The back-off policy.
     pub fn policy(&self) -> &ReconnectPolicy {
         &self.policy
     }
 
+    /// Whether the link is open.
     pub fn is_up(&self) -> bool {
         self.up
     }
@@ -122,6 +125,7 @@ impl Reconnect {
         }
     }
 
+    /// Opens, failures and losses so far.
     pub fn counters(&self) -> LinkCounters {
         self.counters
     }

@@ -18,6 +18,7 @@ impl Shutdown {
         Ok(Self { flag })
     }
 
+    /// Whether SIGTERM or SIGINT arrived.
     pub fn requested(&self) -> bool {
         self.flag.load(Ordering::Relaxed)
     }

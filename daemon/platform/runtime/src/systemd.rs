@@ -10,6 +10,7 @@ pub struct SystemdNotifier {
 }
 
 impl SystemdNotifier {
+    /// Reads `NOTIFY_SOCKET` and `WATCHDOG_USEC` (no-ops when absent).
     pub fn new() -> Self {
         Self {
             watchdog: sd_notify::watchdog_enabled(),
@@ -17,18 +18,22 @@ impl SystemdNotifier {
         }
     }
 
+    /// How often systemd wants a watchdog ping, when it watches this process.
     pub fn watchdog_interval(&self) -> Option<Duration> {
         self.watchdog
     }
 
+    /// Sends `READY=1` with a status line.
     pub fn ready(&self, status: &str) {
         let _ = sd_notify::notify(&[NotifyState::Ready, NotifyState::Status(status)]);
     }
 
+    /// Sends a status line.
     pub fn status(&self, status: &str) {
         let _ = sd_notify::notify(&[NotifyState::Status(status)]);
     }
 
+    /// Sends `STOPPING=1`.
     pub fn stopping(&self) {
         let _ = sd_notify::notify(&[NotifyState::Stopping]);
     }

@@ -27,7 +27,7 @@ fn published(sub: &Subscriber<Health>, h: &mut HealthReporter) -> Health {
 fn outage_shows_as_degraded_with_its_reason_and_clears_once_back() {
     let bus = bus();
     let mut h = HealthReporter::new(&bus, "drv", Duration::from_secs(1)).unwrap();
-    let sub = bus.subscriber::<Health>(&topics::health("drv")).unwrap();
+    let sub = bus.subscriber::<Health>(topics::health("drv")).unwrap();
     let policy = ReconnectPolicy::new(Duration::from_millis(100), Duration::from_millis(400));
     let mut link = Reconnect::new(policy, 0);
     link.open_failed(0, "No such file or directory");

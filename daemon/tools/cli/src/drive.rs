@@ -57,7 +57,7 @@ pub fn run(a: DriveArgs) -> anyhow::Result<()> {
     );
     let stop = smokenav_platform_runtime::Shutdown::install()?;
     let bus = a.bus.open("drive")?;
-    let mut publisher = bus.publisher::<VelocityCommand>(topics::BASE_CMD_VEL)?;
+    let mut publisher = bus.publisher(topics::BASE_CMD_VEL)?;
     let period = Duration::from_secs_f64(1.0 / a.rate);
     let start = Instant::now();
     let end = start + Duration::from_secs_f64(a.duration);

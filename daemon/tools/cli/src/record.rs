@@ -6,21 +6,18 @@
 //! `--chunk-interval` so a SIGKILL loses at most that much. SIGINT/SIGTERM
 //! finish the file (summary, statistics, footer) and print the report.
 
-use crate::topic::BusArgs;
+use crate::topic::{BusArgs, known_topics};
 use anyhow::{Context, bail};
 use clap::Args;
 use smokenav_platform_bus::{
-    Attachment, Bus, MapSubscriber, Message as BusMsg, Subscriber, Waiter, topics,
+    Attachment, Bus, MapSubscriber, Subscriber, SubscriberStats, Waiter, topics,
 };
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_recording::{
-    Batch, BusMessage, Compression, Encoder, McapSink, RobotGeometry, SinkOptions,
+    AnyMessageRef, Batch, Compression, Encoder, McapSink, RobotGeometry, SinkOptions,
 };
+use smokenav_shared_types::catalog::{self, Cataloged, MessageVisitor};
 use smokenav_shared_types::clock::monotonic_now_ns;
-use smokenav_shared_types::{
-    FusedScan, Health, LaserScan, Odometry, PoseEstimate, SmokeReading, SonarRing, VelocityCommand,
-};
-use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
@@ -60,14 +57,6 @@ pub struct RecordArgs {
 /// costs no message.
 const BATCHES_IN_FLIGHT: usize = 256;
 
-/// What one topic's subscriber saw.
-#[derive(Debug, Clone, Copy, Default)]
-struct TapStats {
-    received: u64,
-    lost: u64,
-    publisher_restarts: u64,
-}
-
 /// A subscriber of one topic, whatever its type.
 trait Tap {
     fn topic(&self) -> &str;
@@ -75,40 +64,17 @@ trait Tap {
     /// Hands every queued message to `f`; returns how many there were.
     fn drain(
         &self,
-        f: &mut dyn FnMut(&str, BusMessage<'_>) -> anyhow::Result<()>,
+        f: &mut dyn FnMut(&str, AnyMessageRef<'_>) -> anyhow::Result<()>,
     ) -> anyhow::Result<u64>;
-    fn stats(&self) -> TapStats;
+    fn stats(&self) -> SubscriberStats;
 }
 
-/// The smokenav types that have a recording form.
-trait Recordable: BusMsg {
-    fn as_bus(&self) -> BusMessage<'_>;
-}
-
-macro_rules! recordable {
-    ($t:ty, $v:ident) => {
-        impl Recordable for $t {
-            fn as_bus(&self) -> BusMessage<'_> {
-                BusMessage::$v(self)
-            }
-        }
-    };
-}
-recordable!(LaserScan, LaserScan);
-recordable!(FusedScan, FusedScan);
-recordable!(Odometry, Odometry);
-recordable!(SonarRing, SonarRing);
-recordable!(VelocityCommand, VelocityCommand);
-recordable!(SmokeReading, SmokeReading);
-recordable!(PoseEstimate, PoseEstimate);
-recordable!(Health, Health);
-
-struct TypedTap<T: Recordable> {
+struct TypedTap<T: Cataloged> {
     topic: String,
     sub: Subscriber<T>,
 }
 
-impl<T: Recordable> Tap for TypedTap<T> {
+impl<T: Cataloged> Tap for TypedTap<T> {
     fn topic(&self) -> &str {
         &self.topic
     }
@@ -119,33 +85,25 @@ impl<T: Recordable> Tap for TypedTap<T> {
 
     fn drain(
         &self,
-        f: &mut dyn FnMut(&str, BusMessage<'_>) -> anyhow::Result<()>,
+        f: &mut dyn FnMut(&str, AnyMessageRef<'_>) -> anyhow::Result<()>,
     ) -> anyhow::Result<u64> {
         let mut n = 0;
         while let Some(sample) = self.sub.receive()? {
-            f(&self.topic, sample.as_bus())?;
+            f(&self.topic, sample.as_any())?;
             n += 1;
         }
         Ok(n)
     }
 
-    fn stats(&self) -> TapStats {
-        let s = self.sub.stats();
-        TapStats {
-            received: s.received,
-            lost: s.lost,
-            publisher_restarts: s.publisher_restarts,
-        }
+    fn stats(&self) -> SubscriberStats {
+        self.sub.stats()
     }
 }
 
-/// `slam/map`: the map subscriber has no loss accounting; count seq gaps here.
+/// `slam/map`: a map info header and its cells.
 struct MapTap {
     topic: String,
     sub: MapSubscriber,
-    // Cells: draining happens while the subscriber is attached (borrowed).
-    last_seq: Cell<Option<u64>>,
-    stats: Cell<TapStats>,
 }
 
 impl Tap for MapTap {
@@ -159,71 +117,79 @@ impl Tap for MapTap {
 
     fn drain(
         &self,
-        f: &mut dyn FnMut(&str, BusMessage<'_>) -> anyhow::Result<()>,
+        f: &mut dyn FnMut(&str, AnyMessageRef<'_>) -> anyhow::Result<()>,
     ) -> anyhow::Result<u64> {
         let mut n = 0;
         while let Some(sample) = self.sub.receive()? {
-            let info = *sample.user_header();
-            let seq = info.header.seq;
-            let mut stats = self.stats.get();
-            match self.last_seq.get() {
-                Some(last) if seq > last => stats.lost += seq - last - 1,
-                Some(_) => stats.publisher_restarts += 1,
-                None => {}
-            }
-            stats.received += 1;
-            self.stats.set(stats);
-            self.last_seq.set(Some(seq));
-            f(&self.topic, BusMessage::Map(&info, sample.payload()))?;
+            f(
+                &self.topic,
+                AnyMessageRef::Map(sample.user_header(), sample.payload()),
+            )?;
             n += 1;
         }
         Ok(n)
     }
 
-    fn stats(&self) -> TapStats {
-        self.stats.get()
+    fn stats(&self) -> SubscriberStats {
+        self.sub.stats()
     }
 }
 
-fn typed<T: Recordable>(bus: &Bus, topic: &str) -> anyhow::Result<Box<dyn Tap>> {
-    Ok(Box::new(TypedTap::<T> {
-        topic: topic.to_owned(),
-        sub: bus
-            .subscriber(topic)
-            .with_context(|| format!("cannot subscribe to {topic}"))?,
-    }))
+/// Opens the tap of one topic, whatever catalog type it carries.
+struct OpenTap<'a> {
+    bus: &'a Bus,
+    topic: &'a str,
+}
+
+impl MessageVisitor for OpenTap<'_> {
+    type Output = anyhow::Result<Box<dyn Tap>>;
+
+    fn fixed<M: Cataloged>(&mut self) -> Self::Output {
+        let topic = topics::lookup::<M>(self.topic)
+            .with_context(|| format!("topic `{}` does not carry {}", self.topic, M::NAME))?;
+        Ok(Box::new(TypedTap::<M> {
+            topic: self.topic.to_owned(),
+            sub: self
+                .bus
+                .subscriber(topic)
+                .with_context(|| format!("cannot subscribe to {}", self.topic))?,
+        }))
+    }
+
+    fn map(&mut self) -> Self::Output {
+        let topic = topics::lookup_map(self.topic)
+            .with_context(|| format!("topic `{}` does not carry the map", self.topic))?;
+        Ok(Box::new(MapTap {
+            topic: self.topic.to_owned(),
+            sub: self
+                .bus
+                .map_subscriber(topic)
+                .with_context(|| format!("cannot subscribe to {}", self.topic))?,
+        }))
+    }
 }
 
 fn open_tap(bus: &Bus, topic: &str) -> anyhow::Result<Box<dyn Tap>> {
-    let Some(ty) = topics::type_of(topic) else {
+    let Some(kind) = catalog::topic_kind(topic) else {
         bail!("unknown topic `{topic}`");
     };
-    match ty {
-        "LaserScan" => typed::<LaserScan>(bus, topic),
-        "FusedScan" => typed::<FusedScan>(bus, topic),
-        "Odometry" => typed::<Odometry>(bus, topic),
-        "SonarRing" => typed::<SonarRing>(bus, topic),
-        "VelocityCommand" => typed::<VelocityCommand>(bus, topic),
-        "SmokeReading" => typed::<SmokeReading>(bus, topic),
-        "PoseEstimate" => typed::<PoseEstimate>(bus, topic),
-        "Health" => typed::<Health>(bus, topic),
-        "MapInfo" => Ok(Box::new(MapTap {
-            topic: topic.to_owned(),
-            sub: MapSubscriber::create(bus, topic)
-                .with_context(|| format!("cannot subscribe to {topic}"))?,
-            last_seq: Cell::new(None),
-            stats: Cell::new(TapStats::default()),
-        })),
-        other => bail!("topic `{topic}` carries {other}, which cannot be recorded"),
-    }
+    kind.visit(&mut OpenTap { bus, topic })
 }
 
-/// Every fixed topic and the health topic of every role.
+/// Every fixed topic of the catalog and the health topic of every role.
 pub fn default_topics() -> Vec<String> {
-    topics::FIXED_TOPICS
+    catalog::TOPICS
         .iter()
-        .map(|(t, _)| (*t).to_owned())
-        .chain(topics::ROLES.iter().map(|r| topics::health(r)))
+        .flat_map(|t| {
+            if t.family {
+                topics::ROLES
+                    .iter()
+                    .map(|r| format!("{}{r}", t.name))
+                    .collect()
+            } else {
+                vec![t.name.to_owned()]
+            }
+        })
         .collect()
 }
 
@@ -300,15 +266,8 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         args.topics.clone()
     };
     for t in &topics {
-        if topics::type_of(t).is_none() {
-            bail!(
-                "unknown topic `{t}` (known: {}, health/<role>)",
-                topics::FIXED_TOPICS
-                    .iter()
-                    .map(|(t, _)| *t)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
+        if catalog::topic_kind(t).is_none() {
+            bail!("unknown topic `{t}` (known: {})", known_topics());
         }
     }
     if args.chunk_interval <= 0.0 || !args.chunk_interval.is_finite() {
@@ -400,7 +359,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         .iter()
         .map(|t| t.attach(&waiter))
         .collect::<anyhow::Result<_>>()?;
-    let mut send = |topic: &str, msg: BusMessage<'_>| -> anyhow::Result<()> {
+    let mut send = |topic: &str, msg: AnyMessageRef<'_>| -> anyhow::Result<()> {
         let mut batch = match empties.try_recv() {
             Ok(b) => b,
             Err(_) => {

@@ -381,10 +381,7 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         "--timeout-s must be positive"
     );
     let bus = bus.open("map-save")?;
-    let sub = smokenav_platform_bus::MapSubscriber::create(
-        &bus,
-        smokenav_platform_bus::topics::SLAM_MAP,
-    )?;
+    let sub = bus.map_subscriber(smokenav_platform_bus::topics::SLAM_MAP)?;
     let waiter = smokenav_platform_bus::Waiter::new()?;
     let _guard = waiter.attach(&sub)?;
     let deadline = Instant::now() + std::time::Duration::from_secs_f64(timeout_s);

@@ -226,7 +226,7 @@ pub fn run(args: StatusArgs) -> anyhow::Result<std::process::ExitCode> {
     let roles = expected_roles(&args)?;
     let subs: Vec<(String, Subscriber<Health>)> = roles
         .iter()
-        .map(|r| Ok((r.clone(), bus.subscriber::<Health>(&topics::health(r))?)))
+        .map(|r| Ok((r.clone(), bus.subscriber(topics::health(r))?)))
         .collect::<anyhow::Result<_>>()?;
     let waiter = Waiter::new()?;
     let _guards = subs

@@ -2,14 +2,10 @@
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
-use smokenav_platform_bus::{
-    Bus, BusOptions, MapSubscriber, Message as BusMessage, Subscriber, Waiter, topics,
-};
+use smokenav_platform_bus::{Bus, BusOptions, Waiter, topics};
 use smokenav_platform_config::{INSTANCE_ENV, IOX2_ROOT_ENV, RobotConfig};
-use smokenav_shared_types::record::{Message, TopicRecord};
-use smokenav_shared_types::{
-    FusedScan, Health, LaserScan, Odometry, PoseEstimate, SmokeReading, SonarRing, VelocityCommand,
-};
+use smokenav_shared_types::catalog::{self, Cataloged, MessageKind, MessageVisitor};
+use smokenav_shared_types::record::{MapInfoRecord, Message, TopicRecord};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -174,34 +170,122 @@ struct EchoOptions {
     timeout: Option<Duration>,
 }
 
+/// The catalog type `topic` carries, or an error listing the known topics.
+fn kind_of(topic: &str) -> anyhow::Result<MessageKind> {
+    catalog::topic_kind(topic)
+        .with_context(|| format!("unknown topic `{topic}` (known: {})", known_topics()))
+}
+
 fn echo(bus: &Bus, topic: &str, opts: &EchoOptions) -> anyhow::Result<()> {
-    let Some(ty) = topics::type_of(topic) else {
-        bail!("unknown topic `{topic}` (known: {})", known_topics());
-    };
-    match ty {
-        "LaserScan" => echo_typed::<LaserScan>(bus, topic, opts, |m| Message::LaserScan(m.into())),
-        "Odometry" => echo_typed::<Odometry>(bus, topic, opts, |m| Message::Odometry(m.into())),
-        "SonarRing" => echo_typed::<SonarRing>(bus, topic, opts, |m| Message::SonarRing(m.into())),
-        "VelocityCommand" => {
-            echo_typed::<VelocityCommand>(bus, topic, opts, |m| Message::VelocityCommand(m.into()))
-        }
-        "SmokeReading" => {
-            echo_typed::<SmokeReading>(bus, topic, opts, |m| Message::SmokeReading(m.into()))
-        }
-        "FusedScan" => echo_typed::<FusedScan>(bus, topic, opts, |m| Message::FusedScan(m.into())),
-        "PoseEstimate" => {
-            echo_typed::<PoseEstimate>(bus, topic, opts, |m| Message::PoseEstimate(m.into()))
-        }
-        "Health" => echo_typed::<Health>(bus, topic, opts, |m| Message::Health(m.into())),
-        "MapInfo" => echo_map(bus, topic, opts),
-        other => bail!("topic `{topic}` carries {other}, which echo cannot print"),
+    kind_of(topic)?.visit(&mut Echo { bus, topic, opts })
+}
+
+/// The catalog's topics, families as `health/<role>`.
+pub fn known_topics() -> String {
+    catalog::TOPICS
+        .iter()
+        .map(|t| {
+            if t.family {
+                format!("{}<role>", t.name)
+            } else {
+                t.name.to_owned()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Echoes one topic, whatever catalog type it carries.
+struct Echo<'a> {
+    bus: &'a Bus,
+    topic: &'a str,
+    opts: &'a EchoOptions,
+}
+
+impl MessageVisitor for Echo<'_> {
+    type Output = anyhow::Result<()>;
+
+    fn fixed<M: Cataloged>(&mut self) -> Self::Output {
+        let topic = topics::lookup::<M>(self.topic)
+            .with_context(|| format!("topic `{}` does not carry {}", self.topic, M::NAME))?;
+        let sub = self.bus.subscriber(topic)?;
+        let waiter = Waiter::new()?;
+        let _g = waiter.attach(&sub)?;
+        let mut printer = Printer::new(self.topic, self.opts);
+        receive_loop(&waiter, self.opts.timeout, || {
+            while let Some(s) = sub.receive()? {
+                if printer.print(M::to_json(&s))? {
+                    return Ok(true);
+                }
+            }
+            printer.flush()?;
+            Ok(false)
+        })
+    }
+
+    fn map(&mut self) -> Self::Output {
+        let topic = topics::lookup_map(self.topic)
+            .with_context(|| format!("topic `{}` does not carry the map", self.topic))?;
+        let sub = self.bus.map_subscriber(topic)?;
+        let waiter = Waiter::new()?;
+        let _g = waiter.attach(&sub)?;
+        let with_data = self.opts.with_data;
+        let mut printer = Printer::new(self.topic, self.opts);
+        receive_loop(&waiter, self.opts.timeout, || {
+            while let Some(s) = sub.receive()? {
+                let cells = with_data.then(|| s.payload());
+                let record = MapInfoRecord::from_map(s.user_header(), cells);
+                if printer.print(Message::MapInfo(record))? {
+                    return Ok(true);
+                }
+            }
+            printer.flush()?;
+            Ok(false)
+        })
     }
 }
 
-fn known_topics() -> String {
-    let mut v: Vec<&str> = topics::FIXED_TOPICS.iter().map(|(t, _)| *t).collect();
-    v.push("health/<role>");
-    v.join(", ")
+/// Prints records of one topic, as JSON lines or one summary line each.
+struct Printer<'a> {
+    topic: &'a str,
+    opts: &'a EchoOptions,
+    out: std::io::StdoutLock<'static>,
+    printed: u64,
+}
+
+impl<'a> Printer<'a> {
+    fn new(topic: &'a str, opts: &'a EchoOptions) -> Self {
+        Self {
+            topic,
+            opts,
+            out: std::io::stdout().lock(),
+            printed: 0,
+        }
+    }
+
+    /// Prints `message`; true once `--count` messages are out.
+    fn print(&mut self, message: Message) -> anyhow::Result<bool> {
+        let record = TopicRecord {
+            topic: self.topic.to_owned(),
+            message,
+        };
+        if self.opts.json {
+            serde_json::to_writer(&mut self.out, &record)?;
+            writeln!(self.out)?;
+        } else {
+            writeln!(self.out, "{}", summary(&record))?;
+        }
+        self.printed += 1;
+        let done = self.opts.count.is_some_and(|c| self.printed >= c);
+        if done {
+            self.flush()?;
+        }
+        Ok(done)
+    }
+
+    fn flush(&mut self) -> anyhow::Result<()> {
+        Ok(self.out.flush()?)
+    }
 }
 
 /// Runs `body` on each arrival until the count, the timeout or Ctrl-C.
@@ -231,72 +315,6 @@ fn receive_loop(
         };
         waiter.wait(Some(wait))?;
     }
-}
-
-fn echo_typed<T: BusMessage>(
-    bus: &Bus,
-    topic: &str,
-    opts: &EchoOptions,
-    to_record: impl Fn(&T) -> Message,
-) -> anyhow::Result<()> {
-    let sub: Subscriber<T> = bus.subscriber(topic)?;
-    let waiter = Waiter::new()?;
-    let _g = waiter.attach(&sub)?;
-    let mut printed = 0u64;
-    let mut out = std::io::stdout().lock();
-    receive_loop(&waiter, opts.timeout, || {
-        while let Some(s) = sub.receive()? {
-            let record = TopicRecord {
-                topic: topic.to_owned(),
-                message: to_record(&s),
-            };
-            if opts.json {
-                serde_json::to_writer(&mut out, &record)?;
-                writeln!(out)?;
-            } else {
-                writeln!(out, "{}", summary(&record))?;
-            }
-            printed += 1;
-            if opts.count.is_some_and(|c| printed >= c) {
-                out.flush()?;
-                return Ok(true);
-            }
-        }
-        out.flush()?;
-        Ok(false)
-    })
-}
-
-fn echo_map(bus: &Bus, topic: &str, opts: &EchoOptions) -> anyhow::Result<()> {
-    let sub = MapSubscriber::create(bus, topic)?;
-    let waiter = Waiter::new()?;
-    let _g = waiter.attach(&sub)?;
-    let mut printed = 0u64;
-    let mut out = std::io::stdout().lock();
-    receive_loop(&waiter, opts.timeout, || {
-        while let Some(s) = sub.receive()? {
-            let mut rec = smokenav_shared_types::record::MapInfoRecord::from(s.user_header());
-            if opts.with_data {
-                rec.data = Some(s.payload().to_vec());
-            }
-            let record = TopicRecord {
-                topic: topic.to_owned(),
-                message: Message::MapInfo(rec),
-            };
-            if opts.json {
-                serde_json::to_writer(&mut out, &record)?;
-                writeln!(out)?;
-            } else {
-                writeln!(out, "{}", summary(&record))?;
-            }
-            printed += 1;
-            if opts.count.is_some_and(|c| printed >= c) {
-                return Ok(true);
-            }
-        }
-        out.flush()?;
-        Ok(false)
-    })
 }
 
 /// One human-readable line per message.
@@ -467,60 +485,15 @@ fn hz(
     window: usize,
     json: bool,
 ) -> anyhow::Result<()> {
-    let Some(ty) = topics::type_of(topic) else {
-        bail!("unknown topic `{topic}` (known: {})", known_topics());
-    };
+    let kind = kind_of(topic)?;
     let mut stats = RateStats::new(window);
-    let start = Instant::now();
-    let mut last_print = start;
-    macro_rules! run_typed {
-        ($t:ty) => {{
-            let subscribed_ns = smokenav_shared_types::clock::monotonic_now_ns();
-            let sub: Subscriber<$t> = bus.subscriber(topic)?;
-            let waiter = Waiter::new()?;
-            let _g = waiter.attach(&sub)?;
-            let stop = smokenav_platform_runtime::Shutdown::install()?;
-            loop {
-                while let Some(s) = sub.receive()? {
-                    let header = BusMessage::header(s.payload());
-                    // The topic's history sample was published before we
-                    // subscribed; counting it would fake a near-zero interval.
-                    if header.stamp_ns != 0 && header.stamp_ns < subscribed_ns {
-                        continue;
-                    }
-                    stats.arrive(Instant::now(), header.seq);
-                }
-                let now = Instant::now();
-                if !json && now.duration_since(last_print) >= Duration::from_secs(1) {
-                    last_print = now;
-                    match stats.stats() {
-                        Some((rate, min, max, sd)) => println!(
-                            "average rate: {rate:.3} Hz\n  min: {min:.4}s max: {max:.4}s std dev: {sd:.5}s window: {}  gaps: {} ({} lost)",
-                            stats.intervals.len() + 1,
-                            stats.gaps,
-                            stats.lost
-                        ),
-                        None => println!("no new messages"),
-                    }
-                }
-                if stop.requested() || duration.is_some_and(|d| now.duration_since(start) >= d) {
-                    break;
-                }
-                waiter.wait(Some(Duration::from_millis(200)))?;
-            }
-        }};
-    }
-    match ty {
-        "LaserScan" => run_typed!(LaserScan),
-        "Odometry" => run_typed!(Odometry),
-        "SonarRing" => run_typed!(SonarRing),
-        "VelocityCommand" => run_typed!(VelocityCommand),
-        "SmokeReading" => run_typed!(SmokeReading),
-        "FusedScan" => run_typed!(FusedScan),
-        "PoseEstimate" => run_typed!(PoseEstimate),
-        "Health" => run_typed!(Health),
-        other => bail!("hz does not support {other} topics"),
-    }
+    kind.visit(&mut Hz {
+        bus,
+        topic,
+        duration,
+        json,
+        stats: &mut stats,
+    })?;
     if json {
         let (rate, min, max, sd) = stats.stats().unwrap_or((0.0, 0.0, 0.0, 0.0));
         println!(
@@ -538,4 +511,65 @@ fn hz(
         );
     }
     Ok(())
+}
+
+/// Measures one topic's rate, whatever catalog type it carries.
+struct Hz<'a> {
+    bus: &'a Bus,
+    topic: &'a str,
+    duration: Option<Duration>,
+    json: bool,
+    stats: &'a mut RateStats,
+}
+
+impl MessageVisitor for Hz<'_> {
+    type Output = anyhow::Result<()>;
+
+    fn fixed<M: Cataloged>(&mut self) -> Self::Output {
+        let topic = topics::lookup::<M>(self.topic)
+            .with_context(|| format!("topic `{}` does not carry {}", self.topic, M::NAME))?;
+        let start = Instant::now();
+        let mut last_print = start;
+        let subscribed_ns = smokenav_shared_types::clock::monotonic_now_ns();
+        let sub = self.bus.subscriber(topic)?;
+        let waiter = Waiter::new()?;
+        let _g = waiter.attach(&sub)?;
+        let stop = smokenav_platform_runtime::Shutdown::install()?;
+        loop {
+            while let Some(s) = sub.receive()? {
+                let header = s.payload().header();
+                // The topic's history sample was published before we
+                // subscribed; counting it would fake a near-zero interval.
+                if header.stamp_ns != 0 && header.stamp_ns < subscribed_ns {
+                    continue;
+                }
+                self.stats.arrive(Instant::now(), header.seq);
+            }
+            let now = Instant::now();
+            if !self.json && now.duration_since(last_print) >= Duration::from_secs(1) {
+                last_print = now;
+                match self.stats.stats() {
+                    Some((rate, min, max, sd)) => println!(
+                        "average rate: {rate:.3} Hz\n  min: {min:.4}s max: {max:.4}s std dev: {sd:.5}s window: {}  gaps: {} ({} lost)",
+                        self.stats.intervals.len() + 1,
+                        self.stats.gaps,
+                        self.stats.lost
+                    ),
+                    None => println!("no new messages"),
+                }
+            }
+            if stop.requested()
+                || self
+                    .duration
+                    .is_some_and(|d| now.duration_since(start) >= d)
+            {
+                return Ok(());
+            }
+            waiter.wait(Some(Duration::from_millis(200)))?;
+        }
+    }
+
+    fn map(&mut self) -> Self::Output {
+        bail!("hz does not support {} topics", MessageKind::Map.name())
+    }
 }

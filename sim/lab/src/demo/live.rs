@@ -11,8 +11,9 @@ use anyhow::{Context, bail};
 use smokenav_platform_bus::{Bus, BusOptions, Subscriber, Waiter, topics};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_map::OccupancyGrid;
-use smokenav_platform_recording::{BusMessage, Recorder};
+use smokenav_platform_recording::{AnyMessageRef, Recorder};
 use smokenav_platform_runtime::launch;
+use smokenav_shared_types::catalog::topic_names;
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::{
     FusedScan, Health, HealthState, LaserScan, Odometry, PoseEstimate, SectionSource, SmokeReading,
@@ -126,7 +127,7 @@ fn wait_ready(
 ) -> anyhow::Result<()> {
     let subs: Vec<Subscriber<Health>> = procs
         .iter()
-        .map(|p| bus.subscriber::<Health>(&topics::health(&p.role)))
+        .map(|p| bus.subscriber(topics::health(&p.role)))
         .collect::<Result<_, _>>()?;
     let waiter = Waiter::new()?;
     let _guards = subs
@@ -202,12 +203,12 @@ struct Status {
 }
 
 const TAPPED: [&str; 6] = [
-    topics::LASER_SCAN,
-    topics::BASE_SONAR,
-    topics::BASE_ODOM,
-    topics::SMOKE_LEVEL,
-    topics::FUSION_SCAN,
-    topics::SLAM_POSE,
+    topic_names::LASER_SCAN,
+    topic_names::BASE_SONAR,
+    topic_names::BASE_ODOM,
+    topic_names::SMOKE_LEVEL,
+    topic_names::FUSION_SCAN,
+    topic_names::SLAM_POSE,
 ];
 
 impl Status {
@@ -534,12 +535,12 @@ struct Taps {
 impl Taps {
     fn new(bus: &Bus) -> anyhow::Result<Self> {
         Ok(Self {
-            laser: bus.subscriber(TAPPED[0])?,
-            sonar: bus.subscriber(TAPPED[1])?,
-            odom: bus.subscriber(TAPPED[2])?,
-            smoke: bus.subscriber(TAPPED[3])?,
-            fused: bus.subscriber(TAPPED[4])?,
-            pose: bus.subscriber(TAPPED[5])?,
+            laser: bus.subscriber(topics::LASER_SCAN)?,
+            sonar: bus.subscriber(topics::BASE_SONAR)?,
+            odom: bus.subscriber(topics::BASE_ODOM)?,
+            smoke: bus.subscriber(topics::SMOKE_LEVEL)?,
+            fused: bus.subscriber(topics::FUSION_SCAN)?,
+            pose: bus.subscriber(topics::SLAM_POSE)?,
         })
     }
 
@@ -569,7 +570,7 @@ impl Taps {
         let inside = |stamp: u64| {
             window.is_some_and(|(t0, end)| stamp >= t0 && end.is_none_or(|e| stamp < e))
         };
-        let mut put = |i: usize, stamp: u64, msg: BusMessage| {
+        let mut put = |i: usize, stamp: u64, msg: AnyMessageRef| {
             st.counts[i] += 1;
             if inside(stamp)
                 && error.is_none()
@@ -579,24 +580,24 @@ impl Taps {
             }
         };
         while let Some(s) = self.laser.receive()? {
-            put(0, s.header.stamp_ns, BusMessage::LaserScan(&s));
+            put(0, s.header.stamp_ns, AnyMessageRef::LaserScan(&s));
         }
         while let Some(s) = self.sonar.receive()? {
-            put(1, s.header.stamp_ns, BusMessage::SonarRing(&s));
+            put(1, s.header.stamp_ns, AnyMessageRef::SonarRing(&s));
         }
         while let Some(s) = self.odom.receive()? {
-            put(2, s.header.stamp_ns, BusMessage::Odometry(&s));
+            put(2, s.header.stamp_ns, AnyMessageRef::Odometry(&s));
         }
         while let Some(s) = self.smoke.receive()? {
-            put(3, s.header.stamp_ns, BusMessage::SmokeReading(&s));
+            put(3, s.header.stamp_ns, AnyMessageRef::SmokeReading(&s));
             st.smoke = Some(*s);
         }
         while let Some(s) = self.fused.receive()? {
-            put(4, s.scan.header.stamp_ns, BusMessage::FusedScan(&s));
+            put(4, s.scan.header.stamp_ns, AnyMessageRef::FusedScan(&s));
             st.fused = Some(Box::new(*s));
         }
         while let Some(s) = self.pose.receive()? {
-            put(5, s.header.stamp_ns, BusMessage::PoseEstimate(&s));
+            put(5, s.header.stamp_ns, AnyMessageRef::PoseEstimate(&s));
             st.pose = Some(*s);
         }
         Ok(())

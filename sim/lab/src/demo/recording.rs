@@ -5,7 +5,8 @@
 use anyhow::{Context, bail};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_map::OccupancyGrid;
-use smokenav_platform_recording::{BusMessage, Message, Playback, Recorder, SinkOptions};
+use smokenav_platform_recording::{AnyMessage, AnyMessageRef, Playback, Recorder, SinkOptions};
+use smokenav_shared_types::catalog::topic_names;
 use smokenav_shared_types::{LaserScan, Odometry, SmokeReading, SonarRing};
 use smokenav_sim_link::{DirectDrivers, DirectMessage, TruthTrack, Until};
 use smokenav_sim_world::{Scenario, StepOutput, World};
@@ -17,10 +18,10 @@ use std::time::Duration;
 
 /// The sensor topics the comparison needs.
 pub const SENSOR_TOPICS: [&str; 4] = [
-    smokenav_platform_bus::topics::LASER_SCAN,
-    smokenav_platform_bus::topics::BASE_SONAR,
-    smokenav_platform_bus::topics::SMOKE_LEVEL,
-    smokenav_platform_bus::topics::BASE_ODOM,
+    topic_names::LASER_SCAN,
+    topic_names::BASE_SONAR,
+    topic_names::SMOKE_LEVEL,
+    topic_names::BASE_ODOM,
 ];
 
 /// Stamp of sim time 0 in a recording made straight from the simulator, ns.
@@ -47,21 +48,21 @@ pub struct SensorLog {
 }
 
 impl SensorLog {
-    pub fn push(&mut self, log_time: u64, msg: Message) {
+    pub fn push(&mut self, log_time: u64, msg: AnyMessage) {
         let (kind, i) = match msg {
-            Message::LaserScan(s) => {
+            AnyMessage::LaserScan(s) => {
                 self.lasers.push(s);
                 (Kind::Laser, self.lasers.len() - 1)
             }
-            Message::SonarRing(r) => {
+            AnyMessage::SonarRing(r) => {
                 self.sonars.push(r);
                 (Kind::Sonar, self.sonars.len() - 1)
             }
-            Message::SmokeReading(r) => {
+            AnyMessage::SmokeReading(r) => {
                 self.smokes.push(r);
                 (Kind::Smoke, self.smokes.len() - 1)
             }
-            Message::Odometry(o) => {
+            AnyMessage::Odometry(o) => {
                 self.odoms.push(o);
                 (Kind::Odometry, self.odoms.len() - 1)
             }
@@ -168,16 +169,16 @@ pub fn record_direct(
             }
             let r = match &msg {
                 DirectMessage::Laser(s) => {
-                    rec.record(msg.topic(), BusMessage::LaserScan(s), log_time)
+                    rec.record(msg.topic(), AnyMessageRef::LaserScan(s), log_time)
                 }
                 DirectMessage::Odometry(o) => {
-                    rec.record(msg.topic(), BusMessage::Odometry(o), log_time)
+                    rec.record(msg.topic(), AnyMessageRef::Odometry(o), log_time)
                 }
                 DirectMessage::Sonar(r) => {
-                    rec.record(msg.topic(), BusMessage::SonarRing(r), log_time)
+                    rec.record(msg.topic(), AnyMessageRef::SonarRing(r), log_time)
                 }
                 DirectMessage::Smoke(s) => {
-                    rec.record(msg.topic(), BusMessage::SmokeReading(s), log_time)
+                    rec.record(msg.topic(), AnyMessageRef::SmokeReading(s), log_time)
                 }
             };
             match r {

@@ -1,7 +1,7 @@
 //! `smokenav topic list|echo|hz` against a live publisher in another process.
 
+use smokenav_shared_types::laser::BeamReading;
 use smokenav_shared_types::record::{Message, TopicRecord};
-use smokenav_shared_types::{LaserScan, laser::BeamReading};
 use smokenav_tests::{Child, bin, unique_instance};
 use std::process::Command;
 use std::time::Duration;
@@ -14,7 +14,9 @@ const RATE_HZ: f64 = 20.0;
 fn child_laser_publisher() {
     let instance = std::env::var("SMOKENAV_INSTANCE").unwrap();
     let bus = smokenav_tests::open_bus(&instance);
-    let mut publisher = bus.publisher::<LaserScan>("laser/scan").unwrap();
+    let mut publisher = bus
+        .publisher(smokenav_platform_bus::topics::LASER_SCAN)
+        .unwrap();
     println!("publishing");
     for n in 0u64.. {
         publisher

@@ -6,15 +6,15 @@
 //! role (the `#[ignore]`d `child_role` entry point), so no extra binaries are needed.
 
 use iceoryx2_bb_derive_macros::ZeroCopySend;
-use smokenav_platform_bus::{Message, WaitOutcome, Waiter};
+use smokenav_platform_bus::{Message, Topic, WaitOutcome, Waiter};
 use smokenav_shared_types::laser::{BEAM_NO_RETURN, BeamReading};
 use smokenav_shared_types::{Header, LaserScan, ZeroCopySend};
 use smokenav_tests::{Child, open_bus, unique_instance};
 use std::time::{Duration, Instant};
 
 const ROLE_ENV: &str = "SMOKENAV_TEST_ROLE";
-const SCAN_TOPIC: &str = "test/scan";
-const ACK_TOPIC: &str = "test/ack";
+const SCAN_TOPIC: Topic<LaserScan> = Topic::new("test/scan");
+const ACK_TOPIC: Topic<Ack> = Topic::new("test/ack");
 /// Unacknowledged scans a publisher may have in flight; below the topic's
 /// queue of 64, so nothing can be overwritten however slow the subscriber is.
 const WINDOW: u64 = 32;
@@ -93,8 +93,8 @@ fn batch_of(scan: &LaserScan) -> Option<u64> {
 
 fn run_publisher(instance: &str, batch: u64, count: u64) {
     let bus = open_bus(instance);
-    let mut scans = bus.publisher::<LaserScan>(SCAN_TOPIC).unwrap();
-    let acks = bus.subscriber::<Ack>(ACK_TOPIC).unwrap();
+    let mut scans = bus.publisher(SCAN_TOPIC).unwrap();
+    let acks = bus.subscriber(ACK_TOPIC).unwrap();
     let waiter = Waiter::new().unwrap();
     let _g = waiter.attach(&acks).unwrap();
     let mut acked = 0u64;
@@ -124,8 +124,8 @@ fn run_publisher(instance: &str, batch: u64, count: u64) {
 
 fn run_subscriber(instance: &str, expected: u64) {
     let bus = open_bus(instance);
-    let scans = bus.subscriber::<LaserScan>(SCAN_TOPIC).unwrap();
-    let mut acks = bus.publisher::<Ack>(ACK_TOPIC).unwrap();
+    let scans = bus.subscriber(SCAN_TOPIC).unwrap();
+    let mut acks = bus.publisher(ACK_TOPIC).unwrap();
     let waiter = Waiter::new().unwrap();
     let _g = waiter.attach(&scans).unwrap();
     println!("subscriber ready");

@@ -2,15 +2,17 @@
 //!
 //! `PartialEq` says NaN ≠ NaN, yet sensor-code beams carry NaN ranges and a
 //! replay must reproduce them (payload bits included). These compare every
-//! field, unused capacity and reserved bytes included, by bit pattern.
+//! field, unused capacity and reserved bytes included, by bit pattern. The
+//! catalog's [`AnyMessage`](crate::catalog::AnyMessage) compares through these.
 
-use crate::reader::Message;
-use smokenav_shared_types::{
+use crate::{
     FusedScan, Header, Health, LaserScan, MapInfo, Odometry, PoseEstimate, SmokeReading, SonarRing,
     VelocityCommand,
 };
 
+/// Equality by bit pattern, NaN payloads, unused capacity and reserved bytes included.
 pub trait BitIdentical {
+    /// True when `self` and `other` hold the same bits in every field.
     fn bit_identical(&self, other: &Self) -> bool;
 }
 
@@ -198,22 +200,5 @@ impl BitIdentical for Health {
                     && a.expected.to_bits() == b.expected.to_bits()
             })
             && self.last_error == o.last_error
-    }
-}
-
-impl BitIdentical for Message {
-    fn bit_identical(&self, o: &Self) -> bool {
-        match (self, o) {
-            (Message::LaserScan(a), Message::LaserScan(b)) => a.bit_identical(b),
-            (Message::FusedScan(a), Message::FusedScan(b)) => a.bit_identical(b),
-            (Message::Odometry(a), Message::Odometry(b)) => a.bit_identical(b),
-            (Message::SonarRing(a), Message::SonarRing(b)) => a.bit_identical(b),
-            (Message::VelocityCommand(a), Message::VelocityCommand(b)) => a.bit_identical(b),
-            (Message::SmokeReading(a), Message::SmokeReading(b)) => a.bit_identical(b),
-            (Message::PoseEstimate(a), Message::PoseEstimate(b)) => a.bit_identical(b),
-            (Message::Map(a, ca), Message::Map(b, cb)) => a.bit_identical(b) && ca == cb,
-            (Message::Health(a), Message::Health(b)) => a.bit_identical(b),
-            _ => false,
-        }
     }
 }
