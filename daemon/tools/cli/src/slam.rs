@@ -214,12 +214,15 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         scans.error_count,
         scans.odom_records
     );
-    let _ = writeln!(
-        report,
-        "back-end           {} ({} particles)",
-        slam.backend().name(),
-        cfg.particles
-    );
+    match cfg.backend {
+        SlamBackendKind::Rbpf => writeln!(
+            report,
+            "back-end           rbpf ({} particles)",
+            cfg.particles
+        ),
+        kind => writeln!(report, "back-end           {}", kind.as_str()),
+    }
+    .ok();
     let _ = writeln!(
         report,
         "per-scan CPU ms    p50 {:.2}  p99 {:.2}  max {:.2}",

@@ -124,7 +124,7 @@ fn slam_with_the_graph_back_end_saves_a_graph_that_optimises() {
         graph.to_str().unwrap(),
     ]);
     assert!(ok, "{stderr}");
-    assert!(stdout.contains("backend            Graph"), "{stdout}");
+    assert!(stdout.contains("back-end           graph\n"), "{stdout}");
     assert!(stdout.contains("loop closures"), "{stdout}");
     assert!(dir.path().join("map.png").exists());
     let (ok, out, stderr) = smokenav(&["graph", "optimize", graph.to_str().unwrap()]);
