@@ -70,6 +70,18 @@ impl Validate for LaserSection {
         validate_port(v, &format!("{key}.port"), &self.port);
         validate_baud(v, &format!("{key}.baud"), self.baud);
         v.non_empty(&format!("{key}.frame_id"), &self.frame_id);
+        // Every message carries its frame in a fixed 32-byte field: a longer
+        // name would be cut on the wire and match no transform.
+        if self.frame_id.len() > smokenav_shared_types::header::FRAME_ID_LEN {
+            v.fail(
+                format!("{key}.frame_id"),
+                format!(
+                    "must be at most {} bytes (the messages' frame_id field), got {} bytes",
+                    smokenav_shared_types::header::FRAME_ID_LEN,
+                    self.frame_id.len()
+                ),
+            );
+        }
         self.mount.validate(&format!("{key}.mount"), v);
         if self.skip_scans > 9 {
             v.fail(

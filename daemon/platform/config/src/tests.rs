@@ -83,6 +83,27 @@ fn negative_rate_names_file_key_and_reason() {
     assert!(msg.contains("-10"), "{msg}");
 }
 
+#[test]
+fn a_frame_id_longer_than_the_wire_field_is_refused() {
+    // 33 bytes: one more than a message header's frame_id holds.
+    let long = "hokuyo_urg_04lx_front_mount_laser";
+    assert_eq!(long.len(), 33);
+    let text = pioneer_text().replace("frame_id = \"laser\"", &format!("frame_id = \"{long}\""));
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert_eq!(err.keys(), vec!["laser.frame_id"], "{msg}");
+    assert!(
+        msg.contains("at most 32 bytes") && msg.contains("33"),
+        "{msg}"
+    );
+    // 32 bytes still fit.
+    let text = pioneer_text().replace(
+        "frame_id = \"laser\"",
+        &format!("frame_id = \"{}\"", &long[..32]),
+    );
+    parse(&text).unwrap();
+}
+
 /// 1-based line of the first line of `text` starting with `prefix` (after indentation).
 fn line_starting(text: &str, prefix: &str) -> usize {
     text.lines()
