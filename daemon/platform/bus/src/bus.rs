@@ -135,6 +135,19 @@ impl Bus {
         MapSubscriber::create(&self.endpoint, topic.name())
     }
 
+    /// The live processes other than this one that publish on `topic`
+    /// (their node names); empty if nobody has opened the topic yet.
+    pub fn live_publishers<T: Message>(&self, topic: Topic<T>) -> Result<Vec<String>, BusError> {
+        let service = self.endpoint.service(topic.name())?;
+        service.live_publishers(service.publish_subscribe::<T>())
+    }
+
+    /// [`Bus::live_publishers`] for the occupancy-grid topic.
+    pub fn live_map_publishers(&self, topic: Topic<MapInfo>) -> Result<Vec<String>, BusError> {
+        let service = self.endpoint.service(topic.name())?;
+        service.live_slice_publishers(service.publish_subscribe::<[i8]>().user_header::<MapInfo>())
+    }
+
     /// The services of this instance, as topics.
     pub fn list(&self) -> Result<Vec<ServiceInfo>, BusError> {
         list_services(&self.config, self.instance())

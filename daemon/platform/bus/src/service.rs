@@ -7,8 +7,12 @@
 
 use crate::error::BusError;
 use crate::topics::{self, Qos};
+use iceoryx2::identifiers::UniqueNodeId;
+use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::publish_subscribe::Builder as PubSubBuilder;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
+use iceoryx2::service::dynamic_config::publish_subscribe::DynamicConfig;
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 
 /// Most processes that may attach to one service (publishers, subscribers,
@@ -113,8 +117,86 @@ impl TopicService<'_> {
             .map_err(|e| self.error("open event service", e))
     }
 
+    /// The names of the live processes, other than this one, that have a
+    /// publisher on this service; empty if the service does not exist.
+    /// Publishers of dead processes (not yet cleaned up) do not count.
+    pub(crate) fn live_publishers<P>(
+        &self,
+        builder: PubSubBuilder<P, (), ipc::Service>,
+    ) -> Result<Vec<String>, BusError>
+    where
+        P: core::fmt::Debug + IceoryxSend + ZeroCopySend,
+    {
+        match builder.open() {
+            Ok(f) => {
+                let ids = publishing_nodes(f.dynamic_config());
+                self.alive_names(&f, &ids)
+            }
+            Err(PublishSubscribeOpenError::DoesNotExist) => Ok(Vec::new()),
+            Err(e) => Err(self.error("open publish-subscribe service", e)),
+        }
+    }
+
+    /// [`TopicService::live_publishers`] for a slice payload with a user header.
+    pub(crate) fn live_slice_publishers<P, H>(
+        &self,
+        builder: PubSubBuilder<[P], H, ipc::Service>,
+    ) -> Result<Vec<String>, BusError>
+    where
+        P: core::fmt::Debug + IceoryxSend + ZeroCopySend,
+        H: core::fmt::Debug + ZeroCopySend,
+    {
+        match self.with_qos(builder).open() {
+            Ok(f) => {
+                let ids = publishing_nodes(f.dynamic_config());
+                self.alive_names(&f, &ids)
+            }
+            Err(PublishSubscribeOpenError::DoesNotExist) => Ok(Vec::new()),
+            Err(e) => Err(self.error("open publish-subscribe service", e)),
+        }
+    }
+
+    /// The names of the live nodes among `ids`, this process's excepted.
+    fn alive_names<F: PortFactory<Service = ipc::Service>>(
+        &self,
+        factory: &F,
+        ids: &[UniqueNodeId],
+    ) -> Result<Vec<String>, BusError> {
+        let own = *self.node.id();
+        let mut names = Vec::new();
+        factory
+            .nodes(|state| {
+                if let NodeState::Alive(view) = &state
+                    && *view.id() != own
+                    && ids.contains(view.id())
+                {
+                    names.push(match view.details() {
+                        Some(d) => d.name().as_str().to_owned(),
+                        None => format!("{:?}", view.id()),
+                    });
+                }
+                CallbackProgression::Continue
+            })
+            .map_err(|e| self.error("list nodes", e))?;
+        names.sort();
+        names.dedup();
+        Ok(names)
+    }
+
     /// An error of `op` on this service.
     pub(crate) fn error(&self, op: &'static str, e: impl core::fmt::Debug) -> BusError {
         BusError::service(&self.full, op, e)
     }
+}
+
+/// The nodes that hold a publisher of a service.
+fn publishing_nodes(
+    d: &DynamicConfig<<ipc::Service as iceoryx2::service::Service>::Bag>,
+) -> Vec<UniqueNodeId> {
+    let mut ids = Vec::new();
+    d.list_publishers(|p| {
+        ids.push(p.node_id);
+        CallbackProgression::Continue
+    });
+    ids
 }

@@ -5,13 +5,19 @@
 //! back to back with `--fast`. The bus never blocks a publisher: with
 //! `--fast`, a subscriber slower than the player drops messages and sees the
 //! gaps in its sequence numbers; use `--rate` for faithful re-runs.
+//!
+//! A replay must never move a robot or masquerade as its live sensors:
+//! velocity commands are left out unless `--commands` asks for them, and
+//! before publishing anything `play` looks for live processes publishing the
+//! topics it would replay and refuses, naming them, unless `--force`. Play
+//! onto a separate instance (`--instance replay`) to run beside a robot.
 
 use crate::topic::BusArgs;
 use anyhow::{Context, bail};
 use clap::Args;
 use smokenav_platform_bus::{Bus, MapPublisher, Publisher, topics};
 use smokenav_platform_recording::{AnyMessage, EndOfData, Playback};
-use smokenav_shared_types::catalog::{Cataloged, MessageVisitor};
+use smokenav_shared_types::catalog::{self, Cataloged, MessageVisitor};
 use smokenav_shared_types::clock::monotonic_now_ns;
 use std::collections::{BTreeMap, HashMap};
 use std::io::IsTerminal;
@@ -39,8 +45,62 @@ pub struct PlayArgs {
     /// message, so subscribers that start with the replay connect.
     #[arg(long, default_value_t = 0.0)]
     pub connect_delay: f64,
+    /// Also replay velocity commands (`base/cmd_vel`): they drive a robot
+    /// whose driver is listening.
+    #[arg(long)]
+    pub commands: bool,
+    /// Publish even where live processes already publish the same topics.
+    #[arg(long)]
+    pub force: bool,
     #[command(flatten)]
     pub bus: BusArgs,
+}
+
+/// Whether `topic` commands the robot: never replayed unless asked for.
+fn is_command(topic: &str) -> bool {
+    topic == topics::BASE_CMD_VEL.name()
+}
+
+/// Lists the live publishers of one topic, whatever catalog type it carries.
+struct LivePublishers<'a> {
+    bus: &'a Bus,
+    topic: &'a str,
+}
+
+impl MessageVisitor for LivePublishers<'_> {
+    type Output = anyhow::Result<Vec<String>>;
+
+    fn fixed<M: Cataloged>(&mut self) -> Self::Output {
+        match topics::lookup::<M>(self.topic) {
+            Some(t) => Ok(self.bus.live_publishers(t)?),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    fn map(&mut self) -> Self::Output {
+        match topics::lookup_map(self.topic) {
+            Some(t) => Ok(self.bus.live_map_publishers(t)?),
+            None => Ok(Vec::new()),
+        }
+    }
+}
+
+/// The topics `play` may publish and, for each with live publishers on the
+/// bus, who they are.
+fn live_conflicts(bus: &Bus, playable: &[String]) -> anyhow::Result<Vec<(String, Vec<String>)>> {
+    let mut out = Vec::new();
+    for topic in playable {
+        let Some(kind) = catalog::topic_kind(topic) else {
+            continue;
+        };
+        let who = kind
+            .visit(&mut LivePublishers { bus, topic })
+            .with_context(|| format!("cannot look for publishers of {topic}"))?;
+        if !who.is_empty() {
+            out.push((topic.clone(), who));
+        }
+    }
+    Ok(out)
 }
 
 /// A publisher of one recorded topic, whatever its type.
@@ -140,6 +200,38 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let mut playback = Playback::open(&args.file)
         .with_context(|| format!("cannot open {}", args.file.display()))?;
     let bus = args.bus.open("play")?;
+    let wanted = |topic: &str| {
+        (args.topics.is_empty() || args.topics.iter().any(|t| t == topic))
+            && (args.commands || !is_command(topic))
+    };
+    // Every topic the recording could hold: checked before the first message,
+    // so a refusal publishes nothing at all.
+    let playable: Vec<String> = if args.topics.is_empty() {
+        crate::record::default_topics()
+    } else {
+        args.topics.clone()
+    };
+    let playable: Vec<String> = playable.into_iter().filter(|t| wanted(t)).collect();
+    let conflicts = live_conflicts(&bus, &playable)?;
+    if !conflicts.is_empty() {
+        let list = conflicts
+            .iter()
+            .map(|(t, who)| format!("  {t} <- {}", who.join(", ")))
+            .collect::<Vec<_>>()
+            .join("\n");
+        if args.force {
+            tracing::warn!(
+                "--force: publishing beside live publishers on instance `{}`:\n{list}",
+                bus.instance()
+            );
+        } else {
+            bail!(
+                "refusing to play onto instance `{}`: live processes publish the same topics\n{list}\n\
+                 stop them, play onto another instance (--instance replay), or pass --force",
+                bus.instance()
+            );
+        }
+    }
     let stop = smokenav_platform_runtime::Shutdown::install()?;
 
     let bar = if std::io::stderr().is_terminal() {
@@ -160,6 +252,7 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let mut stamp_offset: Option<i64> = None;
     let started = Instant::now();
     let mut published = 0u64;
+    let mut commands_skipped = 0u64;
     while !stop.requested() {
         let Some(mut played) = playback
             .read_next()
@@ -167,7 +260,8 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
         else {
             break;
         };
-        if !args.topics.is_empty() && !args.topics.contains(&played.topic) {
+        if !wanted(&played.topic) {
+            commands_skipped += u64::from(is_command(&played.topic));
             continue;
         }
         if !args.fast {
@@ -241,6 +335,11 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
             } else {
                 String::new()
             }
+        );
+    }
+    if commands_skipped > 0 {
+        println!(
+            "  left out {commands_skipped} velocity commands (base/cmd_vel); --commands replays them"
         );
     }
     println!(
