@@ -113,6 +113,10 @@ pub enum SyncState {
     LaserOnly = 1,
     /// The laser timed out: the scan is built from sonar alone.
     SonarOnly = 2,
+    /// Laser and sonar fused without a usable smoke reading (none within the
+    /// sync timeout, or the sensor not `ready`): v2 assumes smoke and keeps
+    /// the sonar witness on in every section.
+    NoSmoke = 3,
 }
 
 impl SyncState {
@@ -121,16 +125,18 @@ impl SyncState {
         match v {
             1 => SyncState::LaserOnly,
             2 => SyncState::SonarOnly,
+            3 => SyncState::NoSmoke,
             _ => SyncState::Complete,
         }
     }
 
-    /// Its name in JSON records and logs (`complete`, `laser-only`, `sonar-only`).
+    /// Its name in JSON records and logs (`complete`, `laser-only`, `sonar-only`, `no-smoke`).
     pub fn as_str(self) -> &'static str {
         match self {
             SyncState::Complete => "complete",
             SyncState::LaserOnly => "laser-only",
             SyncState::SonarOnly => "sonar-only",
+            SyncState::NoSmoke => "no-smoke",
         }
     }
 }

@@ -694,6 +694,7 @@ impl FusedScanRecord {
             "complete" => SyncState::Complete,
             "laser-only" => SyncState::LaserOnly,
             "sonar-only" => SyncState::SonarOnly,
+            "no-smoke" => SyncState::NoSmoke,
             other => {
                 return Err(ConversionError::UnknownValue {
                     field: "sync_state",

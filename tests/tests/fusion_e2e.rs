@@ -12,8 +12,8 @@ use smokenav_platform_config::RobotConfig;
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::record::{FusedScanRecord, Message, TopicRecord};
 use smokenav_shared_types::{
-    FusedScan, FusionMethod, Health, HealthState, LaserScan, SmokeReading, SmokeTrend, SonarRing,
-    SyncState,
+    FusedScan, FusionMethod, Health, HealthState, LaserScan, SmokeReading, SmokeSensorState,
+    SmokeTrend, SonarRing, SyncState,
 };
 use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for};
 use std::path::PathBuf;
@@ -306,4 +306,147 @@ fn silent_sonar_degrades_to_the_laser_alone_and_health_says_so() {
         got.iter().map(|f| f.sync_state()).collect::<Vec<_>>()
     );
     rig.fusion.terminate(Duration::from_secs(5)).unwrap();
+}
+
+/// A corridor (10 × 2 m) with a smoke front 0.6 m ahead: a phantom wall over
+/// ±0.3 rad the laser sees and the sonars do not. The scan keeps a wide
+/// spread (real side and end walls), so only the sonar witness can catch it.
+const PHANTOM_M: f32 = 0.6;
+const PHANTOM_HALF_RAD: f64 = 0.3;
+
+impl Rig {
+    /// One 10 Hz cycle of the phantom wall; `smoke`: the sensor state to
+    /// publish (level 0), or `None` for a sensor that sends nothing.
+    fn publish_phantom_cycle(&mut self, k: u64, smoke: Option<SmokeSensorState>) {
+        let t = monotonic_now_ns();
+        let corridor = Room {
+            half_x: 5.0,
+            half_y: 3.0,
+        };
+        let scan = smokenav_algorithms_fusion::testkit::urg_scan(t - 2 * MS, k, |_, a| {
+            if a.abs() < PHANTOM_HALF_RAD {
+                PHANTOM_M
+            } else {
+                corridor.range(0.0, 0.0, a) as f32
+            }
+        });
+        self.laser.publish(&scan).unwrap();
+        let pipeline = FusionPipeline::from_config(&self.cfg, None).unwrap();
+        let ring = corridor.ring(
+            pipeline.engine().geometry(),
+            self.cfg.sonar.cone_deg / 2.0,
+            t - MS,
+            k,
+        );
+        self.sonar.publish(&ring).unwrap();
+        if let Some(state) = smoke {
+            let mut reading = smoke_reading(t, k, 0.0, SmokeTrend::Steady);
+            reading.state = state as u8;
+            self.smoke.publish(&reading).unwrap();
+        }
+    }
+
+    /// Publishes `n` phantom cycles; returns the fused scans and, if health
+    /// degraded meanwhile, how long after the first cycle it was seen.
+    fn run_phantom(
+        &mut self,
+        n: u64,
+        smoke: Option<SmokeSensorState>,
+    ) -> (Vec<FusedScan>, Option<Duration>) {
+        let health = self
+            .bus
+            .subscriber::<Health>(topics::health("fusion"))
+            .unwrap();
+        let started = Instant::now();
+        let mut degraded = None;
+        let mut got = Vec::new();
+        for k in 0..n {
+            let next = Instant::now() + CYCLE;
+            self.publish_phantom_cycle(k, smoke);
+            self.collect(next.saturating_duration_since(Instant::now()), &mut got);
+            while let Some(h) = health.receive().unwrap() {
+                if degraded.is_none()
+                    && h.state() == HealthState::Degraded
+                    && h.metric("smoke_silent") == Some(1.0)
+                {
+                    degraded = Some(started.elapsed());
+                }
+            }
+        }
+        (got, degraded)
+    }
+}
+
+/// The nearest range the fused scan reports within the phantom's sector.
+fn nearest_ahead(f: &FusedScan) -> f32 {
+    let s = &f.scan;
+    (0..s.len())
+        .filter(|&i| {
+            let a = f64::from(s.angle_min) + i as f64 * f64::from(s.angle_increment);
+            a.abs() < PHANTOM_HALF_RAD - 0.05
+        })
+        .filter_map(|i| s.beam(i).range())
+        .fold(f32::INFINITY, f32::min)
+}
+
+fn check_phantom_removed(test: &str, smoke: Option<SmokeSensorState>, expect_error: &str) {
+    let mut rig = Rig::start(test, FusionMethod::V2);
+    let (got, degraded) = rig.run_phantom(25, smoke);
+    // The first sets wait for the synchroniser's timeout on a silent topic.
+    let settled: Vec<&FusedScan> = got.iter().skip(got.len().saturating_sub(10)).collect();
+    assert!(settled.len() >= 5, "{} fused scans", got.len());
+    for f in &settled {
+        eprintln!(
+            "{test}: sync {} spread {:.2} m, nearest ahead {:.2} m, sonar usage {:.2}",
+            f.sync_state().as_str(),
+            f.laser_spread,
+            nearest_ahead(f),
+            f.sonar_usage()
+        );
+        assert_eq!(f.sync_state(), SyncState::NoSmoke);
+        assert!(
+            nearest_ahead(f) > PHANTOM_M + 0.3,
+            "the phantom wall at {PHANTOM_M} m survived: {:.2} m",
+            nearest_ahead(f)
+        );
+    }
+    let degraded = degraded.expect("health never said the smoke sensor is silent");
+    eprintln!(
+        "{test}: health degraded {:.2} s after the first cycle",
+        degraded.as_secs_f64()
+    );
+    let h = wait_for::<Health>(
+        &rig.bus,
+        topics::health("fusion"),
+        Duration::from_secs(5),
+        |h: &Health| h.state() == HealthState::Degraded,
+    )
+    .unwrap();
+    let h = h.last().unwrap();
+    assert_eq!(h.metric("smoke_silent"), Some(1.0));
+    assert!(
+        h.last_error.as_str().contains(expect_error)
+            && h.last_error.as_str().contains("sonar witness on"),
+        "{}",
+        h.last_error.as_str()
+    );
+    rig.fusion.terminate(Duration::from_secs(5)).unwrap();
+}
+
+#[test]
+fn silent_smoke_sensor_keeps_the_sonar_witness_on_and_health_says_so() {
+    // Nothing on smoke/level: after the sync timeout v2 fuses laser and sonar
+    // assuming smoke; before, it fell back to the laser alone (phantom kept).
+    check_phantom_removed("fusion_e2e_smoke_silent", None, "smoke silent");
+}
+
+#[test]
+fn disconnected_smoke_sensor_keeps_the_sonar_witness_on_and_health_says_so() {
+    // Readings flow but the sensor flags itself disconnected: its level is
+    // unusable, so the witness must not read it as clean air.
+    check_phantom_removed(
+        "fusion_e2e_smoke_disconnected",
+        Some(SmokeSensorState::Disconnected),
+        "smoke sensor not ready",
+    );
 }

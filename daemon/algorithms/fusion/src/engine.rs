@@ -14,6 +14,14 @@ use smokenav_shared_types::{
 };
 use std::f64::consts::TAU;
 
+/// The smoke level the fuzzy model may use: a reading of a `ready` sensor
+/// with a finite level; `None` means the smoke sensor is silent.
+fn usable_smoke_level(smoke: Option<&SmokeReading>) -> Option<f64> {
+    smoke
+        .filter(|s| s.is_ready() && s.level.is_finite())
+        .map(|s| f64::from(s.level))
+}
+
 /// Why a cycle produced nothing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum StepError {
@@ -37,6 +45,9 @@ pub struct StepReport {
     pub rho_laser: f32,
     /// The laser scan's layout was unusable (no beams, bad increment): passed through untouched.
     pub bad_layout: bool,
+    /// v2 fused laser and sonar without a usable smoke reading and assumed
+    /// smoke (the witness on in every section; see the `v2` module).
+    pub smoke_silent: bool,
 }
 
 /// The layout of the last laser scan, used to shape sonar-only output.
@@ -163,8 +174,9 @@ impl FusionEngine {
     }
 
     /// Fuses one set into `out`. Any input may be absent (timed out):
-    /// laser without sonar or smoke gives the laser untouched
-    /// ([`SyncState::LaserOnly`]); sonar without laser gives Algorithm 1's
+    /// laser without sonar (or, except for v2, without smoke) gives the laser
+    /// untouched ([`SyncState::LaserOnly`]); v2 with laser and sonar but no
+    /// usable smoke reading assumes smoke ([`SyncState::NoSmoke`]); sonar without laser gives Algorithm 1's
     /// scan in the last laser layout ([`SyncState::SonarOnly`]).
     pub fn step(
         &mut self,
@@ -185,13 +197,7 @@ impl FusionEngine {
         out.sonar_stamp_ns = sonar.map_or(0, |s| s.header.stamp_ns);
         out.smoke_stamp_ns = smoke.map_or(0, |s| s.header.stamp_ns);
         match (laser, sonar) {
-            (Some(l), _) => Ok(self.fuse_laser(
-                l,
-                sonar.is_some() && smoke.is_some(),
-                smoke,
-                smoke_state,
-                out,
-            )),
+            (Some(l), _) => Ok(self.fuse_laser(l, sonar.is_some(), smoke, smoke_state, out)),
             (None, Some(s)) if self.method != FusionMethod::LaserOnly => {
                 let t = self.template.ok_or(StepError::NoLayout)?;
                 Ok(self.sonar_only(&t, s, smoke_state, out))
@@ -226,14 +232,21 @@ impl FusionEngine {
     fn fuse_laser(
         &mut self,
         l: &LaserScan,
-        complete: bool,
+        with_sonar: bool,
         smoke: Option<&SmokeReading>,
         smoke_state: SmokeState,
         out: &mut FusedScan,
     ) -> StepReport {
         out.scan = *l;
         out.beam_source.fill(SectionSource::Laser as u8);
-        out.sync_state = if complete {
+        let complete = with_sonar && smoke.is_some();
+        // v2 does not fall back to the laser alone when the smoke sensor is
+        // silent: it fuses with the sonar and assumes smoke.
+        let smoke_silent =
+            self.method == FusionMethod::V2 && with_sonar && usable_smoke_level(smoke).is_none();
+        out.sync_state = if smoke_silent {
+            SyncState::NoSmoke
+        } else if complete {
             SyncState::Complete
         } else {
             SyncState::LaserOnly
@@ -248,6 +261,7 @@ impl FusionEngine {
             sonar_sections: 0,
             rho_laser: 1.0,
             bad_layout: false,
+            smoke_silent,
         };
         let Some(shape) = ScanShape::of(l) else {
             report.bad_layout = true;
@@ -265,7 +279,7 @@ impl FusionEngine {
         self.echo_painted = [false; MAX_SONARS];
         let n_sections = self.sections.as_slice().len();
         report.sections = n_sections;
-        let fuse = complete && self.method != FusionMethod::LaserOnly;
+        let fuse = (complete || smoke_silent) && self.method != FusionMethod::LaserOnly;
         if !fuse {
             for k in 0..n_sections {
                 self.decisions[k] = SectionSource::Laser;
@@ -276,7 +290,10 @@ impl FusionEngine {
         }
         match self.method {
             FusionMethod::V1 => self.decide_v1(l, smoke_state, out),
-            _ => report.rho_laser = self.decide_v2(l, &shape, smoke, spread, out) as f32,
+            _ => {
+                report.rho_laser =
+                    self.decide_v2(l, &shape, smoke, smoke_silent, spread, out) as f32
+            }
         }
         out.section_count = n_sections as u32;
         self.apply_sections(l, &shape, out);
@@ -325,24 +342,29 @@ impl FusionEngine {
         l: &LaserScan,
         shape: &ScanShape,
         smoke: Option<&SmokeReading>,
+        smoke_silent: bool,
         spread: f64,
         out: &mut FusedScan,
     ) -> f64 {
-        let level = smoke
-            .filter(|s| s.is_ready() && s.level.is_finite())
-            .map(|s| f64::from(s.level));
+        let level = usable_smoke_level(smoke);
         let trust: LaserTrust = self.fuzzy.laser_trust(level, spread);
+        // The smoke the witness assumes: the worst when the sensor is silent.
+        let mu_smoke = if smoke_silent {
+            1.0
+        } else {
+            trust.mu_alcoholized
+        };
         let n = self.sections.as_slice().len();
         for k in 0..n {
             let s = self.sections.as_slice()[k];
             let (echo, raw) = self.echo(s.sonar_index);
             // The witness is only consulted when there is smoke to explain a contradiction.
-            let share = if trust.mu_alcoholized > 0.0 {
+            let share = if mu_smoke > 0.0 {
                 self.contradicted_share(l, shape, k, echo)
             } else {
                 None
             };
-            let section = self.fuzzy.section_laser_trust(&trust, share);
+            let section = self.fuzzy.section_laser_trust_in(&trust, share, mu_smoke);
             self.section_laser_ok[k] = self.fuzzy.decide_gap(&section) == SectionSource::Laser;
             let rho_s = self.fuzzy.sonar_trust(&section, echo, f64::from(raw));
             let d = self.fuzzy.decide(rho_s, section.rho);
@@ -350,7 +372,7 @@ impl FusionEngine {
             self.record_section(k, rho_s as f32, section.rho as f32, out);
             // A kept laser section in smoky air still loses the single beams
             // its sonar contradicts (patchy smoke catches every few beams).
-            if d == SectionSource::Laser && share.is_some() && trust.mu_alcoholized >= 0.5 {
+            if d == SectionSource::Laser && share.is_some() && mu_smoke >= 0.5 {
                 self.blank_contradicted(l, &s, out);
             }
         }
@@ -568,6 +590,7 @@ impl FusionEngine {
             sonar_sections: used,
             rho_laser: 0.0,
             bad_layout: false,
+            smoke_silent: false,
         }
     }
 }

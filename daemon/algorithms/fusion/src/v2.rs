@@ -78,6 +78,20 @@
 //! fusion rule. Single contradicted beams of a kept section are dropped.
 //! `contradicted = { a = 2.0, b = 2.0, c = inf, d = inf }` (a share never
 //! reached) turns the witness off.
+//!
+//! ## A silent smoke sensor
+//!
+//! Without a smoke reading the witness cannot be gated by the air, and
+//! trusting the laser then is exactly the phantom wall the witness exists to
+//! catch. The smoke sensor is *silent* when the synchronised set has no smoke
+//! reading (the synchroniser heard nothing from it within its timeout,
+//! `[fusion.sync]`), or the reading's own state is not `ready` (warming up,
+//! disconnected, saturated). Then v2 assumes the worst it can still check:
+//! the scan-wide rule uses σ alone, and every section's witness acts as in
+//! fully alcoholized air (μ_Alcoholized = 1 in the section rule), so a
+//! contradicted section goes to a confident sonar or to neither. A laser the
+//! sonar agrees with is kept. The output says so (`SyncState::NoSmoke`) and
+//! so does the fusion process's health (`smoke_silent`).
 
 use crate::fuzzy::{Defuzzifier, pi};
 use crate::geometry::SonarEcho;
@@ -136,8 +150,19 @@ impl FuzzyModel {
         scan: &LaserTrust,
         contradicted_share: Option<f64>,
     ) -> LaserTrust {
+        self.section_laser_trust_in(scan, contradicted_share, scan.mu_alcoholized)
+    }
+
+    /// [`Self::section_laser_trust`] with the smoke the witness assumes:
+    /// μ_Alcoholized of the reading, or 1 when the smoke sensor is silent.
+    pub fn section_laser_trust_in(
+        &self,
+        scan: &LaserTrust,
+        contradicted_share: Option<f64>,
+        mu_alcoholized: f64,
+    ) -> LaserTrust {
         let mu_c = contradicted_share.map_or(0.0, |c| pi(c, &self.params.contradicted));
-        let w = scan.w.min((1.0 - scan.mu_alcoholized).max(1.0 - mu_c));
+        let w = scan.w.min((1.0 - mu_alcoholized).max(1.0 - mu_c));
         if w == scan.w {
             return *scan;
         }
@@ -272,6 +297,21 @@ mod tests {
         assert_eq!(m.section_laser_trust(&scan, Some(1.0)), scan);
         let scan = m.laser_trust(None, 1.2);
         assert_eq!(m.section_laser_trust(&scan, Some(1.0)), scan);
+    }
+
+    #[test]
+    fn with_a_silent_smoke_sensor_the_witness_assumes_smoke() {
+        // No reading: σ alone says the structured scan is fine, but a section
+        // the sonar contradicts still goes to it.
+        let m = model();
+        let scan = m.laser_trust(None, 1.2);
+        assert_eq!(scan.w, 1.0);
+        let sec = m.section_laser_trust_in(&scan, Some(0.9), 1.0);
+        assert!(sec.w < 1e-9 && sec.rho < 0.5);
+        let s = m.sonar_trust(&sec, SonarEcho::Echo(2.0), 2.0);
+        assert_eq!(m.decide(s, sec.rho), SectionSource::Sonar);
+        // A section the sonar agrees with keeps the laser.
+        assert_eq!(m.section_laser_trust_in(&scan, Some(0.05), 1.0), scan);
     }
 
     #[test]

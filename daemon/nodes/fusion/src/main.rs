@@ -5,7 +5,9 @@
 //! (`[fusion] method` or `--method`: laser-only, v1, v2), and publishes one
 //! `FusedScan` per synchronised set on `fusion/scan` — the laser's rate when
 //! the sensors run at the same rate, as in the paper. Health on
-//! `health/fusion`: method, smoke state, sonar usage, sync drops, and the
+//! `health/fusion`: method, smoke state, sonar usage, sync drops,
+//! `smoke_silent` (v2 fused the last set assuming smoke because the smoke
+//! sensor sent nothing or flagged itself not ready; health degraded), and the
 //! latency from the input that completed a set to its fused scan being
 //! published (p50/p99/max per health period).
 //!
@@ -198,7 +200,21 @@ fn report(p: &mut Process, pipeline: &FusionPipeline, out: &Output, bus_lost: u6
         .map(|t| TOPIC_NAMES[t])
         .collect();
     let method = engine.method().as_str();
-    if engine.method() != FusionMethod::LaserOnly && !silent.is_empty() {
+    // v2 fused the last set without a usable smoke reading (none arrived, or
+    // the sensor is not ready): it assumed smoke; say so.
+    let smoke_silent = last.is_some_and(|r| r.smoke_silent);
+    h.set_metric("smoke_silent", f64::from(u8::from(smoke_silent)));
+    if smoke_silent {
+        let why = if active[SMOKE] {
+            "smoke sensor not ready"
+        } else {
+            "smoke silent"
+        };
+        let text = format!("{why}: assuming smoke, sonar witness on in every section ({method})");
+        h.error(&text);
+        h.set_state(HealthState::Degraded);
+        text
+    } else if engine.method() != FusionMethod::LaserOnly && !silent.is_empty() {
         if h.state() == HealthState::Ok {
             h.error(&format!(
                 "{} silent: output degraded to {}",
