@@ -113,9 +113,9 @@ pub enum SyncState {
     LaserOnly = 1,
     /// The laser timed out: the scan is built from sonar alone.
     SonarOnly = 2,
-    /// Laser and sonar fused without a usable smoke reading (none within the
-    /// sync timeout, or the sensor not `ready`): v2 assumes smoke and keeps
-    /// the sonar witness on in every section.
+    /// Laser and sonar fused without a smoke reading (none within the sync
+    /// timeout): v2 assumes smoke and keeps the sonar witness on in every
+    /// section (as it does, under `Complete`, for a sensor that is not ready).
     NoSmoke = 3,
 }
 

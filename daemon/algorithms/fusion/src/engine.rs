@@ -244,7 +244,9 @@ impl FusionEngine {
         // silent: it fuses with the sonar and assumes smoke.
         let smoke_silent =
             self.method == FusionMethod::V2 && with_sonar && usable_smoke_level(smoke).is_none();
-        out.sync_state = if smoke_silent {
+        // The sync state says what was paired: a reading of a sensor that is not
+        // ready still completes the set (the report flags `smoke_silent`).
+        out.sync_state = if smoke_silent && smoke.is_none() {
             SyncState::NoSmoke
         } else if complete {
             SyncState::Complete

@@ -90,8 +90,9 @@
 //! the scan-wide rule uses σ alone, and every section's witness acts as in
 //! fully alcoholized air (μ_Alcoholized = 1 in the section rule), so a
 //! contradicted section goes to a confident sonar or to neither. A laser the
-//! sonar agrees with is kept. The output says so (`SyncState::NoSmoke`) and
-//! so does the fusion process's health (`smoke_silent`).
+//! sonar agrees with is kept. The output says so when no reading came
+//! (`SyncState::NoSmoke`); the fusion process's health says so in both
+//! cases (`smoke_silent`, state degraded).
 
 use crate::fuzzy::{Defuzzifier, pi};
 use crate::geometry::SonarEcho;
