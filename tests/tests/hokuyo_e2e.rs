@@ -299,3 +299,98 @@ fn scip_decode_cli_prints_one_json_object_per_reply() {
     assert_eq!(damaged.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&damaged.stdout).contains("checksum expected"));
 }
+
+fn streaming_rig(test: &str) -> Rig {
+    let dev = DeviceConfig {
+        boot: BootState {
+            scip11: Some(false),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut rig = Rig::new(test, dev);
+    rig.start_driver();
+    rig.scans(5, Duration::from_secs(15));
+    rig
+}
+
+/// Issue #22 point 5: 1000 B/s of line noise (100 bytes before every scan)
+/// is counted byte for byte, and cutting it off keeps the scans.
+#[test]
+fn line_noise_at_1000_bytes_per_s_is_counted_and_scans_keep_their_rate() {
+    let rig = streaming_rig("hokuyo_noise");
+    // Line noise without LF (an LF pair would make a frame of its own,
+    // counted too, but leading LFs are skipped without a count).
+    let mut x = 0x2545_f491_u32;
+    let mut noise = [0u8; 100];
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(3) {
+        for b in &mut noise {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            *b = match (x >> 24) as u8 {
+                b'\n' => b'#',
+                v => v,
+            };
+        }
+        rig.emu.inject_garbage(&noise);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let injected = rig.emu.stats().garbage_bytes as f64;
+    assert!(injected >= 2500.0, "injected {injected} bytes");
+    let h = rig.health(Duration::from_secs(5), |h| {
+        h.metric("discarded_bytes").unwrap_or(0.0) >= injected
+    });
+    let hz = h.metric("scan_hz").unwrap();
+    eprintln!(
+        "{injected} B of noise in 3 s: discarded_bytes {}, discarded_frames {}, scan_hz {hz:.1}",
+        h.metric("discarded_bytes").unwrap(),
+        h.metric("discarded_frames").unwrap()
+    );
+    assert!(hz >= 8.0, "scan rate under noise {hz} Hz\n{}", rig.output());
+    assert_eq!(h.state(), HealthState::Ok, "{}", h.last_error.as_str());
+}
+
+/// Issue #22 point 5: 2 % of lines corrupted loses about half the scans;
+/// health goes `degraded` (rate below 80 % of the sensor's 10 Hz),
+/// `smokenav status` says so with exit 1, and it recovers with the rate.
+#[test]
+fn lost_scans_turn_health_degraded_and_status_fails_until_the_rate_recovers() {
+    let rig = streaming_rig("hokuyo_lost");
+    rig.health(Duration::from_secs(5), |h| h.state() == HealthState::Ok);
+    rig.emu.set_corrupt_line_fraction(0.02);
+    let h = rig.health(Duration::from_secs(8), |h| {
+        h.state() == HealthState::Degraded
+    });
+    let hz = h.metric("scan_hz").unwrap();
+    eprintln!(
+        "degraded at scan_hz {hz:.1} (expected {:?}), discarded_frames {}: {}",
+        h.metrics()
+            .iter()
+            .find(|m| m.name.as_str() == "scan_hz")
+            .map(|m| m.expected),
+        h.metric("discarded_frames").unwrap(),
+        h.last_error.as_str()
+    );
+    assert!(hz < 8.0, "degraded at {hz} Hz");
+    assert!(h.last_error.as_str().contains("scan_hz"));
+    assert!(h.metric("discarded_frames").unwrap() >= 1.0);
+    let out = std::process::Command::new(bin("smokenav"))
+        .args(["status", "--json", "--roles", "hokuyo"])
+        .env("SMOKENAV_INSTANCE", &rig.instance)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let v: serde_json::Value = serde_json::from_str(text.trim())
+        .unwrap_or_else(|e| panic!("{e}: {text} {}", String::from_utf8_lossy(&out.stderr)));
+    assert_eq!(v["processes"][0]["status"], "degraded", "{v}");
+    assert!(!out.status.success(), "exit 0 while degraded: {v}");
+    rig.emu.set_corrupt_line_fraction(0.0);
+    let h = rig.health(Duration::from_secs(5), |h| h.state() == HealthState::Ok);
+    assert!(
+        h.last_error.as_str().is_empty(),
+        "{}",
+        h.last_error.as_str()
+    );
+}

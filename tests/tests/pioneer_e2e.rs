@@ -58,7 +58,17 @@ fn start(
 
 /// Emulator + driver on a fresh bus instance; returns once odometry flows.
 fn rig(test: &str, robot: RobotConfig, transport: Transport) -> Rig {
-    let (dir, emu, driver, bus, instance) = start(test, robot, transport, |_| {});
+    rig_with(test, robot, transport, |_| {})
+}
+
+/// [`rig`] with the profile edited first.
+fn rig_with(
+    test: &str,
+    robot: RobotConfig,
+    transport: Transport,
+    edit: impl FnOnce(&mut smokenav_platform_config::RobotConfig),
+) -> Rig {
+    let (dir, emu, driver, bus, instance) = start(test, robot, transport, edit);
     wait_for::<Odometry>(&bus, topics::BASE_ODOM, Duration::from_secs(15), |_| true)
         .unwrap_or_else(|e| panic!("{e}\n{}", driver.output()));
     Rig {
@@ -179,7 +189,13 @@ fn commanding_0_3_mps_for_2_s_moves_odometry_about_0_6_m_and_sigterm_closes() {
 
 #[test]
 fn crashed_controller_stops_the_robot_within_the_0_5_s_command_timeout() {
-    let r = rig("pioneer_crash", RobotConfig::default(), Transport::Pty);
+    // The profile's timeout is shorter now; this checks a configured one holds.
+    let r = rig_with(
+        "pioneer_crash",
+        RobotConfig::default(),
+        Transport::Pty,
+        |c| c.base.cmd_timeout_s = 0.5,
+    );
     let h = r.emu.handle();
     let ctl = Child::spawn(
         &bin("smokenav"),
@@ -215,6 +231,62 @@ fn crashed_controller_stops_the_robot_within_the_0_5_s_command_timeout() {
         .expect("wheels stop");
     let health = health_metric(&r, "cmd_timeouts", |v| v >= 1.0);
     assert_eq!(health.metric("cmd_timeouts"), Some(1.0));
+}
+
+/// Issue #22 point 3: from the controller's SIGKILL to wheels at rest, with
+/// the profile's command timeout and the emulator's 1 m/s² deceleration.
+#[test]
+fn crashed_controller_at_0_3_mps_leaves_the_robot_at_standstill_within_0_5_s() {
+    let robot = RobotConfig::default();
+    let decel_mps2 = robot.trans_decel / 1000.0;
+    let r = rig("pioneer_standstill", robot, Transport::Pty);
+    let timeout_s =
+        smokenav_platform_config::RobotConfig::load(&r._dir.path().join("test-pioneer-3dx.toml"))
+            .map(|c| c.base.cmd_timeout_s)
+            .unwrap_or_else(|e| panic!("profile: {e}"));
+    let h = r.emu.handle();
+    let ctl = Child::spawn(
+        &bin("smokenav"),
+        &["drive", "0.3", "0", "--for", "60"],
+        &r.instance,
+    )
+    .unwrap();
+    h.wait_for(Duration::from_secs(10), |s| s.robot.actual.trans == 300.0)
+        .unwrap_or_else(|| {
+            panic!(
+                "never reached 0.3 m/s\n{}\n{}",
+                r.driver.output(),
+                ctl.output()
+            )
+        });
+    std::thread::sleep(Duration::from_millis(500));
+    let at_kill = h.status().robot.pose;
+    ctl.signal(nix::sys::signal::Signal::SIGKILL);
+    let killed = Instant::now();
+    let st = h
+        .wait_for(Duration::from_secs(3), |s| s.robot.actual.trans == 0.0)
+        .expect("the robot comes to rest");
+    let dt = killed.elapsed();
+    let coast_m =
+        (st.robot.pose.x_mm - at_kill.x_mm).hypot(st.robot.pose.y_mm - at_kill.y_mm) / 1000.0;
+    eprintln!(
+        "standstill {:.0} ms and {coast_m:.3} m after the controller was killed at 0.3 m/s \
+         (cmd_timeout_s {timeout_s}, decel {decel_mps2} m/s²)",
+        dt.as_secs_f64() * 1e3
+    );
+    // Last command ≤ 0.1 s before the kill, then the timeout, then v / decel,
+    // plus the driver's loop and the motor model's 10 ms step.
+    let budget = Duration::from_secs_f64(timeout_s + 0.3 / decel_mps2 + 0.03);
+    assert!(
+        dt <= Duration::from_millis(530).min(budget),
+        "at rest {dt:?} after the crash (budget {budget:?})"
+    );
+    // Braking distance at 0.3 m/s: ≤ 0.3 m/s · timeout + v² / 2a.
+    assert!(
+        coast_m <= 0.3 * timeout_s + 0.09 / (2.0 * decel_mps2) + 0.01,
+        "coasted {coast_m:.3} m"
+    );
+    assert_eq!(st.robot.counters.watchdog_trips, 0);
 }
 
 #[test]

@@ -24,9 +24,14 @@ struct Rig {
 
 /// Emulator + driver on a fresh bus instance; returns once odometry flows.
 fn rig(test: &str) -> Rig {
+    rig_with(test, |_| {})
+}
+
+/// [`rig`] with the profile edited first.
+fn rig_with(test: &str, edit: impl FnOnce(&mut smokenav_platform_config::RobotConfig)) -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let emu = ScoutEmulator::start(EmulatorConfig::new(dir.path().join("scout"))).unwrap();
-    let config = profile(dir.path(), "nomad-scout.toml", |_| {});
+    let config = profile(dir.path(), "nomad-scout.toml", edit);
     let instance = unique_instance(test);
     let bus = open_bus(&instance);
     let port = emu.path().to_string_lossy().into_owned();
@@ -181,7 +186,8 @@ fn odometry_and_all_16_sonars_match_what_the_emulator_was_fed() {
 
 #[test]
 fn command_timeout_stops_the_robot() {
-    let r = rig("scout_timeout");
+    // The profile's timeout is shorter now; this checks a configured one holds.
+    let r = rig_with("scout_timeout", |c| c.base.cmd_timeout_s = 0.5);
     let (run, t) = drive(&r.instance, 0.3, 0.0);
     let (_, moving) = r.emu.wait_for(Duration::from_secs(3), |s| {
         (s.wheels.left - 0.3).abs() < 0.002
@@ -210,6 +216,39 @@ fn command_timeout_stops_the_robot() {
     })
     .unwrap();
     assert_eq!(odoms.last().unwrap().linear, 0.0);
+}
+
+/// Issue #22 point 3: from the last velocity command to wheels at rest with
+/// the shipped profile (its command timeout; the robot-side watchdog armed
+/// at 1 s, the smallest `conf_tm` takes, as the backstop).
+#[test]
+fn silent_controller_at_0_3_mps_leaves_the_scout_at_standstill_within_0_5_s() {
+    let r = rig("scout_standstill");
+    let timeout_s =
+        smokenav_platform_config::RobotConfig::load(&r._dir.path().join("test-nomad-scout.toml"))
+            .map(|c| c.base.cmd_timeout_s)
+            .unwrap_or_else(|e| panic!("profile: {e}"));
+    let (run, t) = drive(&r.instance, 0.3, 0.0);
+    let (snap, moving) = r.emu.wait_for(Duration::from_secs(3), |s| {
+        (s.wheels.left - 0.3).abs() < 0.002
+    });
+    assert!(moving, "robot never reached 0.3 m/s\n{}", r.driver.output());
+    assert_eq!(snap.watchdog_s, 1);
+    run.store(false, Ordering::Relaxed);
+    t.join().unwrap();
+    let quiet_since = Instant::now();
+    let (snap, stopped) = r.emu.wait_for(Duration::from_secs(3), |s| {
+        s.wheels.left == 0.0 && s.wheels.right == 0.0
+    });
+    let took = quiet_since.elapsed();
+    eprintln!(
+        "scout at rest {:.0} ms after the last velocity command (cmd_timeout_s {timeout_s})",
+        took.as_secs_f64() * 1e3
+    );
+    assert!(stopped, "robot still driving: {snap:?}");
+    assert!(took <= Duration::from_millis(500), "at rest after {took:?}");
+    assert!(snap.stats.stop >= 1);
+    assert_eq!(snap.watchdog_trips, 0);
 }
 
 #[test]

@@ -12,6 +12,10 @@ pub struct BaseSection {
     /// Serial baud rate. Pioneer controllers open at 9600; the Scout's default is 38400.
     pub baud: u32,
     /// The robot is stopped when no velocity command arrived for this long, s.
+    /// Two command periods at the 10 Hz command rate: one late command does
+    /// not stop the robot, a dead controller does within 0.2 s. Time to
+    /// standstill after a crash is this plus v / deceleration (0.3 s from
+    /// 0.3 m/s at 1 m/s²), so every 0.1 s here costs 3 cm of coasting.
     #[serde(default = "default_cmd_timeout")]
     pub cmd_timeout_s: f64,
     /// Commands are clamped to these limits.
@@ -36,7 +40,7 @@ pub struct BaseSection {
 }
 
 fn default_cmd_timeout() -> f64 {
-    0.5
+    0.2
 }
 fn default_max_linear() -> f64 {
     0.5

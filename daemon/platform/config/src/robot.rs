@@ -81,10 +81,17 @@ pub struct BusSection {
     /// How often each process publishes its `Health`, s.
     #[serde(default = "default_health_period")]
     pub health_period_s: f64,
+    /// A process reports `degraded` while a rate it publishes (scans,
+    /// odometry, fused output) runs below this fraction of its expected rate.
+    #[serde(default = "default_health_rate_floor")]
+    pub health_rate_floor: f64,
 }
 
 fn default_health_period() -> f64 {
     1.0
+}
+fn default_health_rate_floor() -> f64 {
+    0.8
 }
 
 impl Default for BusSection {
@@ -92,6 +99,7 @@ impl Default for BusSection {
         Self {
             root_path: None,
             health_period_s: default_health_period(),
+            health_rate_floor: default_health_rate_floor(),
         }
     }
 }
@@ -111,6 +119,12 @@ impl Validate for BusSection {
             self.health_period_s,
             0.05,
             60.0,
+        );
+        v.within(
+            &format!("{key}.health_rate_floor"),
+            self.health_rate_floor,
+            0.05,
+            1.0,
         );
     }
 }

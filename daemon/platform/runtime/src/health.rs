@@ -127,7 +127,17 @@ pub struct HealthReporter {
     last_publish: Option<Instant>,
     rates: Vec<(String, RateMeter, Option<f64>)>,
     latency: LatencyWindow,
+    /// The state the process set; published as `Degraded` while a rate is low.
+    state: HealthState,
+    /// When the state last became `Ok`: rates are judged on whole windows after it.
+    ok_since: Option<Instant>,
+    rate_floor: f64,
+    /// `last_error` holds this reporter's low-rate message (cleared on recovery).
+    rate_error: bool,
 }
+
+/// Fraction of its expected rate below which a rate counts as low, unless configured.
+pub const DEFAULT_RATE_FLOOR: f64 = 0.8;
 
 impl HealthReporter {
     /// Publishes on `health/<role>` of `bus` every `period`.
@@ -142,6 +152,10 @@ impl HealthReporter {
             last_publish: None,
             rates: Vec::new(),
             latency: LatencyWindow::new(),
+            state: HealthState::Starting,
+            ok_since: None,
+            rate_floor: DEFAULT_RATE_FLOOR,
+            rate_error: false,
         })
     }
 
@@ -155,9 +169,23 @@ impl HealthReporter {
         self.health.state()
     }
 
-    /// Sets the reported state.
+    /// Sets the state; an `Ok` one is published as `Degraded` while a rate
+    /// with an expected value runs below the rate floor.
     pub fn set_state(&mut self, s: HealthState) {
+        if s != HealthState::Ok {
+            self.ok_since = None;
+        } else if self.ok_since.is_none() {
+            self.ok_since = Some(Instant::now());
+        }
+        self.state = s;
         self.health.set_state(s);
+    }
+
+    /// Fraction of the expected rate below which a rate is low (published
+    /// as the `rate_floor` metric when not the default, so `smokenav status`
+    /// applies the same).
+    pub fn set_rate_floor(&mut self, fraction: f64) {
+        self.rate_floor = fraction;
     }
 
     /// Sets a named value (a counter, gauge, or setting worth showing).
@@ -172,6 +200,14 @@ impl HealthReporter {
         self.rates
             .push((name.to_owned(), RateMeter::new(Instant::now()), expected_hz));
         RateId(self.rates.len() - 1)
+    }
+
+    /// Sets (or clears) the expected value of a rate: a sensor's nominal rate
+    /// is often known only once it is connected.
+    pub fn set_expected_rate(&mut self, id: RateId, expected_hz: Option<f64>) {
+        if let Some((_, _, e)) = self.rates.get_mut(id.0) {
+            *e = expected_hz;
+        }
     }
 
     /// Counts one event of a rate.
@@ -207,6 +243,7 @@ impl HealthReporter {
 
     /// Clears the last error.
     pub fn clear_error(&mut self) {
+        self.rate_error = false;
         self.health.last_error.set("");
     }
 
@@ -224,9 +261,45 @@ impl HealthReporter {
 
     /// Publishes the report now (the window restarts).
     pub fn publish_now(&mut self, now: Instant) -> Result<(), BusError> {
+        // A window that began before the process was up says nothing.
+        let judge = matches!((self.ok_since, self.last_publish), (Some(ok), Some(t)) if ok <= t);
+        let mut low: Option<(&str, f64, f64)> = None;
         for (name, meter, expected) in &mut self.rates {
             let hz = meter.roll(now);
             self.health.set_metric(name, hz, *expected);
+            if let Some(e) = *expected
+                && judge
+                && low.is_none()
+                && hz < self.rate_floor * e
+            {
+                low = Some((name.as_str(), hz, e));
+            }
+        }
+        // Only a configured floor takes a metric slot (the table is small);
+        // `smokenav status` assumes the default without it.
+        if self.rate_floor != DEFAULT_RATE_FLOOR {
+            self.health.set_metric("rate_floor", self.rate_floor, None);
+        }
+        match low {
+            Some((name, hz, e)) if self.state == HealthState::Ok => {
+                self.health.set_state(HealthState::Degraded);
+                let msg = format!(
+                    "{name} {hz:.1} Hz, below {:.0} % of the expected {e:.1} Hz",
+                    self.rate_floor * 100.0
+                );
+                if self.health.last_error.as_str() != msg {
+                    tracing::warn!("{msg}");
+                }
+                self.health.last_error.set(&msg);
+                self.rate_error = true;
+            }
+            _ => {
+                self.health.set_state(self.state);
+                if self.rate_error {
+                    self.rate_error = false;
+                    self.health.last_error.set("");
+                }
+            }
         }
         let (p50, p99, max) = self.latency.percentiles();
         self.health.latency_p50_us = p50 as f32;

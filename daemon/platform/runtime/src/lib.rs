@@ -48,7 +48,7 @@ mod shutdown;
 mod systemd;
 
 pub use args::CommonArgs;
-pub use health::{HealthReporter, LatencyWindow, RateId, RateMeter, Report};
+pub use health::{DEFAULT_RATE_FLOOR, HealthReporter, LatencyWindow, RateId, RateMeter, Report};
 pub use logging::init_logging;
 pub use process::{ConfigFailure, EXIT_CONFIG, Process, main};
 pub use reconnect::{LinkCounters, Reconnect, ReconnectPolicy};

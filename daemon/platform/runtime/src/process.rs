@@ -50,6 +50,7 @@ impl Process {
         let period = Duration::from_secs_f64(config.bus.health_period_s);
         let mut health = HealthReporter::new(&bus, role, period)
             .with_context(|| format!("cannot publish health/{role}"))?;
+        health.set_rate_floor(config.bus.health_rate_floor);
         health.set_state(HealthState::Starting);
         health.publish_now(Instant::now())?;
         tracing::info!(

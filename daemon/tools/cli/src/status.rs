@@ -51,7 +51,7 @@ pub struct RateStatus {
     pub name: String,
     pub hz: f64,
     pub expected_hz: Option<f64>,
-    /// Below 80 % of the expected rate.
+    /// Below the process's rate floor (80 % unless configured) of the expected rate.
     pub low: bool,
 }
 
@@ -125,13 +125,17 @@ pub fn evaluate(
     };
     let age = now_ns.saturating_sub(h.header.stamp_ns) as f64 * 1e-9;
     let (mut rates, mut counters) = (Vec::new(), Vec::new());
+    // The floor the process applies to itself; older processes do not report one.
+    let floor = h
+        .metric("rate_floor")
+        .unwrap_or(smokenav_platform_runtime::DEFAULT_RATE_FLOOR);
     for m in h.metrics() {
         if m.expected.is_finite() {
             rates.push(RateStatus {
                 name: m.name.as_str().to_owned(),
                 hz: m.value,
                 expected_hz: Some(m.expected),
-                low: m.value < 0.8 * m.expected,
+                low: m.value < floor * m.expected,
             });
         } else {
             counters.push((m.name.as_str().to_owned(), m.value));

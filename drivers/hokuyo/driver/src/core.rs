@@ -54,6 +54,12 @@ pub struct StreamCounters {
     pub sensor_errors: u64,
     /// Bytes the frame splitter dropped (oversized garbage).
     pub dropped_bytes: u64,
+    /// Frames that carried no scan we could publish (checksum, damaged,
+    /// stale, sensor errors): each one a scan lost or a reply not ours.
+    pub discarded_frames: u64,
+    /// Every byte read and not published: discarded frames, garbage cut
+    /// off before a scan's echo, and the splitter's dropped bytes.
+    pub discarded_bytes: u64,
     /// Whether a sensor is connected and streaming.
     pub connected: bool,
     /// Sensor-clock synchronisation state.
@@ -68,6 +74,8 @@ impl Report for StreamCounters {
         h.set_metric("stale_frames", self.stale_frames as f64);
         h.set_metric("sensor_errors", self.sensor_errors as f64);
         h.set_metric("dropped_bytes", self.dropped_bytes as f64);
+        h.set_metric("discarded_frames", self.discarded_frames as f64);
+        h.set_metric("discarded_bytes", self.discarded_bytes as f64);
         h.set_metric("connected", f64::from(u8::from(self.connected)));
         h.set_metric(
             "clock_calibrated",
@@ -189,6 +197,19 @@ pub enum Frame {
 /// Decodes one frame of the stream started with the echo `head` (its first
 /// 13 characters), converting a scan in `conv` stamped through `sync` at
 /// `received_ns` (when its last byte was read).
+/// Where the reply echoing `head` starts in `frame`: line noise before a
+/// scan lands in front of its echo (the splitter cuts on LF LF only), and
+/// cutting it off saves the scan instead of losing it.
+pub fn reply_start(frame: &[u8], head: &[u8; 13]) -> usize {
+    if frame.starts_with(head) {
+        return 0;
+    }
+    frame
+        .windows(head.len())
+        .position(|w| w == head)
+        .unwrap_or(0)
+}
+
 pub fn classify_frame(
     frame: &[u8],
     head: &[u8; 13],
@@ -261,6 +282,36 @@ mod tests {
         assert!((s.scan_time - 0.2).abs() < 1e-6);
         assert_eq!(s.header.frame_id.as_str(), "laser");
         assert_eq!(conv.convert(&h, &g, 1, 0).header.seq, 1);
+    }
+
+    #[test]
+    fn line_noise_before_a_scans_echo_is_cut_off_and_the_scan_kept() {
+        let g = Geometry::URG_04LX;
+        let mut frame = b"\x07#~?garbage\r".to_vec();
+        let noise = frame.len();
+        ReplyWriter::new(&mut frame)
+            .echo(b"MD0044072500000")
+            .status(*b"99")
+            .time(0)
+            .data(3, (0..682).map(|i| 400 + i))
+            .end();
+        let mut head = [0u8; 13];
+        head.copy_from_slice(&b"MD0044072500000"[..13]);
+        let mut sync = ClockSync::new(smokenav_hokuyo_codec::SyncConfig::default());
+        let mut conv = ScanConverter::new("laser");
+        // Before: the noise hides the echo and the scan is lost.
+        assert!(!matches!(
+            classify_frame(&frame, &head, &g, 0, &mut sync, &mut conv, 1),
+            Frame::Scan
+        ));
+        let start = reply_start(&frame, &head);
+        assert_eq!(start, noise);
+        assert!(matches!(
+            classify_frame(&frame[start..], &head, &g, 0, &mut sync, &mut conv, 1),
+            Frame::Scan
+        ));
+        // A frame without our echo is left whole (and classified as before).
+        assert_eq!(reply_start(b"QT\n00P\n\n", &head), 0);
     }
 
     #[test]

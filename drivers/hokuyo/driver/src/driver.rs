@@ -1,7 +1,7 @@
 //! The reconnecting run loop: open → connect → stream → (lost) → back off → again.
 
 use crate::core::{
-    Frame, ScanConverter, StreamConfig, StreamCounters, classify_frame, streamed_range,
+    Frame, ScanConverter, StreamConfig, StreamCounters, classify_frame, reply_start, streamed_range,
 };
 use crate::link::PortSpec;
 use crate::session::{SensorInfo, Session, SessionError, use_intensity};
@@ -262,8 +262,16 @@ pub fn stream(
         let n = session.port.read_timeout(session.splitter.spare(), wait)?;
         let received_ns = clock.now_ns();
         session.splitter.commit(n);
-        while let Some(frame) = session.splitter.next_frame() {
-            match classify_frame(frame, &head, &g, cfg.skip_scans, sync, conv, received_ns) {
+        while let Some(whole) = session.splitter.next_frame() {
+            let start = reply_start(whole, &head);
+            counters.discarded_bytes += start as u64;
+            let frame = &whole[start..];
+            let kind = classify_frame(frame, &head, &g, cfg.skip_scans, sync, conv, received_ns);
+            if !matches!(kind, Frame::Scan) {
+                counters.discarded_frames += 1;
+                counters.discarded_bytes += frame.len() as u64;
+            }
+            match kind {
                 Frame::Scan => {
                     consecutive_errors = 0;
                     last_scan = received_ns;
@@ -295,6 +303,7 @@ pub fn stream(
         }
         let dropped = session.splitter.stats().discarded_bytes;
         counters.dropped_bytes += dropped - seen_dropped;
+        counters.discarded_bytes += dropped - seen_dropped;
         seen_dropped = dropped;
         if consecutive_errors >= cfg.max_consecutive_errors {
             return Err(SessionError::TooManyErrors(consecutive_errors));

@@ -33,6 +33,8 @@ struct BusSink<'a> {
     link: Option<Reconnect>,
     connected_once: bool,
     publish_errors: u64,
+    /// Scans the sensor skips between transmissions (sets the expected rate).
+    skip_scans: u8,
 }
 
 impl ScanSink for BusSink<'_> {
@@ -74,8 +76,11 @@ impl DriverSink for BusSink<'_> {
         };
         let g = info.spec.geometry;
         let nominal_hz = f64::from(g.scan_rpm) / 60.0;
+        // The sensor sends one scan in every `skip_scans + 1`.
+        let expected_hz = nominal_hz / (1.0 + f64::from(self.skip_scans));
         let h = &mut self.p.health;
         h.set_metric("scan_hz_nominal", nominal_hz);
+        h.set_expected_rate(self.scan_rate, Some(expected_hz));
         h.set_metric("steps", g.step_count() as f64);
         h.set_metric(
             "sensor_stat_ok",
@@ -117,7 +122,9 @@ fn main() -> ExitCode {
         let cfg = DriverConfig::from_section(&p.config.laser, p.port_override.as_deref());
         let port = cfg.port.to_string();
         let scans = p.bus.publisher::<LaserScan>(topics::LASER_SCAN)?;
+        // Expected rate set once the sensor states its speed.
         let scan_rate = p.health.add_rate("scan_hz", None);
+        let skip_scans = cfg.stream.skip_scans;
         p.status(&format!("connecting to the laser on {port}"));
         let mut sink = BusSink {
             p,
@@ -127,6 +134,7 @@ fn main() -> ExitCode {
             link: None,
             connected_once: false,
             publish_errors: 0,
+            skip_scans,
         };
         Driver::new(cfg, Arc::new(MonotonicClock)).run(&mut sink);
         Ok(())

@@ -1,7 +1,7 @@
 //! Velocity commands from the bus to a safe target for the robot.
 //!
 //! The robot is stopped when commands stop arriving for `timeout` (default
-//! 0.5 s): a crashed controller must never leave the robot driving (rosaria
+//! 0.2 s, two periods of the 10 Hz command stream): a crashed controller must never leave the robot driving (rosaria
 //! PR #51 — ARIA's own resending defeats the firmware watchdog). Commands are
 //! clamped to the profile's limits; non-finite ones stop the robot.
 

@@ -16,6 +16,8 @@ use smokenav_pioneer_codec::{
 
 /// Most transducers a ring can have here.
 pub const MAX_SONARS: usize = 32;
+/// Motor-model step while the wheels move or ramp, ns.
+pub const MOTION_STEP_NS: u64 = 10_000_000;
 
 /// A planar pose: mm and radians.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -334,12 +336,20 @@ impl ArcosRobot {
         }
     }
 
-    /// When the controller next needs [`ArcosRobot::tick`].
+    /// When the controller next needs [`ArcosRobot::tick`]. While the wheels
+    /// move or ramp, every [`MOTION_STEP_NS`]: a real controller's servo loop
+    /// is far faster than its SIP cycle, and standstill must be observable
+    /// when it happens, not at the next SIP.
     pub fn next_deadline_ns(&self, now_ns: u64) -> u64 {
-        if self.streaming {
+        let next = if self.streaming {
             self.next_sip_ns.max(now_ns)
         } else {
             now_ns + self.cfg.sip_period_ms * 1_000_000
+        };
+        if self.actual != Motion::default() || self.motion_target() != self.actual {
+            next.min(now_ns + MOTION_STEP_NS)
+        } else {
+            next
         }
     }
 
@@ -511,6 +521,15 @@ impl ArcosRobot {
         (self.actual.trans - half_diff, self.actual.trans + half_diff)
     }
 
+    /// What the wheels ramp towards.
+    fn motion_target(&self) -> Motion {
+        if self.motors_enabled && !self.estop {
+            self.commanded
+        } else {
+            Motion::default()
+        }
+    }
+
     /// Moves time forward: velocity ramps, pose integration, watchdog.
     fn advance(&mut self, now_ns: u64) {
         let dt = match self.last_tick_ns {
@@ -535,11 +554,7 @@ impl ArcosRobot {
         if dt <= 0.0 {
             return;
         }
-        let target = if self.motors_enabled && !self.estop {
-            self.commanded
-        } else {
-            Motion::default()
-        };
+        let target = self.motion_target();
         self.actual.trans = ramp(
             self.actual.trans,
             target.trans,
@@ -821,6 +836,29 @@ mod tests {
         // p3dx: the counter reads 600 / 0.485 = 1237 units.
         let s = b.robot.sip();
         assert!((i32::from(s.x) - 1237).abs() <= 4, "{}", s.x);
+    }
+
+    #[test]
+    fn motor_model_steps_every_10_ms_while_ramping_and_idles_at_standstill() {
+        let mut b = Bench::new(RobotConfig::default());
+        b.connect();
+        b.run_for(50);
+        let idle = b.robot.next_deadline_ns(b.now);
+        assert!(
+            idle > b.now + MOTION_STEP_NS,
+            "idle robot wakes only for SIPs"
+        );
+        b.send(Command::Vel(300));
+        assert_eq!(b.robot.next_deadline_ns(b.now), b.now + MOTION_STEP_NS);
+        b.run_for(1000);
+        b.send(Command::Vel(0));
+        assert_eq!(b.robot.next_deadline_ns(b.now), b.now + MOTION_STEP_NS);
+        // 300 mm/s at 1000 mm/s² decel: standstill after 0.3 s.
+        b.run_for(299);
+        assert!(b.robot.status().actual.trans > 0.0);
+        b.run_for(2);
+        assert_eq!(b.robot.status().actual.trans, 0.0);
+        assert!(b.robot.next_deadline_ns(b.now) > b.now + MOTION_STEP_NS);
     }
 
     #[test]
