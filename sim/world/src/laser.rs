@@ -36,7 +36,7 @@
 
 use crate::arena::Arena;
 use crate::geom::{Pose2, Position, Vec2, normalize_angle};
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 use crate::smoke::SmokeField;
 
 /// Angular resolution: steps per full turn (PP ARES).

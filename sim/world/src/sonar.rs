@@ -25,7 +25,7 @@
 
 use crate::arena::Arena;
 use crate::geom::{Pose2, Position, Vec2};
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SonarParams {
