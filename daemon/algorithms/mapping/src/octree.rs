@@ -1,0 +1,677 @@
+//! A log-odds occupancy octree laid out like OctoMap's `OcTree` (Hornung et
+//! al. 2013): 16 levels, keys `floor(c / res) + 2¹⁵` per axis, child index
+//! `x + 2y + 4z` of the key bits at each level, inner nodes holding their
+//! children's maximum, clamped updates, and pruning of eight identical leaf
+//! children into their parent. Nodes live in two vectors (nodes and
+//! 8-child blocks) with free lists, so steady-state updates do not allocate.
+
+use crate::logodds::ClampLogOdds;
+use std::io::{self, BufRead, Read, Write};
+
+/// Tree depth: OctoMap's 16 levels.
+pub const DEPTH: u32 = 16;
+/// Key of the coordinate 0.
+pub const KEY_ORIGIN: i64 = 1 << (DEPTH - 1);
+const NONE: u32 = u32::MAX;
+
+/// A voxel key at the finest level.
+pub type Key = [u16; 3];
+
+/// Packs a key into one integer (for key sets).
+pub fn pack(k: Key) -> u64 {
+    (k[0] as u64) | ((k[1] as u64) << 16) | ((k[2] as u64) << 32)
+}
+
+pub fn unpack(v: u64) -> Key {
+    [v as u16, (v >> 16) as u16, (v >> 32) as u16]
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Node {
+    logodds: f32,
+    /// Index into `blocks`, or `NONE` for a leaf.
+    block: u32,
+}
+
+/// One leaf: the cube of `size` finest voxels per side from `key` (its
+/// lowest corner key), and its log-odds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Leaf {
+    pub key: Key,
+    pub size: u32,
+    pub logodds: f32,
+}
+
+#[derive(Debug, Clone)]
+pub struct Octree {
+    resolution: f64,
+    clamp: ClampLogOdds,
+    nodes: Vec<Node>,
+    blocks: Vec<[u32; 8]>,
+    free_nodes: Vec<u32>,
+    free_blocks: Vec<u32>,
+    /// Scratch path of one descent.
+    path: Vec<(u32, usize)>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BtError {
+    #[error("reading the .bt file: {0}")]
+    Io(#[from] io::Error),
+    #[error(".bt header, line {line}: {reason}")]
+    Header { line: usize, reason: String },
+    #[error(".bt data: {0}")]
+    Data(String),
+}
+
+/// What an export wrote.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BtStats {
+    /// Nodes in the file (the header's `size`).
+    pub nodes: usize,
+    pub occupied_leaves: usize,
+    pub free_leaves: usize,
+}
+
+impl Octree {
+    pub fn new(resolution: f64, clamp: ClampLogOdds) -> Self {
+        Self {
+            resolution,
+            clamp,
+            nodes: vec![Node {
+                logodds: 0.0,
+                block: NONE,
+            }],
+            blocks: Vec::new(),
+            free_nodes: Vec::new(),
+            free_blocks: Vec::new(),
+            path: Vec::with_capacity(DEPTH as usize + 1),
+        }
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.resolution
+    }
+
+    pub fn clamping(&self) -> ClampLogOdds {
+        self.clamp
+    }
+
+    /// The key of a coordinate, `None` outside the tree's ±2¹⁵ voxels.
+    pub fn key_of(&self, c: f64) -> Option<u16> {
+        let k = (c / self.resolution).floor();
+        if !k.is_finite() {
+            return None;
+        }
+        let k = k as i64 + KEY_ORIGIN;
+        (0..=u16::MAX as i64).contains(&k).then_some(k as u16)
+    }
+
+    pub fn key(&self, p: [f64; 3]) -> Option<Key> {
+        Some([self.key_of(p[0])?, self.key_of(p[1])?, self.key_of(p[2])?])
+    }
+
+    /// Centre coordinate of a key along one axis.
+    pub fn coord(&self, k: u16) -> f64 {
+        (k as i64 - KEY_ORIGIN) as f64 * self.resolution + self.resolution / 2.0
+    }
+
+    fn child_pos(key: Key, depth: u32) -> usize {
+        let bit = DEPTH - 1 - depth;
+        (((key[0] >> bit) & 1) | (((key[1] >> bit) & 1) << 1) | (((key[2] >> bit) & 1) << 2))
+            as usize
+    }
+
+    fn alloc_node(&mut self, logodds: f32) -> u32 {
+        let n = Node {
+            logodds,
+            block: NONE,
+        };
+        if let Some(i) = self.free_nodes.pop() {
+            self.nodes[i as usize] = n;
+            i
+        } else {
+            self.nodes.push(n);
+            (self.nodes.len() - 1) as u32
+        }
+    }
+
+    fn alloc_block(&mut self) -> u32 {
+        if let Some(i) = self.free_blocks.pop() {
+            self.blocks[i as usize] = [NONE; 8];
+            i
+        } else {
+            self.blocks.push([NONE; 8]);
+            (self.blocks.len() - 1) as u32
+        }
+    }
+
+    /// The log-odds of the leaf covering `key`, `None` if unknown.
+    pub fn search(&self, key: Key) -> Option<f32> {
+        let mut n = 0u32;
+        if self.nodes[0].block == NONE {
+            return None;
+        }
+        for depth in 0..DEPTH {
+            let b = self.nodes[n as usize].block;
+            if b == NONE {
+                return Some(self.nodes[n as usize].logodds);
+            }
+            let c = self.blocks[b as usize][Self::child_pos(key, depth)];
+            if c == NONE {
+                return None;
+            }
+            n = c;
+        }
+        Some(self.nodes[n as usize].logodds)
+    }
+
+    /// Adds a hit (`occupied`) or a miss at `key` with the tree's clamping.
+    pub fn integrate(&mut self, key: Key, occupied: bool) {
+        let delta = if occupied {
+            self.clamp.hit
+        } else {
+            self.clamp.miss
+        };
+        self.integrate_logodds(key, delta);
+    }
+
+    /// Adds `delta` at `key` unless the leaf is already at the bound in that
+    /// direction (OctoMap's shortcut: no descent, no change).
+    pub fn integrate_logodds(&mut self, key: Key, delta: f32) {
+        if let Some(l) = self.search(key)
+            && self.clamp.saturated(l, delta > 0.0)
+        {
+            return;
+        }
+        self.update(key, delta);
+    }
+
+    /// Adds `delta` (log-odds) at `key`, clamped; expands pruned leaves on
+    /// the way down, prunes and refreshes inner maxima on the way up.
+    pub fn update(&mut self, key: Key, delta: f32) {
+        let mut path = std::mem::take(&mut self.path);
+        path.clear();
+        let mut n = 0u32;
+        let mut just_created = false;
+        for depth in 0..DEPTH {
+            let pos = Self::child_pos(key, depth);
+            let node = self.nodes[n as usize];
+            if node.block == NONE {
+                let b = self.alloc_block();
+                self.nodes[n as usize].block = b;
+                if n != 0 && !just_created {
+                    // A pruned leaf: its eight children inherit its value.
+                    for i in 0..8 {
+                        let c = self.alloc_node(node.logodds);
+                        self.blocks[b as usize][i] = c;
+                    }
+                }
+            }
+            let b = self.nodes[n as usize].block as usize;
+            let mut c = self.blocks[b][pos];
+            just_created = false;
+            if c == NONE {
+                c = self.alloc_node(0.0);
+                self.blocks[b][pos] = c;
+                just_created = true;
+            }
+            path.push((n, pos));
+            n = c;
+        }
+        let leaf = &mut self.nodes[n as usize];
+        leaf.logodds = self.clamp.add(leaf.logodds, delta);
+        for &(parent, _) in path.iter().rev() {
+            self.refresh(parent);
+        }
+        self.path = path;
+    }
+
+    /// Sets an inner node to its children's maximum, or prunes eight
+    /// identical leaf children into it.
+    fn refresh(&mut self, n: u32) {
+        let b = self.nodes[n as usize].block;
+        if b == NONE {
+            return;
+        }
+        let kids = self.blocks[b as usize];
+        let mut max = f32::NEG_INFINITY;
+        let mut prunable = true;
+        let first = kids[0];
+        for &c in &kids {
+            if c == NONE {
+                prunable = false;
+                continue;
+            }
+            let cn = self.nodes[c as usize];
+            max = max.max(cn.logodds);
+            if cn.block != NONE || first == NONE || cn.logodds != self.nodes[first as usize].logodds
+            {
+                prunable = false;
+            }
+        }
+        if prunable && n != 0 {
+            for &c in &kids {
+                self.free_nodes.push(c);
+            }
+            self.free_blocks.push(b);
+            self.nodes[n as usize].block = NONE;
+        }
+        self.nodes[n as usize].logodds = max;
+    }
+
+    /// Nodes in use, root included.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len() - self.free_nodes.len()
+    }
+
+    /// Bytes the live nodes and child blocks take.
+    pub fn memory_bytes(&self) -> usize {
+        self.node_count() * std::mem::size_of::<Node>()
+            + (self.blocks.len() - self.free_blocks.len()) * std::mem::size_of::<[u32; 8]>()
+    }
+
+    /// Calls `f` for every leaf (pruned leaves once, with their size).
+    pub fn for_each_leaf(&self, mut f: impl FnMut(Leaf)) {
+        if self.nodes[0].block == NONE {
+            return;
+        }
+        let mut stack: Vec<(u32, u32, Key)> = vec![(0, 0, [0, 0, 0])];
+        while let Some((n, depth, base)) = stack.pop() {
+            let node = self.nodes[n as usize];
+            if node.block == NONE {
+                f(Leaf {
+                    key: base,
+                    size: 1 << (DEPTH - depth),
+                    logodds: node.logodds,
+                });
+                continue;
+            }
+            let half = 1u32 << (DEPTH - 1 - depth);
+            for (i, &c) in self.blocks[node.block as usize].iter().enumerate() {
+                if c == NONE {
+                    continue;
+                }
+                let mut k = base;
+                for (axis, kk) in k.iter_mut().enumerate() {
+                    if i & (1 << axis) != 0 {
+                        *kk += half as u16;
+                    }
+                }
+                stack.push((c, depth + 1, k));
+            }
+        }
+    }
+
+    /// Calls `f(key, logodds)` for every finest voxel the leaves cover.
+    pub fn for_each_voxel(&self, mut f: impl FnMut(Key, f32)) {
+        self.for_each_leaf(|l| {
+            for dz in 0..l.size {
+                for dy in 0..l.size {
+                    for dx in 0..l.size {
+                        f(
+                            [
+                                l.key[0] + dx as u16,
+                                l.key[1] + dy as u16,
+                                l.key[2] + dz as u16,
+                            ],
+                            l.logodds,
+                        );
+                    }
+                }
+            }
+        });
+    }
+
+    /// Writes the tree in OctoMap's binary format (`.bt`, read by
+    /// `octomap::OcTree::readBinary` and the `octomap-tools`): a text header,
+    /// then per inner node, depth first from the root, two bytes with two bits
+    /// per child (children 0–3, then 4–7; bit `2i` and `2i + 1` of child `i`:
+    /// 00 unknown, 01 occupied leaf, 10 free leaf, 11 inner node). As OctoMap
+    /// does when writing, values become maximum-likelihood first (occupied iff
+    /// log-odds > 0) and eight equal leaf children merge into their parent.
+    pub fn write_bt(&self, w: &mut impl Write) -> io::Result<BtStats> {
+        let ml = self.max_likelihood(0, 0);
+        let mut stats = BtStats {
+            nodes: 0,
+            occupied_leaves: 0,
+            free_leaves: 0,
+        };
+        let root_children = match &ml {
+            Ml::Inner(c) => Some(c),
+            _ => None,
+        };
+        if let Some(c) = root_children {
+            stats.nodes = 1;
+            count(c, &mut stats);
+        }
+        write!(
+            w,
+            "# Octomap OcTree binary file\nid OcTree\nsize {}\nres {}\ndata\n",
+            stats.nodes, self.resolution
+        )?;
+        if let Some(c) = root_children {
+            let mut buf = Vec::with_capacity(stats.nodes * 2);
+            encode(c, &mut buf);
+            w.write_all(&buf)?;
+        }
+        Ok(stats)
+    }
+
+    fn max_likelihood(&self, n: u32, depth: u32) -> Ml {
+        let node = self.nodes[n as usize];
+        if node.block == NONE {
+            return if n == 0 {
+                Ml::Unknown
+            } else {
+                Ml::Leaf(node.logodds > 0.0)
+            };
+        }
+        let kids: [Ml; 8] = std::array::from_fn(|i| {
+            let c = self.blocks[node.block as usize][i];
+            if c == NONE {
+                Ml::Unknown
+            } else {
+                self.max_likelihood(c, depth + 1)
+            }
+        });
+        if n != 0
+            && let Ml::Leaf(first) = kids[0]
+            && kids.iter().all(|k| matches!(k, Ml::Leaf(v) if *v == first))
+        {
+            return Ml::Leaf(first);
+        }
+        Ml::Inner(Box::new(kids))
+    }
+
+    /// Reads a `.bt` file (as written by OctoMap or [`Octree::write_bt`]);
+    /// leaves take the clamping bounds, as OctoMap's reader gives them.
+    /// Distrusts its input: the node count is checked against `size`.
+    pub fn read_bt(r: &mut impl BufRead, clamp: ClampLogOdds) -> Result<Self, BtError> {
+        let mut line = String::new();
+        let mut lineno = 0;
+        let mut size: Option<usize> = None;
+        let mut res: Option<f64> = None;
+        let header_err = |line: usize, reason: String| BtError::Header { line, reason };
+        loop {
+            line.clear();
+            if (&mut *r).take(256).read_line(&mut line)? == 0 {
+                return Err(header_err(lineno + 1, "file ends before `data`".into()));
+            }
+            lineno += 1;
+            let l = line.trim_end();
+            if lineno == 1 {
+                if !l.starts_with("# Octomap OcTree binary file") {
+                    return Err(header_err(1, format!("not an OctoMap binary file: {l:?}")));
+                }
+                continue;
+            }
+            if l.starts_with('#') {
+                continue;
+            }
+            let (k, v) = l.split_once(' ').unwrap_or((l, ""));
+            match k {
+                "id" if v != "OcTree" => {
+                    return Err(header_err(
+                        lineno,
+                        format!("tree type {v:?}, expected OcTree"),
+                    ));
+                }
+                "id" => {}
+                "size" => {
+                    size =
+                        Some(v.parse().map_err(|_| {
+                            header_err(lineno, format!("size {v:?} is not a number"))
+                        })?)
+                }
+                "res" => {
+                    let x: f64 = v
+                        .parse()
+                        .map_err(|_| header_err(lineno, format!("res {v:?} is not a number")))?;
+                    if !(x.is_finite() && x > 0.0) {
+                        return Err(header_err(lineno, format!("res {x} is not positive")));
+                    }
+                    res = Some(x);
+                }
+                "data" => break,
+                _ => return Err(header_err(lineno, format!("unknown key {k:?}"))),
+            }
+        }
+        let size = size.ok_or_else(|| header_err(lineno, "no `size` line".into()))?;
+        let res = res.ok_or_else(|| header_err(lineno, "no `res` line".into()))?;
+        let mut tree = Octree::new(res, clamp);
+        if size == 0 {
+            return Ok(tree);
+        }
+        // Depth first, as written; the stack holds (node, depth) still to read.
+        let mut stack = vec![(0u32, 0u32)];
+        let mut read = 1usize;
+        while let Some((n, depth)) = stack.pop() {
+            let mut bytes = [0u8; 2];
+            r.read_exact(&mut bytes)
+                .map_err(|e| BtError::Data(format!("after {read} nodes: {e}")))?;
+            let b = tree.alloc_block();
+            tree.nodes[n as usize].block = b;
+            let mut inner = Vec::new();
+            for i in 0..8 {
+                let byte = bytes[i / 4];
+                let bits = (byte >> ((i % 4) * 2)) & 0b11;
+                let value = match bits {
+                    0b00 => continue,
+                    0b01 => clamp.max,
+                    0b10 => clamp.min,
+                    _ => {
+                        if depth + 1 >= DEPTH {
+                            return Err(BtError::Data(format!(
+                                "an inner node below the {DEPTH} levels (after {read} nodes)"
+                            )));
+                        }
+                        clamp.max
+                    }
+                };
+                let c = tree.alloc_node(value);
+                tree.blocks[b as usize][i] = c;
+                read += 1;
+                if read > size {
+                    return Err(BtError::Data(format!(
+                        "more nodes than the header's size {size}"
+                    )));
+                }
+                if bits == 0b11 {
+                    inner.push(c);
+                }
+            }
+            // Children are read in order 0..8: push them reversed.
+            for &c in inner.iter().rev() {
+                stack.push((c, depth + 1));
+            }
+        }
+        if read != size {
+            return Err(BtError::Data(format!(
+                "{read} nodes read, the header says {size}"
+            )));
+        }
+        tree.refresh_all(0);
+        Ok(tree)
+    }
+
+    fn refresh_all(&mut self, n: u32) {
+        let b = self.nodes[n as usize].block;
+        if b == NONE {
+            return;
+        }
+        let mut max = f32::NEG_INFINITY;
+        for i in 0..8 {
+            let c = self.blocks[b as usize][i];
+            if c != NONE {
+                self.refresh_all(c);
+                max = max.max(self.nodes[c as usize].logodds);
+            }
+        }
+        self.nodes[n as usize].logodds = max;
+    }
+}
+
+/// A node as the export sees it.
+enum Ml {
+    Unknown,
+    Leaf(bool),
+    Inner(Box<[Ml; 8]>),
+}
+
+fn count(kids: &[Ml; 8], s: &mut BtStats) {
+    for k in kids {
+        match k {
+            Ml::Unknown => {}
+            Ml::Leaf(true) => {
+                s.nodes += 1;
+                s.occupied_leaves += 1;
+            }
+            Ml::Leaf(false) => {
+                s.nodes += 1;
+                s.free_leaves += 1;
+            }
+            Ml::Inner(c) => {
+                s.nodes += 1;
+                count(c, s);
+            }
+        }
+    }
+}
+
+fn encode(kids: &[Ml; 8], out: &mut Vec<u8>) {
+    let mut bytes = [0u8; 2];
+    for (i, k) in kids.iter().enumerate() {
+        let bits = match k {
+            Ml::Unknown => 0b00,
+            Ml::Leaf(true) => 0b01,
+            Ml::Leaf(false) => 0b10,
+            Ml::Inner(_) => 0b11,
+        };
+        bytes[i / 4] |= bits << ((i % 4) * 2);
+    }
+    out.extend_from_slice(&bytes);
+    for k in kids {
+        if let Ml::Inner(c) = k {
+            encode(c, out);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::logodds::Clamping;
+
+    fn tree() -> Octree {
+        Octree::new(0.05, Clamping::default().into())
+    }
+
+    #[test]
+    fn keys_follow_octomap() {
+        let t = tree();
+        assert_eq!(t.key_of(0.0), Some(32768));
+        assert_eq!(t.key_of(0.049), Some(32768));
+        assert_eq!(t.key_of(-0.001), Some(32767));
+        assert!((t.coord(32768) - 0.025).abs() < 1e-12);
+        assert_eq!(t.key_of(1e9), None);
+        assert_eq!(t.key_of(f64::NAN), None);
+    }
+
+    #[test]
+    fn updates_clamp_and_inner_nodes_hold_the_maximum() {
+        let mut t = tree();
+        let k = t.key([1.0, 2.0, 0.3]).unwrap();
+        for _ in 0..10 {
+            t.integrate(k, true);
+        }
+        assert_eq!(t.search(k), Some(t.clamping().max));
+        let k2 = t.key([1.05, 2.0, 0.3]).unwrap();
+        t.integrate(k2, false);
+        assert!((t.search(k2).unwrap() - t.clamping().miss).abs() < 1e-6);
+        assert_eq!(t.nodes[0].logodds, t.clamping().max);
+        assert_eq!(t.search(t.key([5.0, 5.0, 5.0]).unwrap()), None);
+    }
+
+    #[test]
+    fn eight_saturated_siblings_prune_and_expand_again() {
+        let mut t = tree();
+        let base = [32768u16, 32768, 32768];
+        for i in 0..8u16 {
+            let k = [
+                base[0] + (i & 1),
+                base[1] + ((i >> 1) & 1),
+                base[2] + ((i >> 2) & 1),
+            ];
+            for _ in 0..10 {
+                t.integrate(k, false);
+            }
+        }
+        // 16 levels of path to one parent of 8 pruned leaves: 16 nodes.
+        assert_eq!(t.node_count(), 16, "pruned into the parent");
+        let mut leaves = Vec::new();
+        t.for_each_leaf(|l| leaves.push(l));
+        assert_eq!(leaves.len(), 1);
+        assert_eq!(leaves[0].size, 2);
+        assert_eq!(leaves[0].key, base);
+        // A hit in the pruned cube expands it and leaves the siblings free.
+        t.integrate(base, true);
+        assert_eq!(t.node_count(), 24);
+        assert_eq!(
+            t.search([base[0] + 1, base[1], base[2]]),
+            Some(t.clamping().min)
+        );
+        let mut n = 0;
+        t.for_each_voxel(|_, _| n += 1);
+        assert_eq!(n, 8);
+    }
+
+    #[test]
+    fn bt_export_reads_back_with_the_same_occupied_voxels() {
+        let mut t = tree();
+        let mut occupied = std::collections::BTreeSet::new();
+        for i in 0..40 {
+            let p = [
+                i as f64 * 0.05,
+                (i % 7) as f64 * 0.05,
+                (i % 3) as f64 * 0.05,
+            ];
+            let k = t.key(p).unwrap();
+            t.integrate(k, i % 4 != 0);
+            if i % 4 != 0 {
+                occupied.insert(k);
+            }
+        }
+        let mut bytes = Vec::new();
+        let stats = t.write_bt(&mut bytes).unwrap();
+        assert_eq!(stats.occupied_leaves, occupied.len());
+        let text = String::from_utf8_lossy(&bytes[..60]);
+        assert!(text.starts_with("# Octomap OcTree binary file\nid OcTree\nsize "));
+        let back = Octree::read_bt(&mut &bytes[..], Clamping::default().into()).unwrap();
+        let mut got = std::collections::BTreeSet::new();
+        back.for_each_voxel(|k, l| {
+            if l > 0.0 {
+                got.insert(k);
+            }
+        });
+        assert_eq!(got, occupied);
+        assert_eq!(back.node_count(), stats.nodes);
+    }
+
+    #[test]
+    fn bt_reader_rejects_bad_files() {
+        let c = Clamping::default().into();
+        let bad = |s: &[u8]| Octree::read_bt(&mut &s[..], c).unwrap_err().to_string();
+        assert!(bad(b"hello\n").contains("not an OctoMap"));
+        assert!(bad(b"# Octomap OcTree binary file\nid ColorOcTree\n").contains("OcTree"));
+        assert!(
+            bad(b"# Octomap OcTree binary file\nid OcTree\nsize 3\nres 0.1\ndata\n\x03")
+                .contains("after 1 nodes")
+        );
+        assert!(
+            bad(b"# Octomap OcTree binary file\nid OcTree\nsize 2\nres 0.1\ndata\n\x05\x00")
+                .contains("more nodes")
+        );
+        assert!(bad(b"# Octomap OcTree binary file\nid OcTree\nres -1\n").contains("not positive"));
+    }
+}
