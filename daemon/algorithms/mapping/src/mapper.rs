@@ -14,7 +14,7 @@ use crate::ism::{LaserIsm, SonarIsm};
 use crate::logodds::{ClampLogOdds, Clamping, logodds, probability};
 use crate::octree::{KEY_ORIGIN, Key, Octree, pack, unpack};
 use crate::rules::{FusionRule, Opinion, fuse};
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 use smokenav_platform_config::RobotConfig;
 use smokenav_shared_types::geometry::Pose2;
 use smokenav_shared_types::{LaserScan, SonarRing, SonarStatus};
@@ -120,6 +120,8 @@ pub struct MapParams {
     /// The 2D grids' extent.
     pub grid_origin: [f64; 2],
     pub grid_size_m: [f64; 2],
+    /// Sonar echoes farther than this are not mapped, m.
+    pub sonar_map_range_m: f64,
     /// LOP/LIOP weights of laser and sonar (the paper weighs the sonar less).
     pub laser_weight: f64,
     pub sonar_weight: f64,
@@ -134,6 +136,7 @@ impl Default for MapParams {
             sonar_thickness_m: 0.08,
             heights: Heights::default(),
             ceiling_m: 2.0,
+            sonar_map_range_m: 3.0,
             grid_origin: [-20.0, -20.0],
             grid_size_m: [40.0, 40.0],
             laser_weight: 0.7,
@@ -165,21 +168,47 @@ struct PerSensor {
     sonar_grid: LogOddsGrid,
 }
 
-/// One sensor's update, gathered before it is applied.
+/// One scan's cells, gathered before they are applied: stamps say whether
+/// a cell is already listed in this scan (no hashing, no allocation once
+/// the lists have grown).
 #[derive(Debug, Default)]
 struct Scratch {
-    free3: FxHashSet<u64>,
-    occ3: FxHashSet<u64>,
-    free2: FxHashSet<usize>,
-    occ2: FxHashSet<usize>,
+    generation: u32,
+    free_stamp: Vec<u32>,
+    occ_stamp: Vec<u32>,
+    free: Vec<usize>,
+    occ: Vec<usize>,
 }
 
 impl Scratch {
-    fn clear(&mut self) {
-        self.free3.clear();
-        self.occ3.clear();
-        self.free2.clear();
-        self.occ2.clear();
+    fn start(&mut self, cells: usize) {
+        if self.free_stamp.len() != cells {
+            self.free_stamp = vec![0; cells];
+            self.occ_stamp = vec![0; cells];
+            self.generation = 0;
+        }
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            self.free_stamp.fill(0);
+            self.occ_stamp.fill(0);
+            self.generation = 1;
+        }
+        self.free.clear();
+        self.occ.clear();
+    }
+
+    fn mark_free(&mut self, i: usize) {
+        if self.free_stamp[i] != self.generation {
+            self.free_stamp[i] = self.generation;
+            self.free.push(i);
+        }
+    }
+
+    fn mark_occupied(&mut self, i: usize) {
+        if self.occ_stamp[i] != self.generation {
+            self.occ_stamp[i] = self.generation;
+            self.occ.push(i);
+        }
     }
 }
 
@@ -242,8 +271,10 @@ impl Mapper {
                 format!("must be inside (0, 90), got {}", rig.sonar_cone_deg),
             );
         }
+        // On the octree's lattice, so a grid cell is the laser plane's voxel column.
+        let snap = |v: f64| (v / params.resolution).floor() * params.resolution;
         let geometry = GridGeometry {
-            origin: params.grid_origin,
+            origin: [snap(params.grid_origin[0]), snap(params.grid_origin[1])],
             resolution: params.resolution,
             width: w as usize,
             height: h as usize,
@@ -313,9 +344,8 @@ impl Mapper {
         };
         let [rmin, rmax] = self.rig.laser_range_m;
         let mut sc = std::mem::take(&mut self.scratch);
-        sc.clear();
+        sc.start(geo.len());
         let o = [s.x, s.y];
-        let tree_offset = [0.0, 0.0];
         for (angle, range) in beams {
             let Some(r) = range else { continue };
             if !(r.is_finite() && r >= rmin && r <= rmax) {
@@ -324,29 +354,66 @@ impl Mapper {
             let (sn, cs) = (s.theta + angle).sin_cos();
             let e = [s.x + r * cs, s.y + r * sn];
             // Thrun's model with α = one cell: crossed cells free, end cell occupied.
-            let (ex, ey) = walk_cells(o, e, res, tree_offset, |cx, cy| {
-                if let Some(k) = tree_key(cx, cy, kz) {
-                    sc.free3.insert(pack(k));
-                }
-            });
-            if let Some(k) = tree_key(ex, ey, kz) {
-                sc.occ3.insert(pack(k));
-            }
             let (ex, ey) = walk_cells(o, e, res, geo.origin, |cx, cy| {
                 if let Some(i) = geo.index_of_cell(cx, cy) {
-                    sc.free2.insert(i);
+                    sc.mark_free(i);
                 }
             });
             if let Some(i) = geo.index_of_cell(ex, ey) {
-                sc.occ2.insert(i);
+                sc.mark_occupied(i);
             }
         }
-        let (lf, lo) = (
-            logodds(self.params.laser.p_free) as f32,
-            logodds(self.params.laser.p_occupied) as f32,
-        );
-        self.apply(&sc, Sensor::Laser, lf, lo);
+        let free = logodds(self.params.laser.p_free) as f32;
+        let occ = logodds(self.params.laser.p_occupied) as f32;
+        let col = self.column_keys();
+        for k in 0..sc.free.len() + sc.occ.len() {
+            let (i, delta) = if k < sc.free.len() {
+                let i = sc.free[k];
+                if sc.occ_stamp[i] == sc.generation {
+                    continue; // occupied wins within a scan
+                }
+                (i, free)
+            } else {
+                (sc.occ[k - sc.free.len()], occ)
+            };
+            let key = col(i, kz);
+            self.apply(Sensor::Laser, key, Some(i), delta);
+        }
         self.scratch = sc;
+    }
+
+    /// The octree key of grid cell `i` at height key `kz`.
+    fn column_keys(&self) -> impl Fn(usize, u16) -> Option<Key> + use<> {
+        let geo = self.joint_grid.geometry;
+        let res = self.params.resolution;
+        let x0 = (geo.origin[0] / res).round() as i64;
+        let y0 = (geo.origin[1] / res).round() as i64;
+        let w = geo.width;
+        move |i, kz| tree_key(x0 + (i % w) as i64, y0 + (i / w) as i64, kz)
+    }
+
+    /// One update of one sensor: the octree voxel `key` (if any) and the
+    /// laser-plane cell `cell` (if any), in the joint maps and, when kept,
+    /// that sensor's own.
+    fn apply(&mut self, sensor: Sensor, key: Option<Key>, cell: Option<usize>, delta: f32) {
+        if let Some(k) = key {
+            self.joint_tree.integrate_logodds(k, delta);
+        }
+        if let Some(i) = cell {
+            self.joint_grid.add(i, delta);
+        }
+        if let Some(ps) = self.per_sensor.as_deref_mut() {
+            let (tree, grid) = match sensor {
+                Sensor::Laser => (&mut ps.laser_tree, &mut ps.laser_grid),
+                Sensor::Sonar => (&mut ps.sonar_tree, &mut ps.sonar_grid),
+            };
+            if let Some(k) = key {
+                tree.integrate_logodds(k, delta);
+            }
+            if let Some(i) = cell {
+                grid.add(i, delta);
+            }
+        }
     }
 
     /// A sonar ring at robot pose `pose` (valid echoes only; saturated and
@@ -361,97 +428,51 @@ impl Mapper {
         );
     }
 
-    /// Sonar echoes `(transducer index, range)` at robot pose `pose`.
+    /// Sonar echoes `(transducer index, range)` at robot pose `pose`. Each
+    /// echo updates its cone directly (a 20° cone on a ring at 22.5° steps
+    /// overlaps no neighbour, so there is nothing to merge). Echoes beyond
+    /// `sonar_map_range_m` say nothing: far cones are wide, mostly guessed, and
+    /// would cost tens of thousands of voxels each.
     pub fn insert_sonar(&mut self, pose: &Pose2, echoes: impl IntoIterator<Item = (u8, f64)>) {
-        let mut sc = std::mem::take(&mut self.scratch);
-        sc.clear();
+        let [rmin, rmax] = self.rig.sonar_range_m;
+        let rmax = rmax.min(self.params.sonar_map_range_m);
         for (index, range) in echoes {
             let Some(m) = self.rig.sonar(index).copied() else {
                 continue;
             };
-            let [rmin, rmax] = self.rig.sonar_range_m;
             if !(range.is_finite() && range >= rmin && range < rmax) {
                 continue;
             }
-            self.gather_cone(pose, &m, range, &mut sc);
+            self.insert_cone(pose, &m, range);
         }
-        let ism = self.sonar_ism;
-        self.apply(
-            &sc,
-            Sensor::Sonar,
-            logodds(ism.p_free) as f32,
-            logodds(ism.p_occupied) as f32,
-        );
-        self.scratch = sc;
     }
 
     /// The voxels (and laser-plane cells) one cone marks.
-    fn gather_cone(&self, pose: &Pose2, m: &Mount, range: f64, sc: &mut Scratch) {
+    fn insert_cone(&mut self, pose: &Pose2, m: &Mount, range: f64) {
         let s = pose.compose(&m.pose);
-        let ism = &self.sonar_ism;
-        let res = self.params.resolution;
+        let ism = self.sonar_ism;
         let reach = range + ism.thickness_m / 2.0;
         let (sn, cs) = s.theta.sin_cos();
-        // The horizontal sector's bounding box: apex, both edges and the axis end.
+        // The horizontal sector's bounding box: apex, edges and axis end.
         let half = ism.half_cone_rad;
         let mut lo = [s.x, s.y];
         let mut hi = [s.x, s.y];
         for a in [-half, -half / 2.0, 0.0, half / 2.0, half] {
             let (es, ec) = (s.theta + a).sin_cos();
-            // 1/cos(half): the edge of the sector's arc reaches past `reach` along x/y.
             let r = reach / half.cos();
             for (i, v) in [s.x + r * ec, s.y + r * es].into_iter().enumerate() {
                 lo[i] = lo[i].min(v);
                 hi[i] = hi[i].max(v);
             }
         }
-        let tree = &self.joint_tree;
         let geo = self.joint_grid.geometry;
-        let z_floor = 0.0;
-        let z_top = self.params.ceiling_m;
+        let (z_floor, z_top) = (0.0, self.params.ceiling_m);
         let plane_dz = self.rig.laser.z - m.z;
-        let key_lo = |c: f64| (c / res).floor() as i64;
-        for cy in key_lo(lo[1])..=key_lo(hi[1]) {
-            for cx in key_lo(lo[0])..=key_lo(hi[0]) {
-                let (x, y) = ((cx as f64 + 0.5) * res, (cy as f64 + 0.5) * res);
-                let (dx, dy) = (x - s.x, y - s.y);
-                let a = dx * cs + dy * sn;
-                let b = -dx * sn + dy * cs;
-                let Some(dz_max) = ism.vertical_extent(a, b) else {
-                    continue;
-                };
-                if a * a + b * b > reach * reach {
-                    continue;
-                }
-                // Voxels of this column inside the cone, between floor and ceiling.
-                let z0 = (m.z - dz_max).max(z_floor);
-                let z1 = (m.z + dz_max).min(z_top);
-                if z0 <= z1
-                    && let (Some(k0), Some(k1)) = (tree.key_of(z0), tree.key_of(z1))
-                {
-                    for kz in k0..=k1 {
-                        let z = tree.coord(kz);
-                        if z < z_floor || z > z_top {
-                            continue;
-                        }
-                        let Some(p) = ism.at([a, b, z - m.z], range) else {
-                            continue;
-                        };
-                        if let Some(k) = tree_key(cx, cy, kz) {
-                            if p > 0.5 {
-                                sc.occ3.insert(pack(k));
-                            } else {
-                                sc.free3.insert(pack(k));
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        // The cone's slice at the laser's height, in the 2D grid.
-        let (gc0, gc1) = (geo.cell(lo[0], lo[1]), geo.cell(hi[0], hi[1]));
-        for gy in gc0.1..=gc1.1 {
-            for gx in gc0.0..=gc1.0 {
+        let (free, occ) = (logodds(ism.p_free) as f32, logodds(ism.p_occupied) as f32);
+        let col = self.column_keys();
+        let (c0, c1) = (geo.cell(lo[0], lo[1]), geo.cell(hi[0], hi[1]));
+        for gy in c0.1..=c1.1 {
+            for gx in c0.0..=c1.0 {
                 let Some(i) = geo.index_of_cell(gx, gy) else {
                     continue;
                 };
@@ -459,54 +480,34 @@ impl Mapper {
                 let (dx, dy) = (x - s.x, y - s.y);
                 let a = dx * cs + dy * sn;
                 let b = -dx * sn + dy * cs;
-                if let Some(p) = ism.at([a, b, plane_dz], range) {
-                    if p > 0.5 {
-                        sc.occ2.insert(i);
-                    } else {
-                        sc.free2.insert(i);
+                if a * a + b * b > reach * reach {
+                    continue;
+                }
+                let Some(dz_max) = ism.vertical_extent(a, b) else {
+                    continue;
+                };
+                let delta = |p: f64| if p > 0.5 { occ } else { free };
+                // The column's voxels inside the cone, floor to ceiling.
+                let z0 = (m.z - dz_max).max(z_floor);
+                let z1 = (m.z + dz_max).min(z_top);
+                if z0 <= z1
+                    && let (Some(k0), Some(k1)) =
+                        (self.joint_tree.key_of(z0), self.joint_tree.key_of(z1))
+                {
+                    for kz in k0..=k1 {
+                        let z = self.joint_tree.coord(kz);
+                        if !(z_floor..=z_top).contains(&z) {
+                            continue;
+                        }
+                        if let Some(p) = ism.at([a, b, z - m.z], range) {
+                            self.apply(Sensor::Sonar, col(i, kz), None, delta(p));
+                        }
                     }
                 }
-            }
-        }
-    }
-
-    fn apply(&mut self, sc: &Scratch, sensor: Sensor, free: f32, occ: f32) {
-        for &k in &sc.free3 {
-            if !sc.occ3.contains(&k) {
-                self.joint_tree.integrate_logodds(unpack(k), free);
-            }
-        }
-        for &k in &sc.occ3 {
-            self.joint_tree.integrate_logodds(unpack(k), occ);
-        }
-        for &i in &sc.free2 {
-            if !sc.occ2.contains(&i) {
-                self.joint_grid.add(i, free);
-            }
-        }
-        for &i in &sc.occ2 {
-            self.joint_grid.add(i, occ);
-        }
-        if let Some(ps) = self.per_sensor.as_deref_mut() {
-            let (tree, grid) = match sensor {
-                Sensor::Laser => (&mut ps.laser_tree, &mut ps.laser_grid),
-                Sensor::Sonar => (&mut ps.sonar_tree, &mut ps.sonar_grid),
-            };
-            for &k in &sc.free3 {
-                if !sc.occ3.contains(&k) {
-                    tree.integrate_logodds(unpack(k), free);
+                // The cone's slice at the laser's height, in the 2D grid.
+                if let Some(p) = ism.at([a, b, plane_dz], range) {
+                    self.apply(Sensor::Sonar, None, Some(i), delta(p));
                 }
-            }
-            for &k in &sc.occ3 {
-                tree.integrate_logodds(unpack(k), occ);
-            }
-            for &i in &sc.free2 {
-                if !sc.occ2.contains(&i) {
-                    grid.add(i, free);
-                }
-            }
-            for &i in &sc.occ2 {
-                grid.add(i, occ);
             }
         }
     }

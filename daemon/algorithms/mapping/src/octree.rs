@@ -52,6 +52,26 @@ pub struct Octree {
     free_blocks: Vec<u32>,
     /// Scratch path of one descent.
     path: Vec<(u32, usize)>,
+    /// The nodes along the last key searched, reused by the next search of a
+    /// nearby key (a cone's voxels come column by column); cleared by any
+    /// change to the tree.
+    cache: SearchCache,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct SearchCache {
+    key: Key,
+    /// `nodes[d]` is the node at depth `d` on `key`'s path, for `d < len`.
+    nodes: [u32; DEPTH as usize + 1],
+    len: usize,
+}
+
+impl SearchCache {
+    const EMPTY: SearchCache = SearchCache {
+        key: [0; 3],
+        nodes: [0; DEPTH as usize + 1],
+        len: 0,
+    };
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -86,6 +106,7 @@ impl Octree {
             free_nodes: Vec::new(),
             free_blocks: Vec::new(),
             path: Vec::with_capacity(DEPTH as usize + 1),
+            cache: SearchCache::EMPTY,
         }
     }
 
@@ -177,9 +198,9 @@ impl Octree {
     }
 
     /// Adds `delta` at `key` unless the leaf is already at the bound in that
-    /// direction (OctoMap's shortcut: no descent, no change).
+    /// direction (OctoMap's shortcut: no change).
     pub fn integrate_logodds(&mut self, key: Key, delta: f32) {
-        if let Some(l) = self.search(key)
+        if let Some(l) = self.search_cached(key)
             && self.clamp.saturated(l, delta > 0.0)
         {
             return;
@@ -187,9 +208,45 @@ impl Octree {
         self.update(key, delta);
     }
 
+    /// [`Octree::search`] starting from the deepest node the last searched
+    /// key shares with this one.
+    fn search_cached(&mut self, key: Key) -> Option<f32> {
+        let c = &mut self.cache;
+        let diff = (c.key[0] ^ key[0]) | (c.key[1] ^ key[1]) | (c.key[2] ^ key[2]);
+        // Nodes at depths 0..=shared lie on both paths.
+        let shared = diff.leading_zeros() as usize;
+        let mut depth = if c.len == 0 { 0 } else { shared.min(c.len - 1) };
+        if c.len == 0 {
+            if self.nodes[0].block == NONE {
+                return None;
+            }
+            c.nodes[0] = 0;
+        }
+        c.key = key;
+        let mut n = c.nodes[depth];
+        loop {
+            c.len = depth + 1;
+            let node = self.nodes[n as usize];
+            if node.block == NONE {
+                return (n != 0).then_some(node.logodds);
+            }
+            if depth as u32 == DEPTH {
+                return Some(node.logodds);
+            }
+            let child = self.blocks[node.block as usize][Self::child_pos(key, depth as u32)];
+            if child == NONE {
+                return None;
+            }
+            depth += 1;
+            n = child;
+            c.nodes[depth] = n;
+        }
+    }
+
     /// Adds `delta` (log-odds) at `key`, clamped; expands pruned leaves on
     /// the way down, prunes and refreshes inner maxima on the way up.
     pub fn update(&mut self, key: Key, delta: f32) {
+        self.cache.len = 0;
         let mut path = std::mem::take(&mut self.path);
         path.clear();
         let mut n = 0u32;
@@ -221,19 +278,24 @@ impl Octree {
         }
         let leaf = &mut self.nodes[n as usize];
         leaf.logodds = self.clamp.add(leaf.logodds, delta);
+        // A node whose value and shape did not change leaves its ancestors as
+        // they were: stop there.
         for &(parent, _) in path.iter().rev() {
-            self.refresh(parent);
+            if !self.refresh(parent) {
+                break;
+            }
         }
         self.path = path;
     }
 
     /// Sets an inner node to its children's maximum, or prunes eight
-    /// identical leaf children into it.
-    fn refresh(&mut self, n: u32) {
+    /// identical leaf children into it. Returns whether the node changed.
+    fn refresh(&mut self, n: u32) -> bool {
         let b = self.nodes[n as usize].block;
         if b == NONE {
-            return;
+            return false;
         }
+        let before = self.nodes[n as usize].logodds;
         let kids = self.blocks[b as usize];
         let mut max = f32::NEG_INFINITY;
         let mut prunable = true;
@@ -250,7 +312,8 @@ impl Octree {
                 prunable = false;
             }
         }
-        if prunable && n != 0 {
+        let pruned = prunable && n != 0;
+        if pruned {
             for &c in &kids {
                 self.free_nodes.push(c);
             }
@@ -258,6 +321,7 @@ impl Octree {
             self.nodes[n as usize].block = NONE;
         }
         self.nodes[n as usize].logodds = max;
+        pruned || max != before
     }
 
     /// Nodes in use, root included.
