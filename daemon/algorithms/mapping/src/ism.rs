@@ -13,7 +13,7 @@
 //!
 //! Both papers' probabilities are OctoMap's hit/miss, 0.7 and 0.4.
 
-use crate::logodds::Clamping;
+use crate::logodds::{Clamping, logodds, probability};
 
 /// Thrun's three-part laser model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -90,6 +90,18 @@ impl SonarIsm {
         }
     }
 
+    /// The occupied probability of the cap in a map of one horizontal slice
+    /// of `cell` thickness (the fused 2D grid in the laser plane). The echo
+    /// came from somewhere on the cap, whose vertical extent at `range` is
+    /// `2 · range · sin θ`; a slice holds its share of that evidence, so a cap
+    /// spanning ten slices moves each by a tenth of the log-odds a voxel of
+    /// the 3D cap gets. Free space is free at every height and keeps `p_free`.
+    pub fn slice_p_occupied(&self, range: f64, cell: f64) -> f64 {
+        let extent = 2.0 * range * self.half_cone_rad.sin();
+        let share = (cell / extent).min(1.0);
+        probability(share * logodds(self.p_occupied))
+    }
+
     /// Largest vertical offset from the axis height still inside the cone at
     /// forward distance `a` and lateral offset `b` (both horizontal, m):
     /// `dz² ≤ a² tan² θ − b²`. `None` outside the cone's horizontal sector.
@@ -131,6 +143,18 @@ mod tests {
         assert_eq!(m.at(at(9.0, 2.0), 2.0), Some(0.7));
         assert_eq!(m.at(at(11.0, 2.0), 2.0), None);
         assert_eq!(m.at([-1.0, 0.0, 0.0], 2.0), None);
+    }
+
+    #[test]
+    fn a_slice_of_the_cap_holds_its_share_of_the_evidence() {
+        let m = SonarIsm::new(20.0);
+        // At 1.5 m the cap spans 2 · 1.5 · sin 10° = 0.52 m: ten 5 cm slices.
+        let p = m.slice_p_occupied(1.5, 0.05);
+        let share = 0.05 / (3.0 * 10f64.to_radians().sin());
+        assert!((logodds(p) - share * logodds(0.7)).abs() < 1e-12);
+        assert!(p > 0.5 && p < 0.55, "{p}");
+        // A slice as thick as the cap keeps the full value.
+        assert!((m.slice_p_occupied(0.1, 1.0) - 0.7).abs() < 1e-12);
     }
 
     #[test]

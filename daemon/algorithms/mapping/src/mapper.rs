@@ -469,6 +469,7 @@ impl Mapper {
         let (z_floor, z_top) = (0.0, self.params.ceiling_m);
         let plane_dz = self.rig.laser.z - m.z;
         let (free, occ) = (logodds(ism.p_free) as f32, logodds(ism.p_occupied) as f32);
+        let slice_occ = logodds(ism.slice_p_occupied(range, self.params.resolution)) as f32;
         let col = self.column_keys();
         let (c0, c1) = (geo.cell(lo[0], lo[1]), geo.cell(hi[0], hi[1]));
         for gy in c0.1..=c1.1 {
@@ -506,7 +507,8 @@ impl Mapper {
                 }
                 // The cone's slice at the laser's height, in the 2D grid.
                 if let Some(p) = ism.at([a, b, plane_dz], range) {
-                    self.apply(Sensor::Sonar, None, Some(i), delta(p));
+                    let d = if p > 0.5 { slice_occ } else { free };
+                    self.apply(Sensor::Sonar, None, Some(i), d);
                 }
             }
         }
