@@ -21,8 +21,11 @@ use smokenav_algorithms_mapping::{
     CellClass, FusionRule, Heights, MapParams, MapSet, Mapper, ProbGrid, Rig,
 };
 use smokenav_platform_map::{FREE, OCCUPIED, OccupancyGrid};
-use smokenav_sim_world::laser::{URG_AMIN, URG_DMAX_MM, URG_DMIN_MM, URG_STEPS, step_angle};
+use smokenav_sim_world::laser::{
+    URG_AFRT, URG_AMIN, URG_DMAX_MM, URG_DMIN_MM, URG_STEP_TIME_S, URG_STEPS, step_angle,
+};
 use smokenav_sim_world::{Pose2, Position, Scenario, StepOutput, World};
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -66,6 +69,8 @@ struct Report {
     dense_grid_bytes: usize,
     bt_bytes: Option<u64>,
     bt_occupied_leaves: usize,
+    /// Lowest and highest corner of the occupied leaves, m.
+    occupied_bounds_m: Option<[[f64; 3]; 2]>,
     checks: Vec<(String, bool)>,
 }
 
@@ -92,40 +97,50 @@ pub fn run(args: Map3dArgs) -> anyhow::Result<()> {
     let duration_ns = args.duration.map(|s| (s * 1e9) as u64);
     let mut world = World::new(scenario)?;
 
-    // Poses at a sample's time: between the truth before and after the step.
+    // True poses of the last 300 ms, every 10 ms: a scan is reported when
+    // its turn ends, 100 ms after its first step.
     let mut out = StepOutput::default();
-    let mut prev = (world.time_ns(), world.truth_pose());
+    let mut history: VecDeque<(u64, Pose2)> = VecDeque::with_capacity(32);
+    history.push_back((world.time_ns(), world.truth_pose()));
     let (mut scans, mut echoes) = (0usize, 0usize);
     let mut beams: Vec<(f64, Option<f64>)> = Vec::with_capacity(URG_STEPS);
+    let laser_mount = mapper.rig().laser.pose;
     while !world.is_finished()
         && !world.route_done()
         && duration_ns.is_none_or(|d| world.time_ns() < d)
     {
         world.step_into(Duration::from_millis(10), &mut out);
-        let now = (world.time_ns(), world.truth_pose());
-        let pose_at = |t: u64| -> Pose2 {
-            let span = now.0.saturating_sub(prev.0).max(1) as f64;
-            let f = (t.saturating_sub(prev.0) as f64 / span).clamp(0.0, 1.0);
-            prev.1.interpolate(&now.1, f)
-        };
+        if history.len() == 30 {
+            history.pop_front();
+        }
+        history.push_back((world.time_ns(), world.truth_pose()));
         for frame in &out.laser {
+            // Each beam at its own step's time, re-expressed from the laser's
+            // pose at mid-turn (de-skewed, as a consumer of a moving scanner must).
+            let step_ns = |s: u32| frame.t_ns + (s as f64 * URG_STEP_TIME_S * 1e9) as u64;
+            let mid = pose_at(&history, step_ns(URG_AFRT)).compose(&laser_mount);
             beams.clear();
             beams.extend(frame.ranges_mm.iter().enumerate().map(|(i, &mm)| {
-                let valid = (URG_DMIN_MM..=URG_DMAX_MM).contains(&mm);
-                (
-                    step_angle(URG_AMIN + i as u32),
-                    valid.then_some(mm as f64 / 1000.0),
-                )
+                let step = URG_AMIN + i as u32;
+                let a = step_angle(step);
+                if !(URG_DMIN_MM..=URG_DMAX_MM).contains(&mm) {
+                    return (a, None);
+                }
+                let r = mm as f64 / 1000.0;
+                let l = pose_at(&history, step_ns(step)).compose(&laser_mount);
+                let (ex, ey) = (l.x + r * (l.theta + a).cos(), l.y + r * (l.theta + a).sin());
+                let (dx, dy) = (ex - mid.x, ey - mid.y);
+                (dy.atan2(dx) - mid.theta, Some(dx.hypot(dy)))
             }));
-            mapper.insert_laser(&pose_at(frame.t_ns), beams.iter().copied());
+            let base = mid.compose(&laser_mount.inverse());
+            mapper.insert_laser(&base, beams.iter().copied());
             scans += 1;
         }
         for s in out.sonar.iter().filter(|s| !s.saturated) {
-            mapper.insert_sonar(&pose_at(s.t_ns), [(s.index, s.range_m)]);
+            mapper.insert_sonar(&pose_at(&history, s.t_ns), [(s.index, s.range_m)]);
             echoes += 1;
         }
         out.clear();
-        prev = now;
     }
     eprintln!(
         "{name}: {:.1} s simulated, {scans} scans, {echoes} sonar echoes mapped",
@@ -261,6 +276,7 @@ pub fn run(args: Map3dArgs) -> anyhow::Result<()> {
         dense_grid_bytes: dense,
         bt_bytes,
         bt_occupied_leaves: bt_occupied,
+        occupied_bounds_m: occupied_bounds(tree),
         checks: checks.clone(),
     };
     if let Some(dir) = &args.out {
@@ -318,4 +334,42 @@ fn recall(map: &ProbGrid, cells: &[(f64, f64)]) -> f64 {
         })
         .count();
     found as f64 / cells.len().max(1) as f64
+}
+
+/// The box around the occupied leaves (log-odds > 0, as the export decides).
+fn occupied_bounds(tree: &smokenav_algorithms_mapping::Octree) -> Option<[[f64; 3]; 2]> {
+    let r = tree.resolution();
+    let mut b: Option<[[f64; 3]; 2]> = None;
+    tree.for_each_leaf(|l| {
+        if l.logodds <= 0.0 {
+            return;
+        }
+        let lo: [f64; 3] = std::array::from_fn(|a| tree.coord(l.key[a]) - r / 2.0);
+        let hi: [f64; 3] = std::array::from_fn(|a| lo[a] + l.size as f64 * r);
+        let bb = b.get_or_insert([lo, hi]);
+        for a in 0..3 {
+            bb[0][a] = bb[0][a].min(lo[a]);
+            bb[1][a] = bb[1][a].max(hi[a]);
+        }
+    });
+    b
+}
+
+/// The true pose at `t`, interpolated in the history (clamped to its ends).
+fn pose_at(history: &VecDeque<(u64, Pose2)>, t: u64) -> Pose2 {
+    let Some(&(_, last)) = history.back() else {
+        return Pose2::default();
+    };
+    let mut before = history[0];
+    if t <= before.0 {
+        return before.1;
+    }
+    for &(ti, pi) in history {
+        if ti >= t {
+            let f = (t - before.0) as f64 / (ti - before.0).max(1) as f64;
+            return before.1.interpolate(&pi, f);
+        }
+        before = (ti, pi);
+    }
+    last
 }

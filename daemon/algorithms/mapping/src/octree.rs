@@ -390,8 +390,9 @@ impl Octree {
     /// Writes the tree in OctoMap's binary format (`.bt`, read by
     /// `octomap::OcTree::readBinary` and the `octomap-tools`): a text header,
     /// then per inner node, depth first from the root, two bytes with two bits
-    /// per child (children 0–3, then 4–7; bit `2i` and `2i + 1` of child `i`:
-    /// 00 unknown, 01 occupied leaf, 10 free leaf, 11 inner node). As OctoMap
+    /// per child (children 0–3, then 4–7). For child `i`, written as the pair
+    /// (bit `2i`, bit `2i + 1`) of its byte: (0, 0) unknown, (0, 1) occupied
+    /// leaf, (1, 0) free leaf, (1, 1) inner node. As OctoMap
     /// does when writing, values become maximum-likelihood first (occupied iff
     /// log-odds > 0) and eight equal leaf children merge into their parent.
     pub fn write_bt(&self, w: &mut impl Write) -> io::Result<BtStats> {
@@ -522,8 +523,8 @@ impl Octree {
                 let bits = (byte >> ((i % 4) * 2)) & 0b11;
                 let value = match bits {
                     0b00 => continue,
-                    0b01 => clamp.max,
-                    0b10 => clamp.min,
+                    0b10 => clamp.max,
+                    0b01 => clamp.min,
                     _ => {
                         if depth + 1 >= DEPTH {
                             return Err(BtError::Data(format!(
@@ -607,9 +608,10 @@ fn encode(kids: &[Ml; 8], out: &mut Vec<u8>) {
     let mut bytes = [0u8; 2];
     for (i, k) in kids.iter().enumerate() {
         let bits = match k {
+            // (bit 2i, bit 2i + 1) as the value `bit2i | bit2i+1 << 1`.
             Ml::Unknown => 0b00,
-            Ml::Leaf(true) => 0b01,
-            Ml::Leaf(false) => 0b10,
+            Ml::Leaf(true) => 0b10,
+            Ml::Leaf(false) => 0b01,
             Ml::Inner(_) => 0b11,
         };
         bytes[i / 4] |= bits << ((i % 4) * 2);
@@ -720,6 +722,22 @@ mod tests {
         });
         assert_eq!(got, occupied);
         assert_eq!(back.node_count(), stats.nodes);
+    }
+
+    #[test]
+    fn bt_bits_are_octomaps_pairs() {
+        // One occupied voxel at key (2¹⁵, 2¹⁵, 2¹⁵) and a free one at x + 1
+        // under the same parent: the last level's byte has child 0 occupied
+        // (bit 1) and child 1 free (bit 2), as OctoMap's writeBinaryNode sets
+        // child1to4[0] = 0, [1] = 1 for occupied and [2] = 1, [3] = 0 for free.
+        let mut t = tree();
+        let k = [32768u16, 32768, 32768];
+        t.integrate(k, true);
+        t.integrate([k[0] + 1, k[1], k[2]], false);
+        let mut bytes = Vec::new();
+        t.write_bt(&mut bytes).unwrap();
+        let data = &bytes[bytes.len() - 2..];
+        assert_eq!(data, &[0b0000_0110, 0]);
     }
 
     #[test]
