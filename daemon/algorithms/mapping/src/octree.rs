@@ -396,7 +396,7 @@ impl Octree {
     /// does when writing, values become maximum-likelihood first (occupied iff
     /// log-odds > 0) and eight equal leaf children merge into their parent.
     pub fn write_bt(&self, w: &mut impl Write) -> io::Result<BtStats> {
-        let ml = self.max_likelihood(0, 0);
+        let ml = self.max_likelihood(0);
         let mut stats = BtStats {
             nodes: 0,
             occupied_leaves: 0,
@@ -423,7 +423,7 @@ impl Octree {
         Ok(stats)
     }
 
-    fn max_likelihood(&self, n: u32, depth: u32) -> Ml {
+    fn max_likelihood(&self, n: u32) -> Ml {
         let node = self.nodes[n as usize];
         if node.block == NONE {
             return if n == 0 {
@@ -437,7 +437,7 @@ impl Octree {
             if c == NONE {
                 Ml::Unknown
             } else {
-                self.max_likelihood(c, depth + 1)
+                self.max_likelihood(c)
             }
         });
         if n != 0
