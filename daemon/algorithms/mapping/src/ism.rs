@@ -4,7 +4,7 @@
 //! * Laser: Thrun's three-part model along the beam (*Probabilistic
 //!   Robotics*, Table 9.2): free before the hit, occupied within half an
 //!   obstacle thickness of it, prior beyond.
-//! * Sonar: the 2D/3D fusion paper's ultrasonic model, with the Polaroid /
+//! * Sonar: Tran et al. 2021's ultrasonic model, with the Polaroid /
 //!   SensComp transducer's beam taken as a circular cone around its axis:
 //!   free inside the cone up to the echo, occupied on the echo's cap (the
 //!   spherical shell at the echo range within the cone), prior beyond and

@@ -1,5 +1,5 @@
-//! Bayesian multi-sensor occupancy mapping in 2D and 3D, after the 2D laser
-//! / 3D ultrasonic fusion paper (see REFERENCES.md): an inverse sensor model
+//! Bayesian multi-sensor occupancy mapping in 2D and 3D, after Tran et al.
+//! 2021 (2D laser and 3D ultrasonic sensor fusion): an inverse sensor model
 //! per sensor, four fusion rules compared, the Bayes filter with OctoMap's
 //! clamping kept, a fused 2D grid in the laser plane, a log-odds octree, its
 //! projection to 2D (everything under the robot's height), and export to

@@ -7,7 +7,7 @@
 //! reading set marks free and occupied are gathered in two key sets first (so
 //! a cell crossed by many beams in one scan is updated once, and occupied
 //! wins over free), then applied with clamping. Sensors are independent, so
-//! laser and sonar updates of one cell add (eq. 15 of the fusion paper).
+//! laser and sonar updates of one cell add (Tran et al. 2021, eq. 15).
 
 use crate::grid::{GridGeometry, LogOddsGrid, ProbGrid, walk_cells};
 use crate::ism::{LaserIsm, SonarIsm};

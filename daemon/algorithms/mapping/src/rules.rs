@@ -1,5 +1,5 @@
 //! The four ways of pooling per-sensor occupancy opinions of one cell that
-//! the 2D/3D ultrasonic–laser fusion paper compares (after Dietrich et al.'s
+//! Tran et al. 2021 compare (after Dietrich et al.'s
 //! survey of opinion pools and Thrun's *Probabilistic Robotics*):
 //! Linear Opinion Pool (eq. 4), Logarithmic Independent Opinion Pool
 //! (eq. 6), Independent Opinion Pool (eq. 7) and the Bayes filter in
