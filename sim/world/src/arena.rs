@@ -155,6 +155,8 @@ pub struct Arena {
     cell_items: Vec<u32>,
     /// When loaded from a pixel map: that map, returned as the ground truth.
     source_grid: Option<OccupancyGrid>,
+    /// Whether any segment spans less than the full height.
+    has_heights: bool,
 }
 
 impl Arena {
@@ -220,6 +222,7 @@ impl Arena {
             cell_items.extend_from_slice(l);
             cell_start.push(cell_items.len() as u32);
         }
+        let has_heights = segments.iter().any(|s| !s.is_full_height());
         Ok(Self {
             name: name.to_owned(),
             segments,
@@ -230,6 +233,7 @@ impl Arena {
             cell_start,
             cell_items,
             source_grid: None,
+            has_heights,
         })
     }
 
@@ -421,6 +425,12 @@ impl Arena {
         let mut arena = Self::from_segments(&file.display().to_string(), segs, file)?;
         arena.source_grid = Some(grid);
         Ok(arena)
+    }
+
+    /// Whether some obstacle spans less than floor to ceiling (otherwise the
+    /// world is planar and sensors need not look at heights).
+    pub fn has_heights(&self) -> bool {
+        self.has_heights
     }
 
     pub fn segments(&self) -> &[Segment] {

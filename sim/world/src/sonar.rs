@@ -128,8 +128,14 @@ impl SonarModel {
         // cone's width at that elevation. The level row is the planar model's
         // fan, so full-height walls echo exactly as in 2D (a tilted ray meets
         // them farther away).
-        for row in 0..n {
-            let elev = spread(row, half);
+        // A planar world: the level row alone gives the same nearest echo.
+        let rows = if arena.has_heights() { 0..n } else { 0..1 };
+        for row in rows {
+            let elev = if arena.has_heights() {
+                spread(row, half)
+            } else {
+                0.0
+            };
             let width = (half * half - elev * elev).max(0.0).sqrt();
             let (tan_e, cos_e) = (elev.tan(), elev.cos());
             // A falling ray meets the floor (which mirrors sound away) here.
