@@ -35,11 +35,19 @@ fn to_wall(x: f64, y: f64, theta: f64) -> f64 {
     t
 }
 
+/// This thread's CPU time: on a loaded machine (the figures below were taken
+/// on 2 cores shared by several builds) wall time also counts preemption.
+fn cpu() -> Duration {
+    let t = nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID)
+        .expect("thread CPU clock");
+    Duration::new(t.tv_sec() as u64, t.tv_nsec() as u32)
+}
+
 fn report(name: &str, mut d: Vec<Duration>) {
     d.sort_unstable();
     let pct = |p: f64| d[((d.len() as f64 * p) as usize).min(d.len() - 1)];
     println!(
-        "{name:<52} n={:<5} p50={:>7.3} ms  p99={:>7.3} ms  max={:>7.3} ms",
+        "{name:<60} n={:<5} p50={:>7.3} ms  p99={:>7.3} ms  max={:>7.3} ms",
         d.len(),
         pct(0.50).as_secs_f64() * 1e3,
         pct(0.99).as_secs_f64() * 1e3,
@@ -61,6 +69,9 @@ fn bench(name: &str, set: MapSet) {
         .collect();
     assert_eq!(beams.len(), 682);
     let mut times = Vec::with_capacity(RUNS);
+    let mut cpu_times = Vec::with_capacity(RUNS);
+    let mut laser = Vec::with_capacity(RUNS);
+    let mut sonar = Vec::with_capacity(RUNS);
     let mut scan = Vec::with_capacity(682);
     let mut ring = Vec::with_capacity(16);
     for i in 0..WARMUP + RUNS {
@@ -79,15 +90,22 @@ fn bench(name: &str, set: MapSet) {
             let sp = pose.compose(&mnt.pose);
             (*idx, to_wall(sp.x, sp.y, sp.theta))
         }));
-        let t0 = Instant::now();
+        let (t0, c0) = (Instant::now(), cpu());
         m.insert_laser(black_box(&pose), scan.iter().copied());
+        let (t1, c1) = (Instant::now(), cpu());
         m.insert_sonar(black_box(&pose), ring.iter().copied());
-        let dt = t0.elapsed();
+        let (t2, c2) = (Instant::now(), cpu());
         if i >= WARMUP {
-            times.push(dt);
+            times.push(t2 - t0);
+            cpu_times.push(c2 - c0);
+            laser.push(c1 - c0);
+            sonar.push(c2 - c1);
         }
     }
-    report(name, times);
+    report(&format!("{name}, wall"), times);
+    report("  the same, thread CPU time", cpu_times);
+    report("  of which the scan (CPU)", laser);
+    report("  of which the ring (CPU)", sonar);
     println!(
         "  octree after {} updates: {} nodes, {:.1} KiB",
         WARMUP + RUNS,

@@ -120,7 +120,8 @@ pub struct MapParams {
     /// The 2D grids' extent.
     pub grid_origin: [f64; 2],
     pub grid_size_m: [f64; 2],
-    /// Sonar echoes farther than this are not mapped, m.
+    /// Sonar echoes farther than this are not mapped, m (2.5 m, the sonar
+    /// cap the fusion layer also uses).
     pub sonar_map_range_m: f64,
     /// LOP/LIOP weights of laser and sonar (the paper weighs the sonar less).
     pub laser_weight: f64,
@@ -136,7 +137,7 @@ impl Default for MapParams {
             sonar_thickness_m: 0.08,
             heights: Heights::default(),
             ceiling_m: 2.0,
-            sonar_map_range_m: 3.0,
+            sonar_map_range_m: 2.5,
             grid_origin: [-20.0, -20.0],
             grid_size_m: [40.0, 40.0],
             laser_weight: 0.7,
@@ -469,6 +470,7 @@ impl Mapper {
         let (z_floor, z_top) = (0.0, self.params.ceiling_m);
         let plane_dz = self.rig.laser.z - m.z;
         let (free, occ) = (logodds(ism.p_free) as f32, logodds(ism.p_occupied) as f32);
+        let half_t = ism.thickness_m / 2.0;
         let slice_occ = logodds(ism.slice_p_occupied(range, self.params.resolution)) as f32;
         let col = self.column_keys();
         let (c0, c1) = (geo.cell(lo[0], lo[1]), geo.cell(hi[0], hi[1]));
@@ -487,7 +489,6 @@ impl Mapper {
                 let Some(dz_max) = ism.vertical_extent(a, b) else {
                     continue;
                 };
-                let delta = |p: f64| if p > 0.5 { occ } else { free };
                 // The column's voxels inside the cone, floor to ceiling.
                 let z0 = (m.z - dz_max).max(z_floor);
                 let z1 = (m.z + dz_max).min(z_top);
@@ -495,14 +496,24 @@ impl Mapper {
                     && let (Some(k0), Some(k1)) =
                         (self.joint_tree.key_of(z0), self.joint_tree.key_of(z1))
                 {
+                    // Inside the cone by construction (|dz| ≤ dz_max): only
+                    // the distance decides (`SonarIsm::at` without its cone test).
+                    let h2 = a * a + b * b;
                     for kz in k0..=k1 {
-                        let z = self.joint_tree.coord(kz);
-                        if !(z_floor..=z_top).contains(&z) {
+                        let dz = self.joint_tree.coord(kz) - m.z;
+                        if dz.abs() > dz_max || !(z_floor..=z_top).contains(&(dz + m.z)) {
                             continue;
                         }
-                        if let Some(p) = ism.at([a, b, z - m.z], range) {
-                            self.apply(Sensor::Sonar, col(i, kz), None, delta(p));
-                        }
+                        let d = (h2 + dz * dz).sqrt();
+                        let upd = if d < range - half_t {
+                            free
+                        } else if d <= range + half_t {
+                            occ
+                        } else {
+                            continue;
+                        };
+                        let key = col(i, kz);
+                        self.apply(Sensor::Sonar, key, None, upd);
                     }
                 }
                 // The cone's slice at the laser's height, in the 2D grid.
