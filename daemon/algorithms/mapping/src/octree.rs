@@ -693,6 +693,54 @@ mod tests {
     }
 
     #[test]
+    fn random_updates_match_a_dense_reference_through_pruning_and_expansion() {
+        // A 4³ cube of voxels, hammered with hits and misses in a fixed
+        // pseudo-random order: every voxel's value must equal the clamped sum
+        // a plain array keeps, whatever was pruned and expanded on the way.
+        let mut t = tree();
+        let c = t.clamping();
+        let mut reference = [0f32; 64];
+        let mut known = [false; 64];
+        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+        let mut pruned_seen = false;
+        for _ in 0..20_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let i = (x % 64) as usize;
+            // Mostly misses, so regions saturate free and prune, then hits break them up.
+            let occupied = (x >> 8) % 5 == 0;
+            let k = [
+                32768 + (i & 3) as u16,
+                32768 + ((i >> 2) & 3) as u16,
+                32768 + (i >> 4) as u16,
+            ];
+            t.integrate(k, occupied);
+            let delta = if occupied { c.hit } else { c.miss };
+            reference[i] = c.add(reference[i], delta);
+            known[i] = true;
+            let mut leaves = 0;
+            t.for_each_leaf(|_| leaves += 1);
+            pruned_seen |= leaves < known.iter().filter(|k| **k).count();
+        }
+        for i in 0..64 {
+            let k = [
+                32768 + (i & 3) as u16,
+                32768 + ((i >> 2) & 3) as u16,
+                32768 + (i >> 4) as u16,
+            ];
+            assert_eq!(t.search(k), known[i].then_some(reference[i]), "voxel {i}");
+        }
+        assert!(
+            pruned_seen,
+            "the sequence never pruned: the test would prove nothing"
+        );
+        // Inner nodes hold the maximum of what lies below.
+        let max = reference.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        assert_eq!(t.nodes[0].logodds, max);
+    }
+
+    #[test]
     fn bt_export_reads_back_with_the_same_occupied_voxels() {
         let mut t = tree();
         let mut occupied = std::collections::BTreeSet::new();
