@@ -709,7 +709,7 @@ mod tests {
             x ^= x << 17;
             let i = (x % 64) as usize;
             // Mostly misses, so regions saturate free and prune, then hits break them up.
-            let occupied = (x >> 8) % 5 == 0;
+            let occupied = (x >> 8).is_multiple_of(5);
             let k = [
                 32768 + (i & 3) as u16,
                 32768 + ((i >> 2) & 3) as u16,
