@@ -3,11 +3,13 @@
 //! the laser plane; optionally also per-sensor maps, so the other fusion
 //! rules can pool them for comparison.
 //!
-//! Each update follows OctoMap's `insertPointCloud`: the cells one sensor's
-//! reading set marks free and occupied are gathered in two key sets first (so
-//! a cell crossed by many beams in one scan is updated once, and occupied
-//! wins over free), then applied with clamping. Sensors are independent, so
-//! laser and sonar updates of one cell add (Tran et al. 2021, eq. 15).
+//! A scan follows OctoMap's `insertPointCloud`: the cells its beams mark
+//! free and occupied are gathered first (so a cell crossed by many beams in
+//! one scan is updated once, and occupied wins over free), then applied with
+//! clamping. Each sonar echo updates its own cone. Sensors are independent,
+//! so laser and sonar updates of one cell add (Tran et al. 2021, eq. 15).
+//! The laser's voxels are the 2D grid's cells at the laser's height, so both
+//! maps cover the grid's extent (`grid_origin`, `grid_size_m`).
 
 use crate::grid::{GridGeometry, LogOddsGrid, ProbGrid, walk_cells};
 use crate::ism::{LaserIsm, SonarIsm};
