@@ -340,6 +340,9 @@ impl Mapper {
         beams: impl IntoIterator<Item = (f64, Option<f64>)>,
     ) {
         let s = pose.compose(&self.rig.laser.pose);
+        if !s.is_finite() {
+            return;
+        }
         let res = self.params.resolution;
         let geo = self.joint_grid.geometry;
         let Some(kz) = self.joint_tree.key_of(self.rig.laser.z) else {
@@ -352,6 +355,9 @@ impl Mapper {
         for (angle, range) in beams {
             let Some(r) = range else { continue };
             if !(r.is_finite() && r >= rmin && r <= rmax) {
+                continue;
+            }
+            if !angle.is_finite() {
                 continue;
             }
             let (sn, cs) = (s.theta + angle).sin_cos();
@@ -437,6 +443,9 @@ impl Mapper {
     /// `sonar_map_range_m` say nothing: far cones are wide, mostly guessed, and
     /// would cost tens of thousands of voxels each.
     pub fn insert_sonar(&mut self, pose: &Pose2, echoes: impl IntoIterator<Item = (u8, f64)>) {
+        if !pose.is_finite() {
+            return;
+        }
         let [rmin, rmax] = self.rig.sonar_range_m;
         let rmax = rmax.min(self.params.sonar_map_range_m);
         for (index, range) in echoes {
@@ -730,6 +739,22 @@ mod tests {
             [(0, 6.0), (7, 1.0), (0, f64::NAN)],
         );
         assert_eq!(m.octree().node_count(), 1);
+    }
+
+    #[test]
+    fn non_finite_poses_angles_and_ranges_change_nothing() {
+        let mut m = mapper();
+        let nan = f64::NAN;
+        m.insert_laser(&Pose2::new(nan, 0.0, 0.0), [(0.0, Some(2.0))]);
+        m.insert_laser(&Pose2::new(0.0, 0.0, f64::INFINITY), [(0.0, Some(2.0))]);
+        m.insert_laser(
+            &Pose2::default(),
+            [(nan, Some(2.0)), (0.0, Some(nan)), (0.0, Some(-1.0))],
+        );
+        m.insert_sonar(&Pose2::new(0.0, nan, 0.0), [(0, 1.0)]);
+        assert_eq!(m.octree().node_count(), 1);
+        let g = m.fused_grid(FusionRule::Bayes).unwrap();
+        assert!(g.p.iter().all(|p| p.is_nan()), "no cell observed");
     }
 
     #[test]
