@@ -2,8 +2,9 @@
 //! al. 2013): 16 levels, keys `floor(c / res) + 2¹⁵` per axis, child index
 //! `x + 2y + 4z` of the key bits at each level, inner nodes holding their
 //! children's maximum, clamped updates, and pruning of eight identical leaf
-//! children into their parent. Nodes live in two vectors (nodes and
-//! 8-child blocks) with free lists, so steady-state updates do not allocate.
+//! children into their parent. A node's eight children live together in one
+//! block of a vector (a free list reuses pruned blocks), so a descent reads
+//! one block per level and steady-state updates do not allocate.
 
 use crate::logodds::ClampLogOdds;
 use std::io::{self, BufRead, Read, Write};
@@ -12,7 +13,12 @@ use std::io::{self, BufRead, Read, Write};
 pub const DEPTH: u32 = 16;
 /// Key of the coordinate 0.
 pub const KEY_ORIGIN: i64 = 1 << (DEPTH - 1);
-const NONE: u32 = u32::MAX;
+/// `Node::kids` of a leaf.
+const LEAF: u32 = u32::MAX;
+/// `Node::kids` of a child slot with no node (unknown space).
+const ABSENT: u32 = u32::MAX - 1;
+/// Node id of the root; other nodes are `block · 8 + child`.
+const ROOT: u32 = u32::MAX;
 
 /// A voxel key at the finest level.
 pub type Key = [u16; 3];
@@ -29,9 +35,15 @@ pub fn unpack(v: u64) -> Key {
 #[derive(Debug, Clone, Copy)]
 struct Node {
     logodds: f32,
-    /// Index into `blocks`, or `NONE` for a leaf.
-    block: u32,
+    /// Index of the block holding the eight children, or [`LEAF`], or
+    /// [`ABSENT`] for an empty child slot.
+    kids: u32,
 }
+
+const ABSENT_NODE: Node = Node {
+    logodds: 0.0,
+    kids: ABSENT,
+};
 
 /// One leaf: the cube of `size` finest voxels per side from `key` (its
 /// lowest corner key), and its log-odds.
@@ -46,12 +58,13 @@ pub struct Leaf {
 pub struct Octree {
     resolution: f64,
     clamp: ClampLogOdds,
-    nodes: Vec<Node>,
-    blocks: Vec<[u32; 8]>,
-    free_nodes: Vec<u32>,
+    root: Node,
+    blocks: Vec<[Node; 8]>,
     free_blocks: Vec<u32>,
-    /// Scratch path of one descent.
-    path: Vec<(u32, usize)>,
+    /// Nodes in use, root included.
+    live: usize,
+    /// Scratch path of one descent (node ids).
+    path: Vec<u32>,
     /// The nodes along the last key searched, reused by the next search of a
     /// nearby key (a cone's voxels come column by column); cleared by any
     /// change to the tree.
@@ -61,7 +74,7 @@ pub struct Octree {
 #[derive(Debug, Clone, Copy)]
 struct SearchCache {
     key: Key,
-    /// `nodes[d]` is the node at depth `d` on `key`'s path, for `d < len`.
+    /// `nodes[d]` is the node id at depth `d` on `key`'s path, for `d < len`.
     nodes: [u32; DEPTH as usize + 1],
     len: usize,
 }
@@ -98,13 +111,13 @@ impl Octree {
         Self {
             resolution,
             clamp,
-            nodes: vec![Node {
+            root: Node {
                 logodds: 0.0,
-                block: NONE,
-            }],
+                kids: LEAF,
+            },
             blocks: Vec::new(),
-            free_nodes: Vec::new(),
             free_blocks: Vec::new(),
+            live: 1,
             path: Vec::with_capacity(DEPTH as usize + 1),
             cache: SearchCache::EMPTY,
         }
@@ -143,48 +156,49 @@ impl Octree {
             as usize
     }
 
-    fn alloc_node(&mut self, logodds: f32) -> u32 {
-        let n = Node {
-            logodds,
-            block: NONE,
-        };
-        if let Some(i) = self.free_nodes.pop() {
-            self.nodes[i as usize] = n;
-            i
+    fn node(&self, id: u32) -> Node {
+        if id == ROOT {
+            self.root
         } else {
-            self.nodes.push(n);
-            (self.nodes.len() - 1) as u32
+            self.blocks[(id / 8) as usize][(id % 8) as usize]
+        }
+    }
+
+    fn node_mut(&mut self, id: u32) -> &mut Node {
+        if id == ROOT {
+            &mut self.root
+        } else {
+            &mut self.blocks[(id / 8) as usize][(id % 8) as usize]
         }
     }
 
     fn alloc_block(&mut self) -> u32 {
         if let Some(i) = self.free_blocks.pop() {
-            self.blocks[i as usize] = [NONE; 8];
+            self.blocks[i as usize] = [ABSENT_NODE; 8];
             i
         } else {
-            self.blocks.push([NONE; 8]);
+            self.blocks.push([ABSENT_NODE; 8]);
             (self.blocks.len() - 1) as u32
         }
     }
 
     /// The log-odds of the leaf covering `key`, `None` if unknown.
     pub fn search(&self, key: Key) -> Option<f32> {
-        let mut n = 0u32;
-        if self.nodes[0].block == NONE {
+        let mut node = self.root;
+        if node.kids == LEAF {
             return None;
         }
         for depth in 0..DEPTH {
-            let b = self.nodes[n as usize].block;
-            if b == NONE {
-                return Some(self.nodes[n as usize].logodds);
+            if node.kids == LEAF {
+                return Some(node.logodds);
             }
-            let c = self.blocks[b as usize][Self::child_pos(key, depth)];
-            if c == NONE {
+            let child = self.blocks[node.kids as usize][Self::child_pos(key, depth)];
+            if child.kids == ABSENT {
                 return None;
             }
-            n = c;
+            node = child;
         }
-        Some(self.nodes[n as usize].logodds)
+        Some(node.logodds)
     }
 
     /// Adds a hit (`occupied`) or a miss at `key` with the tree's clamping.
@@ -211,35 +225,38 @@ impl Octree {
     /// [`Octree::search`] starting from the deepest node the last searched
     /// key shares with this one.
     fn search_cached(&mut self, key: Key) -> Option<f32> {
+        if self.root.kids == LEAF {
+            return None;
+        }
         let c = &mut self.cache;
         let diff = (c.key[0] ^ key[0]) | (c.key[1] ^ key[1]) | (c.key[2] ^ key[2]);
         // Nodes at depths 0..=shared lie on both paths.
         let shared = diff.leading_zeros() as usize;
-        let mut depth = if c.len == 0 { 0 } else { shared.min(c.len - 1) };
-        if c.len == 0 {
-            if self.nodes[0].block == NONE {
-                return None;
-            }
-            c.nodes[0] = 0;
-        }
+        let mut depth = if c.len == 0 {
+            c.nodes[0] = ROOT;
+            0
+        } else {
+            shared.min(c.len - 1)
+        };
         c.key = key;
-        let mut n = c.nodes[depth];
+        let mut id = c.nodes[depth];
         loop {
             c.len = depth + 1;
-            let node = self.nodes[n as usize];
-            if node.block == NONE {
-                return (n != 0).then_some(node.logodds);
+            let node = if id == ROOT {
+                self.root
+            } else {
+                self.blocks[(id / 8) as usize][(id % 8) as usize]
+            };
+            if node.kids == LEAF {
+                return (id != ROOT).then_some(node.logodds);
             }
-            if depth as u32 == DEPTH {
-                return Some(node.logodds);
-            }
-            let child = self.blocks[node.block as usize][Self::child_pos(key, depth as u32)];
-            if child == NONE {
+            let pos = Self::child_pos(key, depth as u32);
+            if self.blocks[node.kids as usize][pos].kids == ABSENT {
                 return None;
             }
             depth += 1;
-            n = child;
-            c.nodes[depth] = n;
+            id = node.kids * 8 + pos as u32;
+            c.nodes[depth] = id;
         }
     }
 
@@ -249,38 +266,42 @@ impl Octree {
         self.cache.len = 0;
         let mut path = std::mem::take(&mut self.path);
         path.clear();
-        let mut n = 0u32;
+        let mut id = ROOT;
         let mut just_created = false;
         for depth in 0..DEPTH {
             let pos = Self::child_pos(key, depth);
-            let node = self.nodes[n as usize];
-            if node.block == NONE {
+            let node = self.node(id);
+            if node.kids == LEAF {
                 let b = self.alloc_block();
-                self.nodes[n as usize].block = b;
-                if n != 0 && !just_created {
+                self.node_mut(id).kids = b;
+                if id != ROOT && !just_created {
                     // A pruned leaf: its eight children inherit its value.
-                    for i in 0..8 {
-                        let c = self.alloc_node(node.logodds);
-                        self.blocks[b as usize][i] = c;
-                    }
+                    self.blocks[b as usize] = [Node {
+                        logodds: node.logodds,
+                        kids: LEAF,
+                    }; 8];
+                    self.live += 8;
                 }
             }
-            let b = self.nodes[n as usize].block as usize;
-            let mut c = self.blocks[b][pos];
-            just_created = false;
-            if c == NONE {
-                c = self.alloc_node(0.0);
-                self.blocks[b][pos] = c;
-                just_created = true;
+            let b = self.node(id).kids;
+            let slot = &mut self.blocks[b as usize][pos];
+            just_created = slot.kids == ABSENT;
+            if just_created {
+                *slot = Node {
+                    logodds: 0.0,
+                    kids: LEAF,
+                };
+                self.live += 1;
             }
-            path.push((n, pos));
-            n = c;
+            path.push(id);
+            id = b * 8 + pos as u32;
         }
-        let leaf = &mut self.nodes[n as usize];
-        leaf.logodds = self.clamp.add(leaf.logodds, delta);
+        let clamp = self.clamp;
+        let leaf = self.node_mut(id);
+        leaf.logodds = clamp.add(leaf.logodds, delta);
         // A node whose value and shape did not change leaves its ancestors as
         // they were: stop there.
-        for &(parent, _) in path.iter().rev() {
+        for &parent in path.iter().rev() {
             if !self.refresh(parent) {
                 break;
             }
@@ -290,60 +311,53 @@ impl Octree {
 
     /// Sets an inner node to its children's maximum, or prunes eight
     /// identical leaf children into it. Returns whether the node changed.
-    fn refresh(&mut self, n: u32) -> bool {
-        let b = self.nodes[n as usize].block;
-        if b == NONE {
+    fn refresh(&mut self, id: u32) -> bool {
+        let node = self.node(id);
+        if node.kids == LEAF {
             return false;
         }
-        let before = self.nodes[n as usize].logodds;
-        let kids = self.blocks[b as usize];
+        let kids = self.blocks[node.kids as usize];
         let mut max = f32::NEG_INFINITY;
-        let mut prunable = true;
-        let first = kids[0];
-        for &c in &kids {
-            if c == NONE {
+        let mut prunable = id != ROOT;
+        for k in &kids {
+            if k.kids == ABSENT {
                 prunable = false;
                 continue;
             }
-            let cn = self.nodes[c as usize];
-            max = max.max(cn.logodds);
-            if cn.block != NONE || first == NONE || cn.logodds != self.nodes[first as usize].logodds
-            {
+            max = max.max(k.logodds);
+            if k.kids != LEAF || k.logodds != kids[0].logodds {
                 prunable = false;
             }
         }
-        let pruned = prunable && n != 0;
-        if pruned {
-            for &c in &kids {
-                self.free_nodes.push(c);
-            }
-            self.free_blocks.push(b);
-            self.nodes[n as usize].block = NONE;
+        let n = self.node_mut(id);
+        n.logodds = max;
+        if prunable {
+            n.kids = LEAF;
+            self.free_blocks.push(node.kids);
+            self.live -= 8;
         }
-        self.nodes[n as usize].logodds = max;
-        pruned || max != before
+        prunable || max != node.logodds
     }
 
     /// Nodes in use, root included.
     pub fn node_count(&self) -> usize {
-        self.nodes.len() - self.free_nodes.len()
+        self.live
     }
 
-    /// Bytes the live nodes and child blocks take.
+    /// Bytes the live nodes take (the root and the blocks in use).
     pub fn memory_bytes(&self) -> usize {
-        self.node_count() * std::mem::size_of::<Node>()
-            + (self.blocks.len() - self.free_blocks.len()) * std::mem::size_of::<[u32; 8]>()
+        std::mem::size_of::<Node>()
+            + (self.blocks.len() - self.free_blocks.len()) * std::mem::size_of::<[Node; 8]>()
     }
 
     /// Calls `f` for every leaf (pruned leaves once, with their size).
     pub fn for_each_leaf(&self, mut f: impl FnMut(Leaf)) {
-        if self.nodes[0].block == NONE {
+        if self.root.kids == LEAF {
             return;
         }
-        let mut stack: Vec<(u32, u32, Key)> = vec![(0, 0, [0, 0, 0])];
-        while let Some((n, depth, base)) = stack.pop() {
-            let node = self.nodes[n as usize];
-            if node.block == NONE {
+        let mut stack: Vec<(Node, u32, Key)> = vec![(self.root, 0, [0, 0, 0])];
+        while let Some((node, depth, base)) = stack.pop() {
+            if node.kids == LEAF {
                 f(Leaf {
                     key: base,
                     size: 1 << (DEPTH - depth),
@@ -352,8 +366,8 @@ impl Octree {
                 continue;
             }
             let half = 1u32 << (DEPTH - 1 - depth);
-            for (i, &c) in self.blocks[node.block as usize].iter().enumerate() {
-                if c == NONE {
+            for (i, &c) in self.blocks[node.kids as usize].iter().enumerate() {
+                if c.kids == ABSENT {
                     continue;
                 }
                 let mut k = base;
@@ -396,7 +410,7 @@ impl Octree {
     /// does when writing, values become maximum-likelihood first (occupied iff
     /// log-odds > 0) and eight equal leaf children merge into their parent.
     pub fn write_bt(&self, w: &mut impl Write) -> io::Result<BtStats> {
-        let ml = self.max_likelihood(0);
+        let ml = self.max_likelihood(ROOT);
         let mut stats = BtStats {
             nodes: 0,
             occupied_leaves: 0,
@@ -423,24 +437,23 @@ impl Octree {
         Ok(stats)
     }
 
-    fn max_likelihood(&self, n: u32) -> Ml {
-        let node = self.nodes[n as usize];
-        if node.block == NONE {
-            return if n == 0 {
+    fn max_likelihood(&self, id: u32) -> Ml {
+        let node = self.node(id);
+        if node.kids == LEAF {
+            return if id == ROOT {
                 Ml::Unknown
             } else {
                 Ml::Leaf(node.logodds > 0.0)
             };
         }
         let kids: [Ml; 8] = std::array::from_fn(|i| {
-            let c = self.blocks[node.block as usize][i];
-            if c == NONE {
+            if self.blocks[node.kids as usize][i].kids == ABSENT {
                 Ml::Unknown
             } else {
-                self.max_likelihood(c)
+                self.max_likelihood(node.kids * 8 + i as u32)
             }
         });
-        if n != 0
+        if id != ROOT
             && let Ml::Leaf(first) = kids[0]
             && kids.iter().all(|k| matches!(k, Ml::Leaf(v) if *v == first))
         {
@@ -509,14 +522,14 @@ impl Octree {
             return Ok(tree);
         }
         // Depth first, as written; the stack holds (node, depth) still to read.
-        let mut stack = vec![(0u32, 0u32)];
+        let mut stack = vec![(ROOT, 0u32)];
         let mut read = 1usize;
         while let Some((n, depth)) = stack.pop() {
             let mut bytes = [0u8; 2];
             r.read_exact(&mut bytes)
                 .map_err(|e| BtError::Data(format!("after {read} nodes: {e}")))?;
             let b = tree.alloc_block();
-            tree.nodes[n as usize].block = b;
+            tree.node_mut(n).kids = b;
             let mut inner = Vec::new();
             for i in 0..8 {
                 let byte = bytes[i / 4];
@@ -534,8 +547,12 @@ impl Octree {
                         clamp.max
                     }
                 };
-                let c = tree.alloc_node(value);
-                tree.blocks[b as usize][i] = c;
+                tree.blocks[b as usize][i] = Node {
+                    logodds: value,
+                    kids: LEAF,
+                };
+                tree.live += 1;
+                let c = b * 8 + i as u32;
                 read += 1;
                 if read > size {
                     return Err(BtError::Data(format!(
@@ -556,24 +573,24 @@ impl Octree {
                 "{read} nodes read, the header says {size}"
             )));
         }
-        tree.refresh_all(0);
+        tree.refresh_all(ROOT);
         Ok(tree)
     }
 
-    fn refresh_all(&mut self, n: u32) {
-        let b = self.nodes[n as usize].block;
-        if b == NONE {
+    fn refresh_all(&mut self, id: u32) {
+        let b = self.node(id).kids;
+        if b == LEAF {
             return;
         }
         let mut max = f32::NEG_INFINITY;
         for i in 0..8 {
-            let c = self.blocks[b as usize][i];
-            if c != NONE {
+            if self.blocks[b as usize][i].kids != ABSENT {
+                let c = b * 8 + i as u32;
                 self.refresh_all(c);
-                max = max.max(self.nodes[c as usize].logodds);
+                max = max.max(self.node(c).logodds);
             }
         }
-        self.nodes[n as usize].logodds = max;
+        self.node_mut(id).logodds = max;
     }
 }
 
@@ -655,7 +672,7 @@ mod tests {
         let k2 = t.key([1.05, 2.0, 0.3]).unwrap();
         t.integrate(k2, false);
         assert!((t.search(k2).unwrap() - t.clamping().miss).abs() < 1e-6);
-        assert_eq!(t.nodes[0].logodds, t.clamping().max);
+        assert_eq!(t.root.logodds, t.clamping().max);
         assert_eq!(t.search(t.key([5.0, 5.0, 5.0]).unwrap()), None);
     }
 
@@ -737,7 +754,7 @@ mod tests {
         );
         // Inner nodes hold the maximum of what lies below.
         let max = reference.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        assert_eq!(t.nodes[0].logodds, max);
+        assert_eq!(t.root.logodds, max);
     }
 
     #[test]
