@@ -374,6 +374,9 @@ impl Mapper {
         }
         let free = logodds(self.params.laser.p_free) as f32;
         let occ = logodds(self.params.laser.p_occupied) as f32;
+        // Row by row, neighbours share most of their octree path (the search
+        // starts where the last one's path parts).
+        sc.free.sort_unstable();
         let col = self.column_keys();
         for k in 0..sc.free.len() + sc.occ.len() {
             let (i, delta) = if k < sc.free.len() {
