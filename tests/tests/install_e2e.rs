@@ -250,13 +250,18 @@ fn host_command_stand_ins(dir: &Path) -> PathBuf {
     stubs
 }
 
-/// Runs `systemd/install --profile PROFILE --bin-dir BIN_DIR` with `DESTDIR=dest`.
-fn install(dest: &Path, profile: &Path, bin_dir: &Path, stubs: &Path) -> Output {
-    let path = format!(
+/// `PATH` with the host-command stand-ins in `stubs` first.
+fn stubbed_path(stubs: &Path) -> String {
+    format!(
         "{}:{}",
         stubs.display(),
         std::env::var("PATH").unwrap_or_default()
-    );
+    )
+}
+
+/// Runs `systemd/install --profile PROFILE --bin-dir BIN_DIR` with `DESTDIR=dest`.
+fn install(dest: &Path, profile: &Path, bin_dir: &Path, stubs: &Path) -> Output {
+    let path = stubbed_path(stubs);
     Command::new(systemd_dir().join("install"))
         .arg("--profile")
         .arg(profile)
@@ -482,14 +487,7 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
         .arg("--bin-dir")
         .arg(&bin_dir)
         .env("DESTDIR", &dest)
-        .env(
-            "PATH",
-            format!(
-                "{}:{}",
-                stubs.display(),
-                std::env::var("PATH").unwrap_or_default()
-            ),
-        )
+        .env("PATH", stubbed_path(&stubs))
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", text(&out));
@@ -508,14 +506,7 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
             c.arg("--purge");
         }
         c.env("DESTDIR", &dest)
-            .env(
-                "PATH",
-                format!(
-                    "{}:{}",
-                    stubs.display(),
-                    std::env::var("PATH").unwrap_or_default()
-                ),
-            )
+            .env("PATH", stubbed_path(&stubs))
             .output()
             .unwrap()
     };
@@ -583,11 +574,7 @@ fn debian_package_installs_the_install_file_set_into_a_fresh_root() {
     let pioneer = workspace_root().join("config/pioneer-3dx.toml");
     let stripped = stripped_binaries(&bin_dir, &work.path().join("stripped"));
     let expected = expected_tree(&pioneer, &stripped);
-    let path = format!(
-        "{}:{}",
-        stubs.display(),
-        std::env::var("PATH").unwrap_or_default()
-    );
+    let path = stubbed_path(&stubs);
 
     let out = Command::new(systemd_dir().join("package"))
         .arg("--bin-dir")
