@@ -170,11 +170,11 @@ macro_rules! for_each_message {
             map {
                 Map {
                     name: MapInfo,
-                    doc: "The occupancy grid: a `MapInfo` header and its cells.",
+                    doc: "The occupancy grid: a `MapInfo` header and its cells. `slam/map` carries 0 (free), 100 (occupied) and -1 (unknown) only, as nav2's static layer expects; `slam/map_probability` the occupancy probability 0..100.",
                     info: $crate::slam::MapInfo,
                     cell: i8,
                     json: $crate::record::MapInfoRecord,
-                    topics: [SLAM_MAP = "slam/map"],
+                    topics: [SLAM_MAP = "slam/map", SLAM_MAP_PROBABILITY = "slam/map_probability"],
                     ros2: "nav_msgs/msg/OccupancyGrid",
                     companion: Some(("/extras", "smokenav_msgs/msg/MapExtras")),
                     latched: true,

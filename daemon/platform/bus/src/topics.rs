@@ -219,7 +219,7 @@ pub fn qos(topic: &str) -> Qos {
             max_subscribers: 8,
         },
         // Maps are large and only the newest matters.
-        t if t == SLAM_MAP.name() => Qos {
+        t if t == SLAM_MAP.name() || t == SLAM_MAP_PROBABILITY.name() => Qos {
             history: 1,
             buffer: 2,
             max_publishers: 2,

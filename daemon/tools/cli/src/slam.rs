@@ -322,17 +322,40 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
 
 #[derive(clap::Subcommand, Debug)]
 pub enum MapCommand {
-    /// Save the map the SLAM process publishes on `slam/map` as map.pgm + map.yaml (ROS
-    /// map_server) and map.png in DIR.
+    /// Save the map the SLAM process publishes as map.pgm|png + map.yaml (ROS map_server,
+    /// as nav2's map_saver writes it) and map.png in DIR.
     Save {
-        /// Output folder.
-        dir: PathBuf,
+        /// Output folder [default: $SMOKENAV_MAP_DIR, else ./maps].
+        #[arg(env = "SMOKENAV_MAP_DIR")]
+        dir: Option<PathBuf>,
+        /// map_server mode: trinary (free/occupied/unknown, from `slam/map`), scale
+        /// or raw (the occupancy probability, from `slam/map_probability`).
+        #[arg(long, value_enum, default_value_t = SaveMode::Trinary)]
+        mode: SaveMode,
         /// Give up if no map arrives within this many seconds.
         #[arg(long, default_value_t = 5.0)]
         timeout_s: f64,
         #[command(flatten)]
         bus: crate::topic::BusArgs,
     },
+}
+
+/// The map_server modes `map save` writes.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SaveMode {
+    Trinary,
+    Scale,
+    Raw,
+}
+
+impl From<SaveMode> for smokenav_platform_map::MapMode {
+    fn from(m: SaveMode) -> Self {
+        match m {
+            SaveMode::Trinary => Self::Trinary,
+            SaveMode::Scale => Self::Scale,
+            SaveMode::Raw => Self::Raw,
+        }
+    }
 }
 
 /// A map received from the bus as a grid, after checking its header against its payload.
@@ -376,15 +399,22 @@ fn grid_from_wire(
 pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
     let MapCommand::Save {
         dir,
+        mode,
         timeout_s,
         bus,
     } = cmd;
+    let dir = dir.unwrap_or_else(|| PathBuf::from("maps"));
+    // Scale and raw keep the probabilities; the thresholded map would lose them.
+    let topic = match mode {
+        SaveMode::Trinary => smokenav_platform_bus::topics::SLAM_MAP,
+        SaveMode::Scale | SaveMode::Raw => smokenav_platform_bus::topics::SLAM_MAP_PROBABILITY,
+    };
     anyhow::ensure!(
         timeout_s.is_finite() && timeout_s > 0.0,
         "--timeout-s must be positive"
     );
     let bus = bus.open("map-save")?;
-    let sub = bus.map_subscriber(smokenav_platform_bus::topics::SLAM_MAP)?;
+    let sub = bus.map_subscriber(topic.clone())?;
     let waiter = smokenav_platform_bus::Waiter::new()?;
     let _guard = waiter.attach(&sub)?;
     let deadline = Instant::now() + std::time::Duration::from_secs_f64(timeout_s);
@@ -399,17 +429,22 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         let now = Instant::now();
         anyhow::ensure!(
             now < deadline,
-            "no map on slam/map of instance `{}` within {timeout_s} s (is smokenav-slam running?)",
+            "no map on {} of instance `{}` within {timeout_s} s (is smokenav-slam running?)",
+            topic.name(),
             bus.instance()
         );
         waiter.wait(Some(deadline - now))?;
     };
-    smokenav_platform_map::save_map_server(&grid, &dir, "map")?;
-    grid.save_png(&dir.join("map.png"))?;
+    smokenav_platform_map::save_map_server_mode(&grid, &dir, "map", mode.into())?;
+    if mode != SaveMode::Scale {
+        // Scale mode's image is map.png itself.
+        grid.save_png(&dir.join("map.png"))?;
+    }
     println!(
-        "saved {}×{} map ({} m/cell) to {}",
+        "saved {}×{} {} map ({} m/cell) to {}",
         grid.width,
         grid.height,
+        smokenav_platform_map::MapMode::from(mode).as_str(),
         grid.resolution,
         dir.display()
     );
