@@ -291,8 +291,16 @@ pub const fn is_catalog_topic(topic: &str) -> bool {
     false
 }
 
-/// The catalog entry of bus topic `topic`, `None` for topics the catalog does not know.
+/// The bus name of a topic given either way: `laser/scan` as the bus spells
+/// it or `/laser/scan` as ROS 2 (and `ros2 topic`, rosbag2, Foxglove) does.
+pub fn bus_topic_name(topic: &str) -> &str {
+    topic.strip_prefix('/').unwrap_or(topic)
+}
+
+/// The catalog entry of bus topic `topic` (bus or ROS spelling, see
+/// [`bus_topic_name`]), `None` for topics the catalog does not know.
 pub fn topic_info(topic: &str) -> Option<&'static TopicInfo> {
+    let topic = bus_topic_name(topic);
     TOPICS.iter().find(|t| t.matches(topic))
 }
 

@@ -331,5 +331,7 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
 
     let status = slam.terminate(Duration::from_secs(10))?;
     assert!(status.success(), "{status:?}");
+    // Its log went to a pipe: plain text, no colour codes.
+    assert!(!slam.output().contains('\x1b'), "ANSI codes in a piped log");
     Ok(())
 }

@@ -57,9 +57,14 @@ fn start_publisher(instance: &str) -> Child {
 }
 
 fn smokenav(instance: &str, args: &[&str]) -> (bool, String, String) {
+    smokenav_env(instance, args, &[])
+}
+
+fn smokenav_env(instance: &str, args: &[&str], env: &[(&str, &str)]) -> (bool, String, String) {
     let out = Command::new(bin("smokenav"))
         .args(args)
         .env("SMOKENAV_INSTANCE", instance)
+        .envs(env.iter().copied())
         .output()
         .unwrap();
     (
@@ -73,12 +78,13 @@ fn smokenav(instance: &str, args: &[&str]) -> (bool, String, String) {
 fn topic_echo_json_prints_live_scans_from_another_process() {
     let instance = unique_instance("echo");
     let _publisher = start_publisher(&instance);
+    // The ROS spelling of the topic: the bus calls it laser/scan.
     let (ok, out, err) = smokenav(
         &instance,
         &[
             "topic",
             "echo",
-            "laser/scan",
+            "/laser/scan",
             "--count",
             "5",
             "--json",
@@ -150,4 +156,27 @@ fn topic_echo_rejects_an_unknown_topic() {
     );
     assert!(!ok);
     assert!(err.contains("unknown topic `lazer/scan`"), "{err}");
+}
+
+#[test]
+fn a_user_error_is_one_message_without_a_backtrace_unless_debug() {
+    let instance = unique_instance("backtrace");
+    let (ok, _out, err) = smokenav_env(
+        &instance,
+        &["topic", "echo", "lazer/scan"],
+        &[("RUST_BACKTRACE", "1")],
+    );
+    assert!(!ok);
+    assert!(err.contains("unknown topic `lazer/scan`"), "{err}");
+    assert!(!err.to_lowercase().contains("backtrace"), "{err}");
+    assert!(!err.contains('\x1b'), "ANSI codes in a pipe: {err:?}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // --debug asks for the whole story.
+    let (ok, _out, err) = smokenav_env(
+        &instance,
+        &["topic", "echo", "lazer/scan", "--debug"],
+        &[("RUST_BACKTRACE", "1")],
+    );
+    assert!(!ok);
+    assert!(err.contains("Stack backtrace"), "{err}");
 }

@@ -24,6 +24,10 @@ mod topic;
     about = "Mapping and localisation in smoke: operator tools"
 )]
 struct Cli {
+    /// On an error, print its full chain with the backtrace (when
+    /// RUST_BACKTRACE=1 captured one), not just the message.
+    #[arg(long, global = true)]
+    debug: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -73,8 +77,26 @@ enum ConfigCommand {
     },
 }
 
-fn main() -> anyhow::Result<std::process::ExitCode> {
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    let debug = cli.debug;
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            // A user error is a message, not a stack trace: returning the error
+            // from main would print anyhow's Debug form, backtrace included
+            // whenever RUST_BACKTRACE is set.
+            if debug {
+                eprintln!("smokenav: error: {e:?}");
+            } else {
+                eprintln!("smokenav: error: {e:#}");
+            }
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
     let done = match cli.command {
         Command::Status(args) => return status::run(args),
         Command::Config(ConfigCommand::Check { file }) => {

@@ -28,7 +28,8 @@ use std::time::{Duration, Instant};
 pub struct PlayArgs {
     /// The recording (an MCAP file written by `smokenav record`; a file cut short is fine).
     pub file: PathBuf,
-    /// Only these bus topics (default: every recorded one).
+    /// Only these bus topics, as laser/scan or /laser/scan (default: every recorded one).
+    #[arg(value_parser = crate::topic::bus_topic)]
     pub topics: Vec<String>,
     /// Speed factor on the recorded timing (2 = twice as fast).
     #[arg(long, default_value_t = 1.0)]

@@ -31,7 +31,8 @@ pub struct RecordArgs {
     /// The MCAP file to write.
     #[arg(short = 'o', long)]
     pub output: PathBuf,
-    /// Bus topics to record (default: every known topic of the instance).
+    /// Bus topics to record, as laser/scan or /laser/scan (default: every known topic of the instance).
+    #[arg(value_parser = crate::topic::bus_topic)]
     pub topics: Vec<String>,
     /// Close and flush a chunk at least this often, s: the most a crash (SIGKILL) can lose.
     #[arg(long, default_value_t = 1.0)]

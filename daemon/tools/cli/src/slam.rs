@@ -4,7 +4,8 @@
 
 use anyhow::Context;
 use smokenav_algorithms_eval::{
-    TrajectoryOptions, evaluate_trajectories, format_trajectory, load_trajectory,
+    TrajectoryFormat, TrajectoryOptions, evaluate_trajectories, format_trajectory_as,
+    load_trajectory,
 };
 use smokenav_algorithms_slam::graph::{GraphSlam, g2o};
 use smokenav_algorithms_slam::offline::LogScans;
@@ -26,6 +27,10 @@ pub struct SlamArgs {
     /// Output folder: trajectory.txt, map.pgm/map.yaml/map.png, stats.txt.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Trajectory file layout: `plain` (trajectory.txt, `timestamp x y theta`) or
+    /// `tum` (trajectory.tum, `timestamp x y z qx qy qz qw`, what `evo_ape tum` reads).
+    #[arg(long, value_enum, default_value_t = TrajFormat::Plain)]
+    format: TrajFormat,
     /// Robot profile whose `[slam]` section to use.
     #[arg(long, value_name = "PROFILE", conflicts_with = "slam_params")]
     profile: Option<PathBuf>,
@@ -48,6 +53,32 @@ pub struct SlamArgs {
     /// Write the pose graph (2D g2o) here at the end (graph back-end only).
     #[arg(long, value_name = "FILE.g2o")]
     save_graph: Option<PathBuf>,
+}
+
+/// `--format` of the trajectory writers.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrajFormat {
+    /// `timestamp x y theta` (s, m, m, rad).
+    Plain,
+    /// TUM RGB-D `timestamp x y z qx qy qz qw` (evo, the TUM tools).
+    Tum,
+}
+
+impl TrajFormat {
+    pub fn layout(self) -> TrajectoryFormat {
+        match self {
+            TrajFormat::Plain => TrajectoryFormat::Plain,
+            TrajFormat::Tum => TrajectoryFormat::Tum,
+        }
+    }
+
+    /// The file extension: `.tum` files are what evo's users expect to pass.
+    pub fn extension(self) -> &'static str {
+        match self {
+            TrajFormat::Plain => "txt",
+            TrajFormat::Tum => "tum",
+        }
+    }
 }
 
 /// CPU time of the process or of the calling thread, ns.
@@ -185,13 +216,14 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     let trajectory = slam.trajectory();
     let trajectory = eval_poses(&trajectory);
     let online = eval_poses(&online);
+    let ext = args.format.extension();
     write(
-        &args.out.join("trajectory.txt"),
-        &format_trajectory(&trajectory),
+        &args.out.join(format!("trajectory.{ext}")),
+        &format_trajectory_as(&trajectory, args.format.layout()),
     )?;
     write(
-        &args.out.join("trajectory_online.txt"),
-        &format_trajectory(&online),
+        &args.out.join(format!("trajectory_online.{ext}")),
+        &format_trajectory_as(&online, args.format.layout()),
     )?;
     if let Some(map) = slam.map() {
         smokenav_platform_map::save_map_server(&map, &args.out, "map")?;

@@ -72,7 +72,8 @@ pub enum TopicCommand {
     },
     /// Print the messages of a topic as they arrive.
     Echo {
-        /// e.g. laser/scan, base/odom, health/hokuyo.
+        /// e.g. laser/scan, base/odom, health/hokuyo (or the ROS spelling, /laser/scan).
+        #[arg(value_parser = bus_topic)]
         topic: String,
         /// Stop after this many messages.
         #[arg(long, short = 'n')]
@@ -91,6 +92,8 @@ pub enum TopicCommand {
     },
     /// Measure a topic's rate, jitter and sequence gaps.
     Hz {
+        /// e.g. laser/scan (or /laser/scan).
+        #[arg(value_parser = bus_topic)]
         topic: String,
         /// Stop after this many seconds.
         #[arg(long)]
@@ -168,6 +171,17 @@ struct EchoOptions {
     json: bool,
     with_data: bool,
     timeout: Option<Duration>,
+}
+
+/// A topic named on the command line, the bus's way (`laser/scan`) or the
+/// ROS way (`/laser/scan`): the bus name. Used as clap's `value_parser` for
+/// every topic argument.
+pub fn bus_topic(arg: &str) -> Result<String, String> {
+    let name = catalog::bus_topic_name(arg);
+    if name.is_empty() {
+        return Err("a topic name is needed".into());
+    }
+    Ok(name.to_owned())
 }
 
 /// The catalog type `topic` carries, or an error listing the known topics.
