@@ -16,6 +16,7 @@ mod scip;
 mod slam;
 mod status;
 mod topic;
+mod topic_info;
 
 #[derive(Parser)]
 #[command(
@@ -37,7 +38,7 @@ enum Command {
     /// Robot profile tools.
     #[command(subcommand)]
     Config(ConfigCommand),
-    /// See what flows on the bus: list, echo, hz.
+    /// See what flows on the bus: list, echo, hz, info, bw (ROS spellings like /laser/scan work).
     #[command(subcommand)]
     Topic(topic::TopicCommand),
     /// One line per process: up/down, heartbeat age, rates, counters. Exit 1 if anything is unhealthy.
