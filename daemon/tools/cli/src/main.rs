@@ -1,7 +1,7 @@
 //! `smokenav`: the operator's command-line tool.
 
 use anyhow::Context;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use std::path::PathBuf;
 
 mod access;
@@ -67,6 +67,17 @@ enum Command {
     Graph(graph::GraphCommand),
     /// Score an estimated map (and trajectory) against ground truth: k-NN error, pixel error, ATE, RPE.
     Eval(eval::EvalArgs),
+    /// Print a shell completion script (`smokenav completions bash >
+    /// /usr/local/share/bash-completion/completions/smokenav`; systemd/install does it).
+    Completions {
+        /// bash, zsh, fish, elvish or powershell.
+        shell: clap_complete::Shell,
+    },
+    /// Write the man pages (smokenav.1, smokenav-topic-echo.1, …) into DIR.
+    Man {
+        /// Output folder, e.g. /usr/local/share/man/man1.
+        dir: PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -117,6 +128,23 @@ fn run(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
         Command::Play(args) => play::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Graph(cmd) => graph::run(cmd),
+        Command::Completions { shell } => {
+            // Into memory first: clap_complete panics on a write error (`| head`).
+            let mut script = Vec::new();
+            clap_complete::generate(shell, &mut Cli::command(), "smokenav", &mut script);
+            use std::io::Write as _;
+            match std::io::stdout().lock().write_all(&script) {
+                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+                r => r.context("cannot write the completion script"),
+            }
+        }
+        Command::Man { dir } => {
+            std::fs::create_dir_all(&dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            clap_mangen::generate_to(Cli::command(), &dir)
+                .with_context(|| format!("cannot write man pages to {}", dir.display()))?;
+            Ok(())
+        }
     };
     done.map(|()| std::process::ExitCode::SUCCESS)
 }
