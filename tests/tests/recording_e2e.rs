@@ -279,6 +279,60 @@ fn u64s(v: &serde_json::Value) -> Vec<u64> {
 }
 
 /// Compares what Python decoded with what the publishers sent.
+/// The file's log times are real dates (Unix ns, within a minute of now, as
+/// the Python `mcap` reader reads them), and its metadata holds the offset
+/// that maps them back onto the bus's monotonic clock, where the messages'
+/// stamps (from `base` on) live.
+fn check_time_base(file: &Path, base: u64) {
+    let script = workspace_root().join("tests/python/log_times.py");
+    let out = Command::new(python())
+        .arg(&script)
+        .arg(file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let now_unix = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as i128;
+    let minute = 60_000_000_000i128;
+    for key in [
+        "first_log_time",
+        "last_log_time",
+        "message_start_time",
+        "message_end_time",
+    ] {
+        let t = v[key].as_u64().unwrap() as i128;
+        assert!(
+            (now_unix - t).abs() < minute,
+            "{key} {t} is not within a minute of {now_unix}: {v}"
+        );
+    }
+    let meta = &v["metadata"]["smokenav"];
+    let offset: i128 = meta["unix_offset_ns"].as_str().unwrap().parse().unwrap();
+    let start_unix: i128 = meta["start_unix_ns"].as_str().unwrap().parse().unwrap();
+    let start_mono: i128 = meta["start_monotonic_ns"]
+        .as_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(start_unix - start_mono, offset, "{meta}");
+    // Back on the monotonic clock: the first record (/tf_static) is the
+    // start, the last message arrived after the last stamps, before now.
+    let first = v["first_log_time"].as_u64().unwrap() as i128 - offset;
+    let last = v["last_log_time"].as_u64().unwrap() as i128 - offset;
+    assert_eq!(first, start_mono, "{v}");
+    assert!(
+        last >= base as i128 && last <= monotonic_now_ns() as i128,
+        "{last} vs stamps from {base}: {v}"
+    );
+}
+
 fn check_python_dump(dump: &Path, count: u64, base: u64) {
     let text = std::fs::read_to_string(dump).unwrap();
     let mut per_topic: BTreeMap<String, u64> = BTreeMap::new();
@@ -491,6 +545,7 @@ fn live_run_recorded_decodes_in_python_and_replays_bit_identical() {
     let summary = run_python_check(&[&file, &dump]);
     assert!(summary.starts_with("OK "), "{summary}");
     check_python_dump(&dump, COUNT, base);
+    check_time_base(&file, base);
 
     // The library reads the file back into exactly what was published.
     let mut recorded: BTreeMap<String, Vec<AnyMessage>> = BTreeMap::new();
