@@ -62,6 +62,7 @@
 pub mod cdr;
 pub mod codec;
 pub mod encoder;
+pub mod info;
 pub mod reader;
 pub mod ros2;
 pub mod schema;
