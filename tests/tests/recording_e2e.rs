@@ -279,6 +279,63 @@ fn u64s(v: &serde_json::Value) -> Vec<u64> {
 }
 
 /// Compares what Python decoded with what the publishers sent.
+/// `smokenav info` tells today's date, the topics with their counts, and
+/// `--check` passes; a byte flipped inside a chunk makes `--check` name that
+/// chunk and fail, which the summary-only `info` cannot see.
+fn check_info(file: &Path, dir: &Path) {
+    let run = |args: &[&str]| {
+        let out = Command::new(bin("smokenav")).args(args).output().unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, text, err) = run(&["info", str_path(file)]);
+    assert_eq!(code, Some(0), "{err}");
+    eprintln!("smokenav info:\n{text}");
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64;
+    let today = &smokenav_platform_recording::info::format_utc(now)[..10];
+    assert!(
+        text.contains(&format!("Start:             {today}")),
+        "{text}"
+    );
+    let scans = text
+        .lines()
+        .find(|l| l.contains("Topic: /laser/scan "))
+        .unwrap_or_else(|| panic!("no /laser/scan line:\n{text}"));
+    assert!(scans.contains("sensor_msgs/msg/LaserScan"), "{scans}");
+    assert!(scans.contains(&format!("Count: {COUNT:>7}")), "{scans}");
+    assert!(text.contains("zstd"), "{text}");
+    let (code, text, err) = run(&["info", "--check", str_path(file)]);
+    assert_eq!(code, Some(0), "{text}{err}");
+    assert!(text.contains("Check:             OK"), "{text}");
+
+    let (_, json, _) = run(&["info", "--json", str_path(file)]);
+    let v: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    let chunk = &v["chunks"][0];
+    let (offset, length) = (
+        chunk["offset"].as_u64().unwrap(),
+        chunk["length"].as_u64().unwrap(),
+    );
+    let mut bytes = std::fs::read(file).unwrap();
+    bytes[(offset + length / 2) as usize] ^= 0x01;
+    let damaged = dir.join("damaged.mcap");
+    std::fs::write(&damaged, &bytes).unwrap();
+    let (code, _, err) = run(&["info", str_path(&damaged)]);
+    assert_eq!(code, Some(0), "the summary still reads: {err}");
+    let (code, text, _) = run(&["info", "--check", str_path(&damaged)]);
+    eprintln!("smokenav info --check of a file with a flipped byte:\n{text}");
+    assert_eq!(code, Some(1), "{text}");
+    assert!(
+        text.contains("chunk 0 of ") && text.contains(&format!("at offset {offset}")),
+        "{text}"
+    );
+}
+
 /// The file's log times are real dates (Unix ns, within a minute of now, as
 /// the Python `mcap` reader reads them), and its metadata holds the offset
 /// that maps them back onto the bus's monotonic clock, where the messages'
@@ -546,6 +603,7 @@ fn live_run_recorded_decodes_in_python_and_replays_bit_identical() {
     assert!(summary.starts_with("OK "), "{summary}");
     check_python_dump(&dump, COUNT, base);
     check_time_base(&file, base);
+    check_info(&file, dir.path());
 
     // The library reads the file back into exactly what was published.
     let mut recorded: BTreeMap<String, Vec<AnyMessage>> = BTreeMap::new();

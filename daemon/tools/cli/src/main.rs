@@ -10,6 +10,7 @@ mod drive;
 mod eval;
 mod fuse;
 mod graph;
+mod info;
 mod play;
 mod record;
 mod scip;
@@ -60,6 +61,9 @@ enum Command {
     Scip(scip::ScipCommand),
     /// Record bus topics to an MCAP file (ros2 profile: Foxglove, ros2 bag).
     Record(record::RecordArgs),
+    /// Describe a recording like `ros2 bag info`: duration, dates, per-topic counts, types and
+    /// rates, chunks and compression; `--check` reads every chunk and reports damage.
+    Info(info::InfoArgs),
     /// Republish a recording onto the bus, with its original timing or as fast as possible.
     Play(play::PlayArgs),
     /// Pose-graph tools: `graph optimize IN.g2o [--out OUT.g2o]`.
@@ -111,6 +115,7 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
     let done = match cli.command {
         Command::Status(args) => return status::run(args),
+        Command::Info(args) => return info::run(args),
         Command::Config(ConfigCommand::Check { file }) => {
             let cfg = smokenav_platform_config::RobotConfig::load(&file)
                 .with_context(|| format!("invalid robot profile {}", file.display()))?;
