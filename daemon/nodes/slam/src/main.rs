@@ -146,6 +146,19 @@ fn default_map_dir(state_directory: Option<std::ffi::OsString>) -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("maps"))
 }
 
+/// Why `dir` (or, if it does not exist yet, the folder it would be made in)
+/// looks unwritable, if it does: a read-only file system (`ProtectSystem=`)
+/// or a folder marked read-only.
+fn unwritable(dir: &Path) -> Option<String> {
+    let existing = dir.ancestors().find(|a| a.exists())?;
+    match std::fs::metadata(existing) {
+        Ok(m) if !m.is_dir() => Some(format!("{} is not a folder", existing.display())),
+        Ok(m) if m.permissions().readonly() => Some(format!("{} is read-only", existing.display())),
+        Ok(_) => None,
+        Err(e) => Some(format!("{}: {e}", existing.display())),
+    }
+}
+
 fn save_map(grid: &OccupancyGrid, dir: &Path) -> anyhow::Result<()> {
     smokenav_platform_map::save_map_server(grid, dir, "map")?;
     grid.save_png(&dir.join("map.png"))?;
@@ -171,9 +184,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         .map_dir
         .clone()
         .unwrap_or_else(|| default_map_dir(std::env::var_os("STATE_DIRECTORY")));
-    // Found out now, not at the first SIGUSR1, when the folder cannot be made.
-    if let Err(e) = std::fs::create_dir_all(&map_dir) {
-        tracing::warn!("map folder {} cannot be created: {e}", map_dir.display());
+    // Said now, not at the first SIGUSR1 (the folder is made on the first save).
+    if let Some(why) = unwritable(&map_dir) {
+        tracing::warn!("maps cannot be saved to {}: {why}", map_dir.display());
     }
     let save_requested = Arc::new(AtomicBool::new(false));
     signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&save_requested))
