@@ -55,6 +55,8 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
         "--particles",
         "10",
         "--json",
+        "--format",
+        "tum",
         "--out",
         &out_s,
     ]);
@@ -96,7 +98,13 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
             std::fs::read_to_string(out.join("trajectories").join(format!("{m}.txt"))).unwrap();
         let poses = traj.lines().filter(|l| !l.starts_with('#')).count();
         assert!(poses >= 250, "{m}: {poses} poses");
+        // --format tum: the same poses as TUM lines, for evo.
+        let tum =
+            std::fs::read_to_string(out.join("trajectories").join(format!("{m}.tum"))).unwrap();
+        assert_eq!(tum.lines().count(), poses, "{m}.tum");
+        assert!(tum.lines().all(|l| l.split(' ').count() == 8), "{m}.tum");
     }
+    assert!(out.join("truth.tum").exists());
     let truth_poses = std::fs::read_to_string(out.join("truth.txt")).unwrap();
     assert!(truth_poses.lines().filter(|l| !l.starts_with('#')).count() >= 295);
 
