@@ -162,11 +162,14 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
 fn bad_arguments_are_refused_with_a_reason() {
     let out = Command::new(bin("smokenav-lab"))
         .args(["demo", "--fast", "--scenario", "no-such-scenario"])
+        .env("RUST_BACKTRACE", "1")
         .output()
         .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no-such-scenario"), "{err}");
+    // A user error, not a crash: no backtrace even with RUST_BACKTRACE=1.
+    assert!(!err.to_lowercase().contains("backtrace"), "{err}");
     let out = Command::new(bin("smokenav-lab"))
         .args(["demo", "--fast", "--duration=-3"])
         .output()
