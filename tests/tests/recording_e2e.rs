@@ -309,6 +309,14 @@ fn check_info(file: &Path, dir: &Path) {
         .unwrap_or_else(|| panic!("no /laser/scan line:\n{text}"));
     assert!(scans.contains("sensor_msgs/msg/LaserScan"), "{scans}");
     assert!(scans.contains(&format!("Count: {COUNT:>7}")), "{scans}");
+    // Published at 10 Hz: the rate is the topic's own, not the file's span.
+    let rate: f64 = scans
+        .split("Rate:")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("no rate in {scans}"));
+    assert!((9.0..=11.0).contains(&rate), "{scans}");
     assert!(text.contains("zstd"), "{text}");
     let (code, text, err) = run(&["info", "--check", str_path(file)]);
     assert_eq!(code, Some(0), "{text}{err}");

@@ -21,6 +21,17 @@ pub struct ChannelSummary {
     pub schema: String,
     pub message_encoding: String,
     pub messages: u64,
+    /// Log times of its first and last message, ns.
+    pub first_log_time: Option<u64>,
+    pub last_log_time: Option<u64>,
+}
+
+impl ChannelSummary {
+    /// Messages per second between its own first and last message.
+    pub fn rate_hz(&self) -> Option<f64> {
+        let (a, b) = (self.first_log_time?, self.last_log_time?);
+        (b > a && self.messages > 1).then(|| (self.messages - 1) as f64 / ((b - a) as f64 * 1e-9))
+    }
 }
 
 /// One chunk as the file frames it.
@@ -104,6 +115,11 @@ struct ChannelAcc {
     schema_id: u16,
     message_encoding: String,
     messages: u64,
+    times: Option<(u64, u64)>,
+}
+
+fn widen(times: &mut Option<(u64, u64)>, t: u64) {
+    *times = Some(times.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
 }
 
 /// Reads what `bytes` (a whole MCAP file) holds; with `check`, decompresses
@@ -140,9 +156,6 @@ pub fn inspect(bytes: &[u8], check: bool) -> Result<FileInfo, InfoError> {
     let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
     let mut channels: BTreeMap<u16, ChannelAcc> = BTreeMap::new();
     let mut times: Option<(u64, u64)> = None;
-    let note_time = |t: u64, times: &mut Option<(u64, u64)>| {
-        *times = Some(times.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
-    };
     let on_record = |r: Record<'_>,
                      schemas: &mut BTreeMap<u16, String>,
                      channels: &mut BTreeMap<u16, ChannelAcc>,
@@ -157,8 +170,10 @@ pub fn inspect(bytes: &[u8], check: bool) -> Result<FileInfo, InfoError> {
             e.message_encoding = c.message_encoding;
         }
         Record::Message { header, .. } => {
-            channels.entry(header.channel_id).or_default().messages += 1;
-            note_time(header.log_time, times);
+            let c = channels.entry(header.channel_id).or_default();
+            c.messages += 1;
+            widen(&mut c.times, header.log_time);
+            widen(times, header.log_time);
         }
         _ => {}
     };
@@ -190,6 +205,14 @@ pub fn inspect(bytes: &[u8], check: bool) -> Result<FileInfo, InfoError> {
             }
             Record::Metadata(m) => {
                 info.metadata.insert(m.name, m.metadata);
+            }
+            // Without reading the chunks, their message indexes give each
+            // channel's times (the summary's statistics give the counts).
+            Record::MessageIndex(mi) if !read_chunks => {
+                let c = channels.entry(mi.channel_id).or_default();
+                for e in &mi.records {
+                    widen(&mut c.times, e.log_time);
+                }
             }
             Record::Chunk { header, data } => {
                 let n = info.chunks.len();
@@ -271,6 +294,8 @@ pub fn inspect(bytes: &[u8], check: bool) -> Result<FileInfo, InfoError> {
             topic: c.topic,
             message_encoding: c.message_encoding,
             messages: c.messages,
+            first_log_time: c.times.map(|t| t.0),
+            last_log_time: c.times.map(|t| t.1),
         })
         .collect();
     info.channels.sort_by(|a, b| a.topic.cmp(&b.topic));
@@ -302,6 +327,7 @@ fn channels_snapshot(c: &BTreeMap<u16, ChannelAcc>) -> BTreeMap<u16, ChannelAcc>
                     schema_id: v.schema_id,
                     message_encoding: v.message_encoding.clone(),
                     messages: v.messages,
+                    times: v.times,
                 },
             )
         })
@@ -379,6 +405,10 @@ mod tests {
             .unwrap();
         assert_eq!(scans.schema, "sensor_msgs/msg/LaserScan");
         assert_eq!(scans.messages, 40);
+        // From the message indexes: 40 scans 0.1 s apart.
+        assert_eq!(scans.first_log_time, Some(0));
+        assert_eq!(scans.last_log_time, Some(3_900_000_000));
+        assert!((scans.rate_hz().unwrap() - 10.0).abs() < 1e-9);
         assert!(
             (info.duration_s() - 3.9).abs() < 1e-9,
             "{}",

@@ -138,11 +138,9 @@ fn print_text(args: &InfoArgs, info: &FileInfo) -> anyhow::Result<()> {
         .max()
         .unwrap_or(0);
     for (i, c) in info.channels.iter().enumerate() {
-        let rate = if d > 0.0 && c.messages > 1 {
-            format!("{:.2} Hz", (c.messages - 1) as f64 / d)
-        } else {
-            "-".into()
-        };
+        let rate = c
+            .rate_hz()
+            .map_or_else(|| "-".to_owned(), |r| format!("{r:.2} Hz"));
         writeln!(
             o,
             "{}Topic: {:width$} | Type: {:swidth$} | Count: {:>7} | Rate: {:>9} | Serialization Format: {}",
