@@ -45,7 +45,7 @@ pub enum TrajectoryFiles {
 
 /// Writes `<name>.tum` beside every `<name>.txt` trajectory under `dir` (truth.txt,
 /// trajectories/*.txt): the same poses as TUM lines.
-fn write_tum_copies(dir: &Path) -> anyhow::Result<()> {
+pub(crate) fn write_tum_copies(dir: &Path) -> anyhow::Result<()> {
     let mut files = vec![dir.join("truth.txt")];
     if let Ok(entries) = std::fs::read_dir(dir.join("trajectories")) {
         files.extend(
