@@ -44,9 +44,9 @@ enum Command {
     Topic(topic::TopicCommand),
     /// One line per process: up/down, heartbeat age, rates, counters. Exit 1 if anything is unhealthy.
     Status(status::StatusArgs),
-    /// Run SLAM offline over a CARMEN log; write trajectory, map and timing.
+    /// Run SLAM offline over a CARMEN log; write trajectory (`--format tum` for evo), map and timing.
     Slam(slam::SlamArgs),
-    /// Maps published by the SLAM process: `map save DIR` writes PGM + YAML + PNG.
+    /// Maps published by the SLAM process: `map save [DIR] [--mode trinary|scale|raw]` writes them as nav2's map_saver does.
     #[command(subcommand)]
     Map(slam::MapCommand),
     /// Run SmokeNav fusion offline: `topic echo --json` lines in, `fusion/scan` lines out.
