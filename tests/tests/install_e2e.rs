@@ -1,7 +1,8 @@
 //! `systemd/install` staged into a temporary `DESTDIR` with the binaries the
 //! test kit built (`--bin-dir`): every shipped unit, the udev rules, the
 //! sysusers file, the README the units name as their documentation, the
-//! profile and the binaries land where the units expect them (the prefix is
+//! profile, the binaries, and the man pages and bash/zsh/fish completions
+//! the CLI generates land where the units and shells expect them (the prefix is
 //! `/usr/local`, units in `/etc/systemd/system`), and nothing else does; a
 //! second run leaves the same files; an existing robot profile is kept. The
 //! host is never touched: `systemctl`, `udevadm`, `systemd-sysusers` and
@@ -28,6 +29,19 @@ const SYSUSERS_FILE: &str = "usr/lib/sysusers.d/smokenav.conf";
 const SUDOERS_FILE: &str = "etc/sudoers.d/smokenav";
 const PROFILE_FILE: &str = "etc/smokenav/robot.toml";
 const DOC_FILE: &str = "usr/local/share/doc/smokenav/README.md";
+const MAN_DIR: &str = "usr/local/share/man/man1";
+/// Where each shell looks for a completion script, and the shell's name.
+const COMPLETIONS: [(&str, &str); 3] = [
+    (
+        "usr/local/share/bash-completion/completions/smokenav",
+        "bash",
+    ),
+    ("usr/local/share/zsh/site-functions/_smokenav", "zsh"),
+    (
+        "usr/local/share/fish/vendor_completions.d/smokenav.fish",
+        "fish",
+    ),
+];
 
 /// Commands that act on the host; in `DESTDIR` mode the script must run none.
 const HOST_COMMANDS: [&str; 4] = ["systemctl", "udevadm", "systemd-sysusers", "cargo"];
@@ -117,7 +131,13 @@ fn stripped_binaries(bin_dir: &Path, out: &Path) -> PathBuf {
 
 /// Every file an install must leave: relative path → (source, mode), the
 /// binaries taken from `bin_dir` (already stripped as the install strips).
-fn expected_tree(profile: &Path, bin_dir: &Path) -> BTreeMap<PathBuf, (PathBuf, u32)> {
+/// `generated` receives what the CLI itself generates (man pages,
+/// completions), to compare the installed copies with.
+fn expected_tree(
+    profile: &Path,
+    bin_dir: &Path,
+    generated: &Path,
+) -> BTreeMap<PathBuf, (PathBuf, u32)> {
     let mut t = BTreeMap::new();
     let mut add = |rel: PathBuf, src: PathBuf, mode: u32| {
         assert!(
@@ -154,6 +174,35 @@ fn expected_tree(profile: &Path, bin_dir: &Path) -> BTreeMap<PathBuf, (PathBuf, 
     add(DOC_FILE.into(), workspace_root().join("README.md"), 0o644);
     for b in expected_binaries() {
         add(Path::new(BIN_DIR).join(&b), bin_dir.join(&b), 0o755);
+    }
+    let cli = bin_dir.join("smokenav");
+    let man = generated.join("man1");
+    let out = Command::new(&cli).arg("man").arg(&man).output().unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+    let mut pages = 0;
+    for e in std::fs::read_dir(&man).unwrap() {
+        let page = e.unwrap().path();
+        add(
+            Path::new(MAN_DIR).join(page.file_name().unwrap()),
+            page,
+            0o644,
+        );
+        pages += 1;
+    }
+    assert!(pages > 20, "one page per subcommand, got {pages}");
+    for (rel, shell) in COMPLETIONS {
+        let out = Command::new(&cli)
+            .args(["completions", shell])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success() && !out.stdout.is_empty(),
+            "{}",
+            text(&out)
+        );
+        let script = generated.join(format!("completion.{shell}"));
+        std::fs::write(&script, &out.stdout).unwrap();
+        add(rel.into(), script, 0o644);
     }
     t
 }
@@ -402,7 +451,8 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
     let stubs = host_command_stand_ins(work.path());
     let pioneer = workspace_root().join("config/pioneer-3dx.toml");
     let stripped = stripped_binaries(&bin_dir, &work.path().join("stripped"));
-    let expected = expected_tree(&pioneer, &stripped);
+    let generated = work.path().join("generated");
+    let expected = expected_tree(&pioneer, &stripped, &generated);
     let binaries = expected_binaries();
 
     // First run: everything staged, nothing else.
@@ -573,7 +623,7 @@ fn debian_package_installs_the_install_file_set_into_a_fresh_root() {
     let stubs = host_command_stand_ins(work.path());
     let pioneer = workspace_root().join("config/pioneer-3dx.toml");
     let stripped = stripped_binaries(&bin_dir, &work.path().join("stripped"));
-    let expected = expected_tree(&pioneer, &stripped);
+    let expected = expected_tree(&pioneer, &stripped, &work.path().join("generated"));
     let path = stubbed_path(&stubs);
 
     let out = Command::new(systemd_dir().join("package"))

@@ -22,6 +22,10 @@ mod sim;
     about = "smokenav's simulator and demo (development machines, not robots)"
 )]
 struct Cli {
+    /// On an error, print its full chain with the backtrace (when
+    /// RUST_BACKTRACE=1 captured one), not just the message.
+    #[arg(long, global = true)]
+    debug: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -36,10 +40,24 @@ enum Command {
     Map3d(map3d::Map3dArgs),
 }
 
-fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let done = match cli.command {
         Command::Sim(args) => sim::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Map3d(args) => map3d::run(args),
+    };
+    match done {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        // A user error is one message; main returning it would print anyhow's
+        // Debug form, backtrace included whenever RUST_BACKTRACE is set.
+        Err(e) if cli.debug => {
+            eprintln!("smokenav-lab: error: {e:?}");
+            std::process::ExitCode::FAILURE
+        }
+        Err(e) => {
+            eprintln!("smokenav-lab: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
     }
 }
