@@ -294,7 +294,12 @@ pub const fn is_catalog_topic(topic: &str) -> bool {
 /// The bus name of a topic given either way: `laser/scan` as the bus spells
 /// it or `/laser/scan` as ROS 2 (and `ros2 topic`, rosbag2, Foxglove) does.
 pub fn bus_topic_name(topic: &str) -> &str {
-    topic.strip_prefix('/').unwrap_or(topic)
+    // One leading slash only, so a name passed through twice stays the same
+    // and `//laser/scan` is not a topic.
+    topic
+        .strip_prefix('/')
+        .filter(|rest| !rest.starts_with('/'))
+        .unwrap_or(topic)
 }
 
 /// The catalog entry of bus topic `topic` (bus or ROS spelling, see
