@@ -56,6 +56,8 @@ pub struct Limits {
     /// counted and the map and pose overtake, instead of megabytes of
     /// stale messages in the kernel.
     pub send_buffer: Option<usize>,
+    /// Clients served at once; more are refused (each costs two threads).
+    pub max_clients: usize,
 }
 
 impl Default for Limits {
@@ -66,6 +68,7 @@ impl Default for Limits {
             stream_queue: 512,
             write_timeout: Duration::from_secs(30),
             send_buffer: Some(64 * 1024),
+            max_clients: 8,
         }
     }
 }
@@ -366,6 +369,14 @@ fn accept_loop(listener: &TcpListener, shared: &Arc<Shared>) {
                 continue;
             }
         };
+        if shared.clients().len() >= shared.limits.max_clients {
+            tracing::warn!(
+                "refusing {:?}: already {} clients",
+                stream.peer_addr().ok(),
+                shared.limits.max_clients
+            );
+            continue;
+        }
         let shared = shared.clone();
         let spawned = std::thread::Builder::new()
             .name("view-client".into())
@@ -756,5 +767,31 @@ mod tests {
             matches!(err, tungstenite::HandshakeError::Failure(tungstenite::Error::Http(ref r)) if r.status() == 400),
             "{err}"
         );
+    }
+
+    #[test]
+    fn clients_beyond_the_limit_are_refused() {
+        let limits = Limits {
+            max_clients: 1,
+            ..Limits::default()
+        };
+        let server = ViewServer::start("127.0.0.1:0", "test", Vec::new(), limits).unwrap();
+        let connect = || {
+            let mut req = tungstenite::client::IntoClientRequest::into_client_request(format!(
+                "ws://{}",
+                server.local_addr()
+            ))
+            .unwrap();
+            req.headers_mut().insert(
+                "Sec-WebSocket-Protocol",
+                HeaderValue::from_static("foxglove.sdk.v1"),
+            );
+            let tcp = TcpStream::connect(server.local_addr()).unwrap();
+            tungstenite::client(req, tcp)
+        };
+        let (mut first, _) = connect().unwrap();
+        assert_eq!(read_json(&mut first)["op"], "serverInfo");
+        assert!(connect().is_err(), "a second client was served");
+        assert_eq!(server.client_stats().len(), 1);
     }
 }
