@@ -787,7 +787,7 @@ mod tests {
                 HeaderValue::from_static("foxglove.sdk.v1"),
             );
             let tcp = TcpStream::connect(server.local_addr()).unwrap();
-            tungstenite::client(req, tcp)
+            tungstenite::client(req, tcp).map_err(|e| e.to_string())
         };
         let (mut first, _) = connect().unwrap();
         assert_eq!(read_json(&mut first)["op"], "serverInfo");
