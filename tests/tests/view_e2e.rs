@@ -10,7 +10,8 @@
 //! map → odom → base_link to the SLAM pose and `/tf_static` holds the
 //! profile's laser mount; and a second client that reads nothing for 5 s
 //! loses stream messages (counted in `health/view`, per client) while the
-//! first keeps receiving scans at the laser's rate and loses none.
+//! first keeps receiving scans at the laser's rate and loses none, and
+//! fusion keeps its rate.
 //!
 //! `VIEW_E2E_DUMP=DIR` keeps both clients' output and the view's log there.
 
@@ -248,6 +249,16 @@ fn foxglove_clients_see_the_live_pipeline_and_a_slow_one_disturbs_nobody() {
     ]);
     // In the middle of the slow client's stall (it started ~0.7 s after the fast one).
     std::thread::sleep(Duration::from_secs_f64(STALL_AFTER + STALL - 1.5 - 1.5));
+    let fusion_during = echo(&[
+        "topic",
+        "echo",
+        "health/fusion",
+        "--json",
+        "-n",
+        "2",
+        "--timeout",
+        "10",
+    ]);
     let during = smokenav(
         &instance,
         &[
@@ -261,6 +272,7 @@ fn foxglove_clients_see_the_live_pipeline_and_a_slow_one_disturbs_nobody() {
             "10",
         ],
     );
+    let fusion_during = fusion_during.join().unwrap();
     let (scans, maps, poses) = (
         scans.join().unwrap(),
         maps.join().unwrap(),
@@ -481,6 +493,13 @@ fn foxglove_clients_see_the_live_pipeline_and_a_slow_one_disturbs_nobody() {
         after_resume < 2_000_000_000,
         "the slow client's first fresh pose came {} ms after it read again",
         after_resume / 1_000_000
+    );
+
+    // Fusion kept the laser's rate meanwhile: the view is only a subscriber.
+    let f = fusion_during.last().unwrap();
+    assert!(
+        metric(f, "fused_hz") > 7.0,
+        "fusion slowed down while a view client stalled: {f:?}"
     );
 
     // Health: drops counted for the slow client only.
