@@ -481,16 +481,17 @@ fn foxglove_clients_see_the_live_pipeline_and_a_slow_one_disturbs_nobody() {
         worst_gap / 1_000_000
     );
     // … and once what its own socket buffers held is read (stale, queued
-    // before the stall), the slow client gets a fresh pose at once: the
-    // newest-value slot overtakes the full stream queue.
+    // before the stall), the slow client gets a fresh pose: the newest-value
+    // slot overtakes the full stream queue (the unit tests check the order;
+    // here the bounds leave room for a loaded machine).
     let fresh = msgs(&slow, "/slam/pose").find(|m| {
         let t = m["t_ns"].as_u64().unwrap();
-        t > resume && t - m["stamp_ns"].as_u64().unwrap() < 1_500_000_000
+        t > resume && t - m["stamp_ns"].as_u64().unwrap() < 2_000_000_000
     });
     let fresh = fresh.expect("no fresh pose reached the slow client after its stall");
     let after_resume = fresh["t_ns"].as_u64().unwrap() - resume;
     assert!(
-        after_resume < 2_000_000_000,
+        after_resume < 5_000_000_000,
         "the slow client's first fresh pose came {} ms after it read again",
         after_resume / 1_000_000
     );
