@@ -177,6 +177,9 @@ fn main() {
     // Keep draining its log so it never blocks on a full pipe.
     std::thread::spawn(move || for _ in lines.map_while(Result::ok) {});
     let bus = Bus::open(&BusOptions::new(&instance, "view-bench")).expect("bus");
+    let health = bus
+        .subscriber(topics::health("view"))
+        .expect("health subscriber");
     println!(
         "bus publish → WebSocket frame read, /laser/scan (682 beams) at 50 Hz, {samples} samples:"
     );
@@ -187,6 +190,19 @@ fn main() {
         let (p50, p99, max) = pct(&mut d);
         println!("  {name:<24} n {n:>5}  p50 {p50:>7.0} µs  p99 {p99:>7.0} µs  max {max:>7.0} µs");
     }
+    // The view's own count: the stalled client did overflow its queue.
+    std::thread::sleep(Duration::from_millis(1500));
+    let mut dropped = None;
+    while let Ok(Some(h)) = health.receive() {
+        dropped = h
+            .metrics()
+            .iter()
+            .find(|m| m.name.as_str() == "dropped_total")
+            .map(|m| m.value);
+    }
+    println!(
+        "  health/view dropped_total {dropped:?} (over both runs: the stalled client did overflow its queue)"
+    );
     let _ = child.kill();
     let _ = child.wait();
 }
