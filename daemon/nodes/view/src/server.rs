@@ -248,9 +248,8 @@ impl ViewServer {
             })
             .collect::<Result<_, _>>()?;
         let shared = Arc::new(Shared {
-            server_info: ServerInfo::new(name)
-                .with_supported_encodings(["cdr".to_owned()])
-                .to_string(),
+            // No capabilities: clients only subscribe (no publishing, no services).
+            server_info: ServerInfo::new(name).to_string(),
             advertise: Advertise::new(advertised).to_string(),
             last: Mutex::new(vec![None; channels.len()]),
             watched: channels.iter().map(|_| AtomicU64::new(0)).collect(),
