@@ -170,11 +170,11 @@ macro_rules! for_each_message {
             map {
                 Map {
                     name: MapInfo,
-                    doc: "The occupancy grid: a `MapInfo` header and its cells.",
+                    doc: "The occupancy grid: a `MapInfo` header and its cells. `slam/map` carries 0 (free), 100 (occupied) and -1 (unknown) only, as nav2's static layer expects; `slam/map_probability` the occupancy probability 0..100.",
                     info: $crate::slam::MapInfo,
                     cell: i8,
                     json: $crate::record::MapInfoRecord,
-                    topics: [SLAM_MAP = "slam/map"],
+                    topics: [SLAM_MAP = "slam/map", SLAM_MAP_PROBABILITY = "slam/map_probability"],
                     ros2: "nav_msgs/msg/OccupancyGrid",
                     companion: Some(("/extras", "smokenav_msgs/msg/MapExtras")),
                     latched: true,
@@ -291,8 +291,16 @@ pub const fn is_catalog_topic(topic: &str) -> bool {
     false
 }
 
-/// The catalog entry of bus topic `topic`, `None` for topics the catalog does not know.
+/// The bus name of a topic given either way: `laser/scan` as the bus spells
+/// it or `/laser/scan` as ROS 2 (and `ros2 topic`, rosbag2, Foxglove) does.
+pub fn bus_topic_name(topic: &str) -> &str {
+    topic.strip_prefix('/').unwrap_or(topic)
+}
+
+/// The catalog entry of bus topic `topic` (bus or ROS spelling, see
+/// [`bus_topic_name`]), `None` for topics the catalog does not know.
 pub fn topic_info(topic: &str) -> Option<&'static TopicInfo> {
+    let topic = bus_topic_name(topic);
     TOPICS.iter().find(|t| t.matches(topic))
 }
 

@@ -55,6 +55,8 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
         "--particles",
         "10",
         "--json",
+        "--format",
+        "tum",
         "--out",
         &out_s,
     ]);
@@ -96,7 +98,13 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
             std::fs::read_to_string(out.join("trajectories").join(format!("{m}.txt"))).unwrap();
         let poses = traj.lines().filter(|l| !l.starts_with('#')).count();
         assert!(poses >= 250, "{m}: {poses} poses");
+        // --format tum: the same poses as TUM lines, for evo.
+        let tum =
+            std::fs::read_to_string(out.join("trajectories").join(format!("{m}.tum"))).unwrap();
+        assert_eq!(tum.lines().count(), poses, "{m}.tum");
+        assert!(tum.lines().all(|l| l.split(' ').count() == 8), "{m}.tum");
     }
+    assert!(out.join("truth.tum").exists());
     let truth_poses = std::fs::read_to_string(out.join("truth.txt")).unwrap();
     assert!(truth_poses.lines().filter(|l| !l.starts_with('#')).count() >= 295);
 
@@ -154,11 +162,14 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
 fn bad_arguments_are_refused_with_a_reason() {
     let out = Command::new(bin("smokenav-lab"))
         .args(["demo", "--fast", "--scenario", "no-such-scenario"])
+        .env("RUST_BACKTRACE", "1")
         .output()
         .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("no-such-scenario"), "{err}");
+    // A user error, not a crash: no backtrace even with RUST_BACKTRACE=1.
+    assert!(!err.to_lowercase().contains("backtrace"), "{err}");
     let out = Command::new(bin("smokenav-lab"))
         .args(["demo", "--fast", "--duration=-3"])
         .output()

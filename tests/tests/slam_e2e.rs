@@ -2,8 +2,11 @@
 //! replayed through the bus (`base/odom` + `laser/scan`) into the real
 //! `smokenav-slam` binary; the poses it publishes on `slam/pose` are compared
 //! with GMapping's corrected poses for the same scans, the map on `slam/map`
-//! is saved with `smokenav map save` and with SIGUSR1, and a burst of scans
-//! shows the process skipping to the newest instead of queueing.
+//! has only 0, 100 and -1 (nav2's static layer), it is saved with `smokenav
+//! map save` in all three map_server modes and read back by an independent
+//! nav2-semantics reader (PyYAML + Pillow), SIGUSR1 saves into systemd's
+//! state directory, and a burst of scans shows the process skipping to the
+//! newest instead of queueing.
 
 use smokenav_algorithms_eval::{StampedPose, TrajectoryOptions, evaluate_trajectories};
 use smokenav_algorithms_slam::Pose2;
@@ -14,7 +17,7 @@ use smokenav_platform_config::slam::SlamInput;
 use smokenav_shared_types::{
     BeamReading, Clock, Header, LaserScan, MonotonicClock, Odometry, PoseEstimate,
 };
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
+use smokenav_tests::{Child, bin, open_bus, profile, python, unique_instance, workspace_root};
 use std::io::BufReader;
 use std::time::{Duration, Instant};
 
@@ -91,6 +94,45 @@ fn pose_for(
     }
 }
 
+/// The cells of the newest map on `topic`, waiting up to 10 s for one.
+fn newest_map(
+    bus: &smokenav_platform_bus::Bus,
+    topic: smokenav_platform_bus::Topic<smokenav_shared_types::MapInfo>,
+) -> anyhow::Result<Vec<i8>> {
+    let sub = bus.map_subscriber(topic.clone())?;
+    let waiter = Waiter::new()?;
+    let _g = waiter.attach(&sub)?;
+    let end = Instant::now() + Duration::from_secs(10);
+    loop {
+        let mut newest = None;
+        while let Some(s) = sub.receive()? {
+            newest = Some(s.payload().to_vec());
+        }
+        if let Some(cells) = newest {
+            return Ok(cells);
+        }
+        let now = Instant::now();
+        anyhow::ensure!(now < end, "no map on {} within 10 s", topic.name());
+        waiter.wait(Some(end - now))?;
+    }
+}
+
+/// The map at `yaml` as nav2's map_io reads it (tests/python/nav2_map.py).
+fn nav2_load(yaml: &std::path::Path) -> anyhow::Result<serde_json::Value> {
+    let script = workspace_root().join("tests/python/nav2_map.py");
+    let out = std::process::Command::new(python())
+        .arg(&script)
+        .arg(yaml)
+        .output()?;
+    anyhow::ensure!(
+        out.status.success(),
+        "nav2_map.py {}: {}",
+        yaml.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Ok(serde_json::from_slice(&out.stdout)?)
+}
+
 #[test]
 fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Result<()> {
     let instance = unique_instance("slam_e2e");
@@ -107,16 +149,14 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
             yaw_deg: 0.0,
         };
     });
-    let sig_dir = dir.path().join("sigusr1");
-    let mut slam = Child::spawn(
+    // No --map-dir: the process must save where systemd's StateDirectory= points.
+    let state_dir = dir.path().join("state");
+    let sig_dir = state_dir.join("maps");
+    let mut slam = Child::spawn_env(
         &bin("smokenav-slam"),
-        &[
-            "--config",
-            cfg.to_str().unwrap(),
-            "--map-dir",
-            sig_dir.to_str().unwrap(),
-        ],
+        &["--config", cfg.to_str().unwrap()],
         &instance,
+        &[("STATE_DIRECTORY", state_dir.to_str().unwrap())],
     )?;
     slam.wait_for_line("particles on laser/scan", Duration::from_secs(30))?;
 
@@ -190,6 +230,76 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
         "{occupied} occupied, {free} free cells"
     );
     assert!(saved.join("map.png").exists());
+
+    // The live maps, read through the bus: slam/map is nav2-ready, the
+    // probabilities travel on their own topic. The replay is over, so every
+    // map published from now on is the same one.
+    let live = newest_map(&bus, topics::SLAM_MAP)?;
+    let probability = newest_map(&bus, topics::SLAM_MAP_PROBABILITY)?;
+    assert_eq!(live.len(), probability.len());
+    assert!(
+        live.iter().all(|c| [-1, 0, 100].contains(c)),
+        "slam/map carries values other than -1/0/100"
+    );
+    assert!(
+        probability.iter().any(|&c| c > 0 && c < 100),
+        "slam/map_probability carries no probabilities"
+    );
+    let mut expected = Vec::new();
+    smokenav_platform_map::trinary_cells_into(
+        &smokenav_platform_map::OccupancyGrid {
+            cells: probability.clone(),
+            ..map.clone()
+        },
+        &mut expected,
+    );
+    assert_eq!(live, expected);
+
+    // Each mode, saved by the CLI and read by the independent nav2 reader.
+    for mode in ["trinary", "scale", "raw"] {
+        let out_dir = dir.path().join(format!("saved-{mode}"));
+        let out = std::process::Command::new(bin("smokenav"))
+            .args(["map", "save", "--mode", mode, "--instance", &instance])
+            .arg(&out_dir)
+            .output()?;
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let nav2 = nav2_load(&out_dir.join("map.yaml"))?;
+        assert_eq!(nav2["mode"], mode);
+        assert_eq!(
+            nav2["negate_text"], "0",
+            "ROS 1 map_server reads negate as an integer"
+        );
+        assert_eq!(nav2["width"].as_u64(), Some(map.width as u64));
+        assert_eq!(nav2["resolution"].as_f64(), Some(0.05));
+        let cells: Vec<i8> = serde_json::from_value(nav2["cells"].clone())?;
+        // What the loader here reads must be what nav2 reads, cell for cell.
+        let ours = smokenav_platform_map::load_map_server(&out_dir.join("map.yaml"))?;
+        assert_eq!(
+            ours.cells, cells,
+            "{mode}: smokenav and nav2 semantics disagree"
+        );
+        match mode {
+            "trinary" => assert_eq!(cells, live, "trinary map differs from slam/map"),
+            "raw" => assert_eq!(
+                cells, probability,
+                "raw map differs from slam/map_probability"
+            ),
+            _ => {
+                for (&p, &c) in probability.iter().zip(&cells) {
+                    match p {
+                        -1 => assert_eq!(c, -1),
+                        p if p >= 66 => assert_eq!(c, 100, "{p}"),
+                        p if p <= 19 => assert_eq!(c, 0, "{p}"),
+                        _ => {}
+                    }
+                }
+            }
+        }
+    }
     let sub = bus.map_subscriber(topics::SLAM_MAP)?;
     let _m = waiter.attach(&sub)?;
 
@@ -221,5 +331,7 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
 
     let status = slam.terminate(Duration::from_secs(10))?;
     assert!(status.success(), "{status:?}");
+    // Its log went to a pipe: plain text, no colour codes.
+    assert!(!slam.output().contains('\x1b'), "ANSI codes in a piped log");
     Ok(())
 }

@@ -57,9 +57,14 @@ fn start_publisher(instance: &str) -> Child {
 }
 
 fn smokenav(instance: &str, args: &[&str]) -> (bool, String, String) {
+    smokenav_env(instance, args, &[])
+}
+
+fn smokenav_env(instance: &str, args: &[&str], env: &[(&str, &str)]) -> (bool, String, String) {
     let out = Command::new(bin("smokenav"))
         .args(args)
         .env("SMOKENAV_INSTANCE", instance)
+        .envs(env.iter().copied())
         .output()
         .unwrap();
     (
@@ -73,12 +78,13 @@ fn smokenav(instance: &str, args: &[&str]) -> (bool, String, String) {
 fn topic_echo_json_prints_live_scans_from_another_process() {
     let instance = unique_instance("echo");
     let _publisher = start_publisher(&instance);
+    // The ROS spelling of the topic: the bus calls it laser/scan.
     let (ok, out, err) = smokenav(
         &instance,
         &[
             "topic",
             "echo",
-            "laser/scan",
+            "/laser/scan",
             "--count",
             "5",
             "--json",
@@ -150,4 +156,90 @@ fn topic_echo_rejects_an_unknown_topic() {
     );
     assert!(!ok);
     assert!(err.contains("unknown topic `lazer/scan`"), "{err}");
+}
+
+#[test]
+fn a_user_error_is_one_message_without_a_backtrace_unless_debug() {
+    let instance = unique_instance("backtrace");
+    let (ok, _out, err) = smokenav_env(
+        &instance,
+        &["topic", "echo", "lazer/scan"],
+        &[("RUST_BACKTRACE", "1")],
+    );
+    assert!(!ok);
+    assert!(err.contains("unknown topic `lazer/scan`"), "{err}");
+    assert!(!err.to_lowercase().contains("backtrace"), "{err}");
+    assert!(!err.contains('\x1b'), "ANSI codes in a pipe: {err:?}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // --debug asks for the whole story.
+    let (ok, _out, err) = smokenav_env(
+        &instance,
+        &["topic", "echo", "lazer/scan", "--debug"],
+        &[("RUST_BACKTRACE", "1")],
+    );
+    assert!(!ok);
+    assert!(err.contains("Stack backtrace"), "{err}");
+}
+
+#[test]
+fn topic_info_lists_the_publisher_and_subscriber_processes() {
+    let instance = unique_instance("info");
+    let _publisher = start_publisher(&instance);
+    // A second process subscribes: a `topic echo` left running.
+    let echo = Child::spawn(
+        &bin("smokenav"),
+        &["topic", "echo", "laser/scan", "--json"],
+        &instance,
+    )
+    .unwrap();
+    echo.wait_for_line("\"topic\"", Duration::from_secs(30))
+        .unwrap();
+    let (ok, out, err) = smokenav(&instance, &["topic", "info", "/laser/scan", "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["topic"], "laser/scan", "{out}");
+    assert_eq!(v["ros2_type"], "sensor_msgs/msg/LaserScan", "{out}");
+    assert_eq!(v["bus_type"], "smokenav::LaserScan", "{out}");
+    let publishers = v["publishers"].as_array().unwrap();
+    let subscribers = v["subscribers"].as_array().unwrap();
+    assert_eq!(publishers.len(), 1, "{out}");
+    assert_eq!(subscribers.len(), 1, "{out}");
+    assert_eq!(publishers[0]["alive"], true, "{out}");
+    assert!(
+        subscribers[0]["node"]
+            .as_str()
+            .unwrap()
+            .starts_with("topic-echo"),
+        "{out}"
+    );
+    assert_eq!(v["qos"]["queue"], 32, "{out}");
+    // The text form, as `ros2 topic info` words it.
+    let (ok, text, err) = smokenav(&instance, &["topic", "info", "laser/scan"]);
+    assert!(ok, "{err}");
+    assert!(text.contains("Publisher count: 1"), "{text}");
+    assert!(text.contains("Subscription count: 1"), "{text}");
+    // A topic nobody opened is reported, not an error.
+    let (ok, text, err) = smokenav(&instance, &["topic", "info", "slam/pose"]);
+    assert!(ok, "{err}");
+    assert!(text.contains("Publisher count: 0"), "{text}");
+}
+
+#[test]
+fn topic_bw_measures_bytes_per_second() {
+    let instance = unique_instance("bw");
+    let _publisher = start_publisher(&instance);
+    let (ok, out, err) = smokenav(
+        &instance,
+        &["topic", "bw", "laser/scan", "--duration", "3", "--json"],
+    );
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let size = std::mem::size_of::<smokenav_shared_types::LaserScan>() as f64;
+    assert_eq!(v["mean_bytes"].as_f64(), Some(size), "{out}");
+    let bw = v["bytes_per_s"].as_f64().unwrap();
+    // As for hz: a loaded machine publishes slower, never faster.
+    assert!(
+        bw > RATE_HZ * size * 0.6 && bw < RATE_HZ * size * 1.1,
+        "{bw} B/s for {size} B at {RATE_HZ} Hz: {out}"
+    );
 }

@@ -6,10 +6,13 @@
 //!   on PTYs; run the real drivers against them.
 //! - `smokenav-lab demo`: the smoke experiment of SmokeNav (Santos et al. 2015) end to end (what
 //!   `./demo` runs).
+//! - `smokenav-lab map3d`: laser + 3D sonar-cone occupancy fusion per rule
+//!   on a scenario with out-of-plane obstacles; writes an OctoMap `.bt`.
 
 use clap::{Parser, Subcommand};
 
 mod demo;
+mod map3d;
 mod sim;
 
 #[derive(Parser)]
@@ -19,6 +22,10 @@ mod sim;
     about = "smokenav's simulator and demo (development machines, not robots)"
 )]
 struct Cli {
+    /// On an error, print its full chain with the backtrace (when
+    /// RUST_BACKTRACE=1 captured one), not just the message.
+    #[arg(long, global = true)]
+    debug: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -29,11 +36,28 @@ enum Command {
     Sim(sim::SimArgs),
     /// The SmokeNav paper's smoke experiment end to end: live run, then laser-only vs SmokeNav v1 vs v2.
     Demo(demo::DemoArgs),
+    /// 2D/3D occupancy fusion compared per rule (LOP, LIOP, IOP, Bayes) on a scenario with out-of-plane obstacles.
+    Map3d(map3d::Map3dArgs),
 }
 
-fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let done = match cli.command {
         Command::Sim(args) => sim::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Map3d(args) => map3d::run(args),
+    };
+    match done {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        // A user error is one message; main returning it would print anyhow's
+        // Debug form, backtrace included whenever RUST_BACKTRACE is set.
+        Err(e) if cli.debug => {
+            eprintln!("smokenav-lab: error: {e:?}");
+            std::process::ExitCode::FAILURE
+        }
+        Err(e) => {
+            eprintln!("smokenav-lab: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
     }
 }

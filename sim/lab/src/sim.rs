@@ -37,6 +37,9 @@ pub struct SimArgs {
     /// End after this many simulated seconds (default: the scenario's duration).
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
+    /// Trajectory file: `plain` (truth.txt) or `tum` (also truth.tum, for `evo_ape tum`).
+    #[arg(long, value_enum, default_value_t = crate::demo::TrajectoryFiles::Plain)]
+    pub format: crate::demo::TrajectoryFiles,
 }
 
 pub fn run(args: SimArgs) -> anyhow::Result<()> {
@@ -168,6 +171,9 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         eprintln!("warning: publishing {TRUTH_TOPIC} failed: {e}");
     }
     let (map, traj) = link.write_truth(&args.out)?;
+    if args.format == crate::demo::TrajectoryFiles::Tum {
+        crate::demo::write_tum_copies(&args.out)?;
+    }
     println!(
         "{} after {:.1} s of the scenario ({:.1} s wall); {} laser scans fed",
         if summary.stopped { "stopped" } else { "done" },

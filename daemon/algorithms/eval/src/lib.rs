@@ -11,9 +11,9 @@ pub mod trajectory;
 
 pub use map::{Alignment, DistanceStats, MapMetricError, MapOptions, MapReport, evaluate_maps};
 pub use trajectory::{
-    ErrorStats, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryMetricError,
-    TrajectoryOptions, TrajectoryReport, evaluate_trajectories, format_trajectory, load_trajectory,
-    parse_trajectory,
+    ErrorStats, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryFormat,
+    TrajectoryMetricError, TrajectoryOptions, TrajectoryReport, evaluate_trajectories,
+    format_trajectory, format_trajectory_as, load_trajectory, parse_trajectory,
 };
 
 use std::path::{Path, PathBuf};

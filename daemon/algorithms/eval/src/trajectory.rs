@@ -2,7 +2,9 @@
 //! alignment, and relative pose error (RPE) over a fixed time step, as Sturm
 //! et al. define them for the TUM RGB-D benchmark (IROS 2012), in 2D.
 //!
-//! Files hold one pose per line, `timestamp x y theta` (s, m, m, rad),
+//! Files hold one pose per line, `timestamp x y theta` (s, m, m, rad), or
+//! the TUM RGB-D benchmark's `timestamp x y z qx qy qz qw` (what `evo`
+//! reads; planar poses are written with z = 0 and a yaw-only quaternion),
 //! separated by spaces or tabs; blank lines and lines starting with `#` are
 //! skipped; timestamps must increase. Estimated poses are paired with the
 //! ground truth interpolated at their timestamps, or (for a reference that
@@ -39,9 +41,36 @@ impl StampedPose {
 
 /// Writes poses in the trajectory file format (microsecond stamps).
 pub fn format_trajectory(poses: &[StampedPose]) -> String {
-    let mut s = String::with_capacity(poses.len() * 48);
+    format_trajectory_as(poses, TrajectoryFormat::Plain)
+}
+
+/// The line layouts a trajectory file may have.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TrajectoryFormat {
+    /// `timestamp x y theta`.
+    #[default]
+    Plain,
+    /// TUM RGB-D: `timestamp x y z qx qy qz qw` (z = 0, rotation about z only).
+    Tum,
+}
+
+/// Writes poses as `format` lines (microsecond stamps).
+pub fn format_trajectory_as(poses: &[StampedPose], format: TrajectoryFormat) -> String {
+    let mut s = String::with_capacity(poses.len() * 80);
     for p in poses {
-        let _ = writeln!(s, "{:.6} {:.6} {:.6} {:.6}", p.t, p.x, p.y, p.theta);
+        let _ = match format {
+            TrajectoryFormat::Plain => {
+                writeln!(s, "{:.6} {:.6} {:.6} {:.6}", p.t, p.x, p.y, p.theta)
+            }
+            TrajectoryFormat::Tum => {
+                let (qz, qw) = (0.5 * p.theta).sin_cos();
+                writeln!(
+                    s,
+                    "{:.6} {:.6} {:.6} 0 0 0 {:.9} {:.9}",
+                    p.t, p.x, p.y, qz, qw
+                )
+            }
+        };
     }
     s
 }
@@ -79,23 +108,33 @@ pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, Tra
             reason,
         };
         let fields: Vec<&str> = line.split_whitespace().collect();
-        if fields.len() != 4 {
-            return Err(err(format!(
-                "expected 4 numbers `timestamp x y theta`, got {} field(s)",
-                fields.len()
-            )));
-        }
-        let mut v = [0.0f64; 4];
-        for (k, (f, name)) in fields
-            .iter()
-            .zip(["timestamp", "x", "y", "theta"])
-            .enumerate()
-        {
+        const PLAIN: [&str; 4] = ["timestamp", "x", "y", "theta"];
+        const TUM: [&str; 8] = ["timestamp", "x", "y", "z", "qx", "qy", "qz", "qw"];
+        let names: &[&str] = match fields.len() {
+            4 => &PLAIN,
+            8 => &TUM,
+            n => {
+                return Err(err(format!(
+                    "expected 4 numbers `timestamp x y theta` or 8 (TUM) \
+                     `timestamp x y z qx qy qz qw`, got {n} field(s)"
+                )));
+            }
+        };
+        let mut v = [0.0f64; 8];
+        for (k, (f, name)) in fields.iter().zip(names).enumerate() {
             v[k] = f
                 .parse::<f64>()
                 .ok()
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| err(format!("{name}: expected a finite number, got {f:?}")))?;
+        }
+        if fields.len() == 8 {
+            // Yaw of the quaternion; a planar evaluation ignores z, roll and pitch.
+            let [qx, qy, qz, qw] = [v[4], v[5], v[6], v[7]];
+            if qx * qx + qy * qy + qz * qz + qw * qw < 1e-12 {
+                return Err(err("the quaternion is zero".into()));
+            }
+            v[3] = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
         }
         if let Some(prev) = out.last()
             && v[0] <= prev.t
@@ -687,6 +726,51 @@ mod tests {
             "{r:?}"
         );
         assert!(r.ate_m.max < 1e-9, "{r:?}");
+    }
+
+    #[test]
+    fn tum_lines_round_trip_the_planar_pose() {
+        let poses = [
+            StampedPose {
+                t: 1.5,
+                x: 1.0,
+                y: -2.0,
+                theta: 0.3,
+            },
+            StampedPose {
+                t: 2.25,
+                x: 1.5,
+                y: -2.5,
+                theta: -3.0,
+            },
+            StampedPose {
+                t: 3.0,
+                x: 2.0,
+                y: -3.0,
+                theta: 3.1,
+            },
+        ];
+        let text = format_trajectory_as(&poses, TrajectoryFormat::Tum);
+        let first = text.lines().next().unwrap();
+        assert_eq!(first.split(' ').count(), 8, "{first}");
+        assert!(
+            first.starts_with("1.500000 1.000000 -2.000000 0 0 0 "),
+            "{first}"
+        );
+        let back = parse_trajectory(&text, Path::new("t.tum")).unwrap();
+        for (a, b) in poses.iter().zip(&back) {
+            assert!((a.t - b.t).abs() < 1e-9 && (a.x - b.x).abs() < 1e-6);
+            assert!(
+                (a.theta - b.theta).abs() < 1e-6,
+                "{} vs {}",
+                a.theta,
+                b.theta
+            );
+        }
+        let err = parse_trajectory("1 2 3 4 5\n", Path::new("bad.txt")).unwrap_err();
+        assert!(err.to_string().contains("bad.txt:1"), "{err}");
+        let err = parse_trajectory("1 0 0 0 0 0 0 0\n", Path::new("z.tum")).unwrap_err();
+        assert!(err.to_string().contains("quaternion"), "{err}");
     }
 
     #[test]

@@ -6,12 +6,16 @@
 //! noise model, the front end, the motion filter, the back-end of `[slam]
 //! backend` or `--backend`), the very pipeline `smokenav-lab`'s offline
 //! comparison runs; publishes a `PoseEstimate` on `slam/pose` for every scan
-//! the pipeline turned into an update and the back-end's map on `slam/map`
-//! at `[slam] map_rate_hz`. When it falls behind the pipeline keeps the
+//! the pipeline turned into an update and the back-end's map at `[slam]
+//! map_rate_hz`: thresholded to 0/100/-1 on `slam/map` (what nav2's static
+//! layer and `map_server` tools expect) and as occupancy probability 0..100
+//! on `slam/map_probability`. When it falls behind the pipeline keeps the
 //! newest scan and counts the others as skipped: nothing queues without bound
 //! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
 //! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
-//! map.png (`smokenav map save DIR` saves the published map from anywhere).
+//! map.png (`smokenav map save DIR` saves the published map from anywhere);
+//! the folder defaults to `$SMOKENAV_MAP_DIR`, else systemd's
+//! `$STATE_DIRECTORY/maps` (the unit's `StateDirectory=`), else `./maps`.
 //!
 //! ```text
 //! smokenav-slam --config robot.toml [--input fused|laser] [--backend rbpf] [--map-dir DIR]
@@ -47,9 +51,9 @@ struct Args {
     /// SLAM back-end, overriding `[slam] backend`.
     #[arg(long, value_enum)]
     backend: Option<SlamBackendKind>,
-    /// Folder SIGUSR1 writes the map to.
-    #[arg(long, value_name = "DIR", default_value = ".")]
-    map_dir: PathBuf,
+    /// Folder SIGUSR1 writes the map to [default: $STATE_DIRECTORY/maps under systemd, else ./maps].
+    #[arg(long, value_name = "DIR", env = "SMOKENAV_MAP_DIR")]
+    map_dir: Option<PathBuf>,
     /// Number of particles, overriding `[slam] particles`.
     #[arg(long)]
     particles: Option<usize>,
@@ -123,6 +127,38 @@ fn map_info(grid: &OccupancyGrid, stamp_ns: u64) -> MapInfo {
     }
 }
 
+/// Where maps are saved when `--map-dir` and `$SMOKENAV_MAP_DIR` are not given:
+/// the unit's state directory (systemd sets `$STATE_DIRECTORY`; everything
+/// else is read-only under `ProtectSystem=strict`), else `./maps`.
+fn default_map_dir(state_directory: Option<std::ffi::OsString>) -> PathBuf {
+    state_directory
+        .filter(|d| !d.is_empty())
+        // systemd joins several directories with ':'; the first is ours.
+        .map(|d| {
+            let first = d
+                .to_string_lossy()
+                .split(':')
+                .next()
+                .unwrap_or("")
+                .to_owned();
+            PathBuf::from(first).join("maps")
+        })
+        .unwrap_or_else(|| PathBuf::from("maps"))
+}
+
+/// Why `dir` (or, if it does not exist yet, the folder it would be made in)
+/// looks unwritable, if it does: a read-only file system (`ProtectSystem=`)
+/// or a folder marked read-only.
+fn unwritable(dir: &Path) -> Option<String> {
+    let existing = dir.ancestors().find(|a| a.exists())?;
+    match std::fs::metadata(existing) {
+        Ok(m) if !m.is_dir() => Some(format!("{} is not a folder", existing.display())),
+        Ok(m) if m.permissions().readonly() => Some(format!("{} is read-only", existing.display())),
+        Ok(_) => None,
+        Err(e) => Some(format!("{}: {e}", existing.display())),
+    }
+}
+
 fn save_map(grid: &OccupancyGrid, dir: &Path) -> anyhow::Result<()> {
     smokenav_platform_map::save_map_server(grid, dir, "map")?;
     grid.save_png(&dir.join("map.png"))?;
@@ -144,6 +180,14 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let input = args.input.unwrap_or(cfg.input);
     let m = &p.config.laser.mount;
     let mount = Pose2::new(m.x, m.y, m.yaw_rad());
+    let map_dir = args
+        .map_dir
+        .clone()
+        .unwrap_or_else(|| default_map_dir(std::env::var_os("STATE_DIRECTORY")));
+    // Said now, not at the first SIGUSR1 (the folder is made on the first save).
+    if let Some(why) = unwritable(&map_dir) {
+        tracing::warn!("maps cannot be saved to {}: {why}", map_dir.display());
+    }
     let save_requested = Arc::new(AtomicBool::new(false));
     signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&save_requested))
         .context("cannot install the SIGUSR1 handler")?;
@@ -155,6 +199,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let odom_sub = p.bus.subscriber::<Odometry>(topics::BASE_ODOM)?;
     let mut poses: Publisher<PoseEstimate> = p.bus.publisher(topics::SLAM_POSE)?;
     let mut maps = p.bus.map_publisher(topics::SLAM_MAP)?;
+    let mut probability_maps = p.bus.map_publisher(topics::SLAM_MAP_PROBABILITY)?;
+    // The thresholded cells, reused from map to map.
+    let mut trinary: Vec<i8> = Vec::new();
     let waiter = Waiter::new()?;
     let _attached = match &scans {
         Scans::Fused(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],
@@ -226,23 +273,30 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             }
             if let (Some(grid), Some(u)) = (&map, last_update) {
                 if now >= next_map {
-                    match maps.publish(&map_info(grid, u.stamp_ns), &grid.cells) {
+                    let info = map_info(grid, u.stamp_ns);
+                    smokenav_platform_map::trinary_cells_into(grid, &mut trinary);
+                    match maps.publish(&info, &trinary) {
                         Ok(_) => counters.maps_published += 1,
                         Err(e) => {
                             counters.publish_errors += 1;
                             p.health.error(&format!("cannot publish slam/map: {e}"));
                         }
                     }
+                    if let Err(e) = probability_maps.publish(&info, &grid.cells) {
+                        counters.publish_errors += 1;
+                        p.health
+                            .error(&format!("cannot publish slam/map_probability: {e}"));
+                    }
                 }
                 if save {
-                    match save_map(grid, &args.map_dir) {
+                    match save_map(grid, &map_dir) {
                         Ok(()) => {
                             counters.maps_saved += 1;
-                            tracing::info!("map saved to {}", args.map_dir.display());
+                            tracing::info!("map saved to {}", map_dir.display());
                         }
                         Err(e) => p.health.error(&format!(
                             "cannot save the map to {}: {e:#}",
-                            args.map_dir.display()
+                            map_dir.display()
                         )),
                     }
                 }
@@ -281,6 +335,20 @@ fn report(p: &mut Process, pipeline: &SlamPipeline, c: &Counters, scans: &Scans)
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn maps_go_to_the_state_directory_under_systemd() {
+        assert_eq!(
+            default_map_dir(Some("/var/lib/smokenav".into())),
+            PathBuf::from("/var/lib/smokenav/maps")
+        );
+        assert_eq!(
+            default_map_dir(Some("/var/lib/a:/var/lib/b".into())),
+            PathBuf::from("/var/lib/a/maps")
+        );
+        assert_eq!(default_map_dir(None), PathBuf::from("maps"));
+        assert_eq!(default_map_dir(Some("".into())), PathBuf::from("maps"));
+    }
 
     #[test]
     fn map_info_carries_the_grid_geometry() {

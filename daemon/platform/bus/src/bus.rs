@@ -3,7 +3,7 @@
 use crate::error::BusError;
 use crate::map::{MapPublisher, MapSubscriber};
 use crate::publisher::Publisher;
-use crate::service::Endpoint;
+use crate::service::{Endpoint, TopicPorts};
 use crate::subscriber::Subscriber;
 use crate::topics::Topic;
 use iceoryx2::config::Config;
@@ -146,6 +146,23 @@ impl Bus {
     pub fn live_map_publishers(&self, topic: Topic<MapInfo>) -> Result<Vec<String>, BusError> {
         let service = self.endpoint.service(topic.name())?;
         service.live_slice_publishers(service.publish_subscribe::<[i8]>().user_header::<MapInfo>())
+    }
+
+    /// The publishers, subscribers and QoS of `topic` as iceoryx2 reports
+    /// them; `None` if no process has created the topic yet.
+    pub fn topic_ports<T: Message>(&self, topic: Topic<T>) -> Result<Option<TopicPorts>, BusError> {
+        let service = self.endpoint.service(topic.name())?;
+        service.ports(service.publish_subscribe::<T>().open())
+    }
+
+    /// [`Bus::topic_ports`] for the occupancy-grid topics.
+    pub fn map_topic_ports(&self, topic: Topic<MapInfo>) -> Result<Option<TopicPorts>, BusError> {
+        let service = self.endpoint.service(topic.name())?;
+        service.ports(
+            service
+                .with_qos(service.publish_subscribe::<[i8]>().user_header::<MapInfo>())
+                .open(),
+        )
     }
 
     /// The services of this instance, as topics.

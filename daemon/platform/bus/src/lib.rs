@@ -91,6 +91,7 @@ pub use error::BusError;
 pub use map::{MapPublisher, MapSample, MapSubscriber};
 pub use port::SubscriberStats;
 pub use publisher::Publisher;
+pub use service::{PortInfo, TopicPorts};
 pub use smokenav_shared_types::Message;
 pub use subscriber::{Sample, Subscriber};
 pub use tap::{Tap, TapError};

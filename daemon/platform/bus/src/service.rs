@@ -156,6 +156,90 @@ impl TopicService<'_> {
         }
     }
 
+    /// The ports of the topic as iceoryx2's dynamic configuration lists them;
+    /// `None` if nobody has created the topic's service yet.
+    /// `opened` is the service opened with the topic's type and QoS.
+    pub(crate) fn ports<P, H>(
+        &self,
+        opened: Result<
+            iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, P, H>,
+            PublishSubscribeOpenError,
+        >,
+    ) -> Result<Option<TopicPorts>, BusError>
+    where
+        P: core::fmt::Debug + IceoryxSend + ?Sized,
+        H: core::fmt::Debug + ZeroCopySend,
+    {
+        let factory = match opened {
+            Ok(f) => f,
+            Err(PublishSubscribeOpenError::DoesNotExist) => return Ok(None),
+            Err(e) => return Err(self.error("open publish-subscribe service", e)),
+        };
+        let own = *self.node.id();
+        let mut nodes: Vec<(UniqueNodeId, String, bool)> = Vec::new();
+        factory
+            .nodes(|state| {
+                let (view_id, name, alive) = match &state {
+                    NodeState::Alive(v) => (
+                        *v.id(),
+                        v.details().as_ref().map(|d| d.name().as_str().to_owned()),
+                        true,
+                    ),
+                    NodeState::Dead(v) => (
+                        *v.id(),
+                        v.details().as_ref().map(|d| d.name().as_str().to_owned()),
+                        false,
+                    ),
+                    _ => return CallbackProgression::Continue,
+                };
+                nodes.push((
+                    view_id,
+                    name.unwrap_or_else(|| format!("{view_id:?}")),
+                    alive,
+                ));
+                CallbackProgression::Continue
+            })
+            .map_err(|e| self.error("list nodes", e))?;
+        let describe = |id: &UniqueNodeId| match nodes.iter().find(|(n, _, _)| n == id) {
+            Some((_, name, alive)) => PortInfo {
+                node: name.clone(),
+                alive: *alive,
+                this_process: *id == own,
+            },
+            None => PortInfo {
+                node: format!("{id:?}"),
+                alive: false,
+                this_process: false,
+            },
+        };
+        let d = factory.dynamic_config();
+        let mut publishers = Vec::new();
+        d.list_publishers(|p| {
+            publishers.push(describe(&p.node_id));
+            CallbackProgression::Continue
+        });
+        let mut subscribers = Vec::new();
+        d.list_subscribers(|p| {
+            subscribers.push(describe(&p.node_id));
+            CallbackProgression::Continue
+        });
+        publishers.sort();
+        subscribers.sort();
+        let st = factory.static_config();
+        Ok(Some(TopicPorts {
+            type_name: st.message_type_details().payload.type_name().to_string(),
+            publishers,
+            subscribers,
+            qos: Qos {
+                history: st.history_size(),
+                buffer: st.subscriber_max_buffer_size(),
+                max_publishers: st.max_publishers(),
+                max_subscribers: st.max_subscribers(),
+            },
+            safe_overflow: st.has_safe_overflow(),
+        }))
+    }
+
     /// The names of the live nodes among `ids`, this process's excepted.
     fn alive_names<F: PortFactory<Service = ipc::Service>>(
         &self,
@@ -187,6 +271,32 @@ impl TopicService<'_> {
     pub(crate) fn error(&self, op: &'static str, e: impl core::fmt::Debug) -> BusError {
         BusError::service(&self.full, op, e)
     }
+}
+
+/// One port (publisher or subscriber) of a topic and the process holding it.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub struct PortInfo {
+    /// The iceoryx2 node name of the process (e.g. `hokuyo`, `topic-echo`).
+    pub node: String,
+    /// Whether iceoryx2 sees the node alive (a crashed one is dead until cleaned up).
+    pub alive: bool,
+    /// The port belongs to the process asking.
+    pub this_process: bool,
+}
+
+/// What iceoryx2 knows about one topic's service.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TopicPorts {
+    /// The iceoryx2 payload type name (`smokenav::LaserScan`).
+    pub type_name: String,
+    /// Its publishers, live or not yet cleaned up.
+    pub publishers: Vec<PortInfo>,
+    /// Its subscribers.
+    pub subscribers: Vec<PortInfo>,
+    /// The service's QoS as created (history, queue, port limits).
+    pub qos: Qos,
+    /// A full subscriber queue drops its oldest sample instead of blocking the publisher.
+    pub safe_overflow: bool,
 }
 
 /// The nodes that hold a publisher of a service.

@@ -175,12 +175,15 @@ pub fn health(role: &str) -> Topic<Health> {
 }
 
 /// The topic `name` typed as `T`, if the catalog says `name` carries `T`.
+/// `name` may be spelt the ROS way (`/laser/scan`); the topic is the bus's (`laser/scan`).
 pub fn lookup<T: Cataloged>(name: &str) -> Option<Topic<T>> {
+    let name = catalog::bus_topic_name(name);
     (catalog::topic_kind(name) == Some(T::KIND)).then(|| Topic::owned(name.to_owned()))
 }
 
 /// The topic `name` typed as the map, if the catalog says `name` carries the map.
 pub fn lookup_map(name: &str) -> Option<Topic<MapInfo>> {
+    let name = catalog::bus_topic_name(name);
     (catalog::topic_kind(name) == Some(MessageKind::Map)).then(|| Topic::owned(name.to_owned()))
 }
 
@@ -219,7 +222,7 @@ pub fn qos(topic: &str) -> Qos {
             max_subscribers: 8,
         },
         // Maps are large and only the newest matters.
-        t if t == SLAM_MAP.name() => Qos {
+        t if t == SLAM_MAP.name() || t == SLAM_MAP_PROBABILITY.name() => Qos {
             history: 1,
             buffer: 2,
             max_publishers: 2,
@@ -263,6 +266,11 @@ mod tests {
         assert_eq!(lookup::<LaserScan>("lazer/scan"), None);
         assert_eq!(lookup_map("slam/map"), Some(SLAM_MAP));
         assert_eq!(lookup_map("slam/pose"), None);
+        // The ROS spelling names the same bus topic.
+        assert_eq!(lookup::<LaserScan>("/laser/scan"), Some(LASER_SCAN));
+        assert_eq!(lookup::<Health>("/health/scout"), Some(health("scout")));
+        assert_eq!(lookup_map("/slam/map"), Some(SLAM_MAP));
+        assert_eq!(lookup::<LaserScan>("//laser/scan"), None);
     }
 
     #[test]

@@ -177,52 +177,168 @@ pub struct MapYaml {
     pub image: String,
     pub resolution: f64,
     pub origin: Vec<f64>,
-    #[serde(default, deserialize_with = "bool_or_int")]
-    pub negate: bool,
+    #[serde(default)]
+    pub negate: Negate,
     pub occupied_thresh: f64,
     pub free_thresh: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mode: Option<String>,
 }
 
-fn bool_or_int<'de, D: serde::Deserializer<'de>>(d: D) -> Result<bool, D::Error> {
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum B {
-        Bool(bool),
-        Int(i64),
+/// `negate`: read as a bool or 0/1 (nav2 takes both), written as 0 or 1,
+/// because ROS 1's `map_server` reads it as an integer and rejects `false`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Negate(pub bool);
+
+impl Serialize for Negate {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u8(self.0 as u8)
     }
-    Ok(match B::deserialize(d)? {
-        B::Bool(b) => b,
-        B::Int(i) => i != 0,
-    })
+}
+
+impl<'de> Deserialize<'de> for Negate {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum B {
+            Bool(bool),
+            Int(i64),
+        }
+        Ok(Negate(match B::deserialize(d)? {
+            B::Bool(b) => b,
+            B::Int(i) => i != 0,
+        }))
+    }
+}
+
+/// The `mode` of a map_server map: how image pixels become cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MapMode {
+    /// Free, occupied or unknown (PGM; what nav2's `map_saver` writes by default).
+    #[default]
+    Trinary,
+    /// Occupancy as a grey level, unknown transparent (PNG with alpha).
+    Scale,
+    /// The cell value itself as the pixel, 255 unknown (PGM).
+    Raw,
+}
+
+impl MapMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MapMode::Trinary => "trinary",
+            MapMode::Scale => "scale",
+            MapMode::Raw => "raw",
+        }
+    }
+}
+
+/// `occupied_thresh` written into saved maps (nav2's and ROS 1's default).
+pub const OCCUPIED_THRESH: f64 = 0.65;
+/// `free_thresh` written into saved maps (ROS 1's default; nav2's is 0.25). With
+/// 0.196 the trinary grey 205 reads back as unknown, 254 as free.
+pub const FREE_THRESH: f64 = 0.196;
+
+/// A probability cell (0..100, -1 unknown) as nav2 would read it back from a
+/// trinary map saved with [`OCCUPIED_THRESH`] and [`FREE_THRESH`]: 100, 0 or -1.
+pub fn trinary_cell(c: i8) -> i8 {
+    match c {
+        c if !(0..=OCCUPIED).contains(&c) => UNKNOWN,
+        c if c >= 65 => OCCUPIED,
+        c if c <= 19 => FREE,
+        _ => UNKNOWN,
+    }
+}
+
+/// Writes the cells of `grid` thresholded by [`trinary_cell`] into `out`
+/// (reusing its allocation): what nav2's static layer expects on a map topic.
+pub fn trinary_cells_into(grid: &OccupancyGrid, out: &mut Vec<i8>) {
+    out.clear();
+    out.extend(grid.cells.iter().map(|&c| trinary_cell(c)));
+}
+
+fn trinary_save_pixel(c: i8) -> u8 {
+    match trinary_cell(c) {
+        OCCUPIED => 0,
+        FREE => 254,
+        _ => 205,
+    }
 }
 
 /// Writes `<dir>/<name>.pgm` and `<dir>/<name>.yaml` (trinary mode, as `map_saver` does)
 /// and returns the YAML path.
 pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<PathBuf, MapError> {
+    save_map_server_mode(grid, dir, name, MapMode::Trinary)
+}
+
+/// Writes `<dir>/<name>.{pgm|png}` and `<dir>/<name>.yaml` in `mode` the way nav2's
+/// `map_saver` does (`negate: 0`, thresholds [`OCCUPIED_THRESH`]/[`FREE_THRESH`]) and
+/// returns the YAML path. Scale mode needs transparency for unknown cells, so it
+/// writes a PNG; the others write a binary PGM.
+pub fn save_map_server_mode(
+    grid: &OccupancyGrid,
+    dir: &Path,
+    name: &str,
+    mode: MapMode,
+) -> Result<PathBuf, MapError> {
     grid.check_shape()?;
     fs::create_dir_all(dir).map_err(|e| MapError::Io {
         path: dir.to_owned(),
         error: e,
     })?;
-    let pgm = dir.join(format!("{name}.pgm"));
+    let image_name = match mode {
+        MapMode::Scale => format!("{name}.png"),
+        MapMode::Trinary | MapMode::Raw => format!("{name}.pgm"),
+    };
+    let image_path = dir.join(&image_name);
     let yaml = dir.join(format!("{name}.yaml"));
-    let mut bytes =
-        format!("P5\n# smokenav map\n{} {}\n255\n", grid.width, grid.height).into_bytes();
-    bytes.extend_from_slice(grid.to_gray_image().as_raw());
-    fs::write(&pgm, bytes).map_err(|e| MapError::Io {
-        path: pgm.clone(),
-        error: e,
-    })?;
+    // Image rows run top to bottom; grid rows bottom to top.
+    let top_down =
+        |x: u32, y: u32| grid.cells[(grid.height - 1 - y as usize) * grid.width + x as usize];
+    match mode {
+        MapMode::Trinary | MapMode::Raw => {
+            let mut bytes =
+                format!("P5\n# smokenav map\n{} {}\n255\n", grid.width, grid.height).into_bytes();
+            bytes.reserve(grid.cells.len());
+            for y in 0..grid.height as u32 {
+                for x in 0..grid.width as u32 {
+                    let c = top_down(x, y);
+                    bytes.push(match mode {
+                        MapMode::Raw if (0..=OCCUPIED).contains(&c) => c as u8,
+                        MapMode::Raw => 255,
+                        _ => trinary_save_pixel(c),
+                    });
+                }
+            }
+            fs::write(&image_path, bytes).map_err(|e| MapError::Io {
+                path: image_path.clone(),
+                error: e,
+            })?;
+        }
+        MapMode::Scale => {
+            let img =
+                image::GrayAlphaImage::from_fn(grid.width as u32, grid.height as u32, |x, y| {
+                    match top_down(x, y) {
+                        c if (0..=OCCUPIED).contains(&c) => {
+                            image::LumaA([((100 - c as i32) as f64 * 2.55).round() as u8, 255])
+                        }
+                        _ => image::LumaA([128, 0]),
+                    }
+                });
+            img.save(&image_path).map_err(|e| MapError::Image {
+                path: image_path.clone(),
+                reason: e.to_string(),
+            })?;
+        }
+    }
     let meta = MapYaml {
-        image: format!("{name}.pgm"),
+        image: image_name,
         resolution: grid.resolution,
         origin: grid.origin.to_vec(),
-        negate: false,
-        occupied_thresh: 0.65,
-        free_thresh: 0.196,
-        mode: Some("trinary".into()),
+        negate: Negate(false),
+        occupied_thresh: OCCUPIED_THRESH,
+        free_thresh: FREE_THRESH,
+        mode: Some(mode.as_str().into()),
     };
     let text = serde_yaml_ng::to_string(&meta).map_err(|e| MapError::Yaml {
         path: yaml.clone(),
@@ -343,8 +459,10 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
         .map_err(|e| MapError::Image {
             path: image_path.clone(),
             reason: e.to_string(),
-        })?
-        .to_luma_alpha8();
+        })?;
+    // nav2 averages alpha in (trinary) only when the image has an alpha channel.
+    let has_alpha = img.color().has_alpha();
+    let img = img.to_rgba8();
     let (w, h) = (w as usize, h as usize);
     let mut grid = OccupancyGrid::new(
         w,
@@ -354,25 +472,33 @@ pub fn load_map_server(yaml_path: &Path) -> Result<OccupancyGrid, MapError> {
     );
     for y in 0..h {
         for x in 0..w {
-            let p = img.get_pixel(x as u32, y as u32);
-            let (lum, alpha) = (p.0[0] as f64, p.0[1] as f64);
+            let [r, g, b, a] = img.get_pixel(x as u32, y as u32).0;
+            let rgb = r as f64 + g as f64 + b as f64;
             let cell = &mut grid.cells[(h - 1 - y) * w + x];
+            // nav2: shade in [0, 1] is the mean of the channels; occ = 1 - shade unless negated.
+            let shade = if mode == "trinary" && has_alpha {
+                (rgb + a as f64) / 4.0 / 255.0
+            } else {
+                rgb / 3.0 / 255.0
+            };
             if mode == "raw" {
-                *cell = lum.min(100.0) as i8;
+                // The pixel is the value: 0..100 kept, anything else (255) unknown.
+                let v = (shade * 255.0).round();
+                *cell = if (0.0..=100.0).contains(&v) {
+                    v as i8
+                } else {
+                    UNKNOWN
+                };
                 continue;
             }
-            // nav2: trinary averages alpha in; shade in [0,1]; occ = 1 - shade unless negated.
-            let shade = if mode == "trinary" && alpha < 255.0 {
-                (lum + alpha) / 2.0 / 255.0
-            } else {
-                lum / 255.0
-            };
-            let occ = if meta.negate { shade } else { 1.0 - shade };
-            *cell = if occ > meta.occupied_thresh {
+            let occ = if meta.negate.0 { shade } else { 1.0 - shade };
+            *cell = if mode == "scale" && a < 255 {
+                UNKNOWN
+            } else if occ > meta.occupied_thresh {
                 OCCUPIED
             } else if occ < meta.free_thresh {
                 FREE
-            } else if mode == "trinary" || alpha < 1.0 {
+            } else if mode == "trinary" {
                 UNKNOWN
             } else {
                 let ratio = (occ - meta.free_thresh) / (meta.occupied_thresh - meta.free_thresh);
@@ -405,6 +531,78 @@ mod tests {
         let back = load_map_server(&yaml).unwrap();
         assert_eq!(back, g);
         assert_eq!(back.world_to_cell(-1.0 + 0.16, -0.5 + 0.01), Some((3, 0)));
+    }
+
+    /// A grid with every value: unknown, free, occupied and probabilities in between.
+    fn graded() -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(17, 7, 0.05, [-1.0, -0.5, 0.0]);
+        for (i, c) in g.cells.iter_mut().enumerate() {
+            *c = (i as i32 % 102 - 1) as i8;
+        }
+        g
+    }
+
+    #[test]
+    fn raw_mode_keeps_every_value_and_reads_255_as_unknown() {
+        let dir = tempfile::tempdir().unwrap();
+        let g = graded();
+        let yaml = save_map_server_mode(&g, dir.path(), "m", MapMode::Raw).unwrap();
+        let back = load_map_server(&yaml).unwrap();
+        assert_eq!(back, g);
+        assert!(back.cells.contains(&UNKNOWN));
+        assert!(back.cells.iter().all(|&c| (-1..=100).contains(&c)));
+    }
+
+    #[test]
+    fn trinary_mode_reads_back_as_the_published_thresholding() {
+        let dir = tempfile::tempdir().unwrap();
+        let g = graded();
+        let yaml = save_map_server(&g, dir.path(), "m").unwrap();
+        let back = load_map_server(&yaml).unwrap();
+        let mut expected = Vec::new();
+        trinary_cells_into(&g, &mut expected);
+        assert_eq!(back.cells, expected);
+        assert!(back.cells.iter().all(|c| [-1, 0, 100].contains(c)));
+    }
+
+    #[test]
+    fn scale_mode_keeps_unknown_free_and_occupied() {
+        let dir = tempfile::tempdir().unwrap();
+        let g = graded();
+        let yaml = save_map_server_mode(&g, dir.path(), "m", MapMode::Scale).unwrap();
+        assert!(dir.path().join("m.png").exists());
+        let back = load_map_server(&yaml).unwrap();
+        for (&c, &b) in g.cells.iter().zip(&back.cells) {
+            match c {
+                -1 => assert_eq!(b, UNKNOWN),
+                // 8-bit grey quantises the threshold: 65 may land either side of 0.65.
+                65 => assert!(
+                    b == OCCUPIED || (1..=99).contains(&b),
+                    "65 read back as {b}"
+                ),
+                c if c >= 66 => assert_eq!(b, OCCUPIED, "{c}"),
+                c if c <= 19 => assert_eq!(b, FREE, "{c}"),
+                c => assert!((1..=99).contains(&b), "{c} read back as {b}"),
+            }
+        }
+    }
+
+    #[test]
+    fn negate_is_written_as_zero_and_read_as_bool_or_int() {
+        let dir = tempfile::tempdir().unwrap();
+        let yaml = save_map_server(&sample(), dir.path(), "m").unwrap();
+        let text = fs::read_to_string(&yaml).unwrap();
+        assert!(text.contains("negate: 0\n"), "{text}");
+        for negate in ["false", "1", "true"] {
+            fs::write(
+                &yaml,
+                text.replace("negate: 0", &format!("negate: {negate}")),
+            )
+            .unwrap();
+            let g = load_map_server(&yaml).unwrap();
+            let inverted = negate != "false";
+            assert_eq!(g.get(0, 0), Some(if inverted { FREE } else { OCCUPIED }));
+        }
     }
 
     #[test]

@@ -193,6 +193,36 @@ pub struct Encoder {
     /// Latest odometry pose and its frame, for map → odom.
     last_odom: Option<(Pose2, FixedStr<FRAME_ID_LEN>)>,
     points: Vec<SonarPoint>,
+    /// Added to bus (monotonic) times to make MCAP log and publish times; see
+    /// [`Encoder::set_unix_offset`].
+    unix_offset_ns: i64,
+}
+
+/// CLOCK_REALTIME − CLOCK_MONOTONIC now, ns: what turns a bus stamp into a
+/// Unix time. Read several times, keeping the pair read closest together, so a
+/// preemption between the two reads does not skew it.
+pub fn unix_offset_now() -> i64 {
+    let mut best: Option<(u64, i64)> = None;
+    for _ in 0..5 {
+        let m0 = smokenav_shared_types::clock::monotonic_now_ns();
+        let unix = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos() as i128)
+            .unwrap_or(0);
+        let m1 = smokenav_shared_types::clock::monotonic_now_ns();
+        let spread = m1.saturating_sub(m0);
+        let mid = (m0 as i128 + m1 as i128) / 2;
+        let off = (unix - mid).clamp(i64::MIN as i128, i64::MAX as i128) as i64;
+        if best.is_none_or(|(s, _)| spread < s) {
+            best = Some((spread, off));
+        }
+    }
+    best.map_or(0, |(_, o)| o)
+}
+
+/// `t + offset`, saturating at the ends of u64.
+pub fn shift_ns(t: u64, offset: i64) -> u64 {
+    (t as i128 + offset as i128).clamp(0, u64::MAX as i128) as u64
 }
 
 impl Encoder {
@@ -287,6 +317,18 @@ impl Encoder {
         }
     }
 
+    /// Makes MCAP log and publish times `offset_ns` later than the bus times
+    /// given (the recorder passes [`unix_offset_now`], so they are Unix
+    /// times: real dates in Foxglove and `ros2 bag`). The messages' own header
+    /// stamps stay on the bus's monotonic clock, so a replay is bit for bit.
+    pub fn set_unix_offset(&mut self, offset_ns: i64) {
+        self.unix_offset_ns = offset_ns;
+    }
+
+    fn wall(&self, t: u64) -> u64 {
+        shift_ns(t, self.unix_offset_ns)
+    }
+
     /// The `/tf_static` transforms of the robot profile (base → laser), if known.
     pub fn static_transforms(&mut self, log_time: u64, batch: &mut Batch) {
         if self.geometry.is_none() {
@@ -308,7 +350,8 @@ impl Encoder {
             y: g.laser.y,
             yaw: g.laser.theta,
         };
-        codec::encode_tf_message(&[t], batch.slot(ch, 0, log_time, log_time));
+        let wall = self.wall(log_time);
+        codec::encode_tf_message(&[t], batch.slot(ch, 0, wall, wall));
     }
 
     /// Appends the channels for `msg`, published on bus topic `topic`, to `batch`.
@@ -316,9 +359,10 @@ impl Encoder {
         let ids = self.topic_channels(batch, topic, msg.kind());
         let h = msg.header();
         let (seq, stamp) = (h.seq as u32, h.stamp_ns);
-        ros2::encode_standard(msg, batch.slot(ids.main, seq, log_time, stamp));
+        let (log_time, publish_time) = (self.wall(log_time), self.wall(stamp));
+        ros2::encode_standard(msg, batch.slot(ids.main, seq, log_time, publish_time));
         if let Some(c) = ids.companion {
-            ros2::encode_companion(msg, batch.slot(c, seq, log_time, stamp));
+            ros2::encode_companion(msg, batch.slot(c, seq, log_time, publish_time));
         }
         match msg {
             AnyMessageRef::SonarRing(r) => {
@@ -327,7 +371,7 @@ impl Encoder {
                     codec::encode_sonar_points(
                         stamp,
                         &self.points,
-                        batch.slot(v, seq, log_time, stamp),
+                        batch.slot(v, seq, log_time, publish_time),
                     );
                 }
             }
@@ -343,7 +387,7 @@ impl Encoder {
                     yaw: pose.theta,
                 };
                 let tf = self.tf_channel(batch);
-                codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, stamp));
+                codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, publish_time));
             }
             AnyMessageRef::PoseEstimate(p) => {
                 // map → odom needs the odometry the pose was estimated against;
@@ -360,7 +404,7 @@ impl Encoder {
                         yaw: mo.theta,
                     };
                     let tf = self.tf_channel(batch);
-                    codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, stamp));
+                    codec::encode_tf_message(&[t], batch.slot(tf, 0, log_time, publish_time));
                 }
             }
             _ => {}
@@ -414,6 +458,34 @@ mod tests {
         let y = mo.y + s * odom.x + c * odom.y;
         assert!((x - slam.x).abs() < 1e-12 && (y - slam.y).abs() < 1e-12);
         assert!((mo.theta + odom.theta - slam.theta).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_unix_offset_moves_log_and_publish_times_not_the_message_stamp() {
+        let offset = unix_offset_now();
+        let unix = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as i128;
+        let mono = smokenav_shared_types::clock::monotonic_now_ns() as i128;
+        assert!(
+            (unix - mono - offset as i128).abs() < 50_000_000,
+            "{offset}"
+        );
+        let mut enc = Encoder::new(None);
+        enc.set_unix_offset(1_000);
+        let mut batch = Batch::new();
+        let scan = LaserScan {
+            header: smokenav_shared_types::Header::new(5, 7, "laser"),
+            ..Default::default()
+        };
+        enc.encode("laser/scan", AnyMessageRef::LaserScan(&scan), 9, &mut batch);
+        let main = &batch.messages()[0];
+        assert_eq!((main.log_time, main.publish_time), (1_009, 1_005));
+        // The CDR header stamp (after the 4-byte encapsulation: sec, nanosec) stays 5 ns.
+        assert_eq!(&main.data[4..12], &[0, 0, 0, 0, 5, 0, 0, 0]);
+        assert_eq!(shift_ns(3, -10), 0);
+        assert_eq!(shift_ns(u64::MAX, 1), u64::MAX);
     }
 
     #[test]

@@ -62,12 +62,15 @@
 pub mod cdr;
 pub mod codec;
 pub mod encoder;
+pub mod info;
 pub mod reader;
 pub mod ros2;
 pub mod schema;
 pub mod writer;
 
-pub use encoder::{Batch, ChannelRole, ChannelSpec, Encoder, Pose2, RobotGeometry};
+pub use encoder::{
+    Batch, ChannelRole, ChannelSpec, Encoder, Pose2, RobotGeometry, shift_ns, unix_offset_now,
+};
 pub use reader::{EndOfData, McapSource, Playback, PlaybackStats, Played, ReadError};
 pub use ros2::{Ros2Codec, Ros2Layout};
 pub use smokenav_shared_types::{AnyMessage, AnyMessageRef, BitIdentical};
@@ -75,6 +78,20 @@ pub use writer::{Compression, McapSink, SinkOptions, SinkStats, WriteError};
 
 use std::collections::BTreeMap;
 use std::io::{Seek, Write};
+
+/// Key of the [`writer::METADATA_NAME`] metadata record holding the offset,
+/// ns, that was added to the bus's monotonic times to make the file's log and
+/// publish times Unix times. Absent in older recordings (offset 0).
+pub const UNIX_OFFSET_KEY: &str = "unix_offset_ns";
+
+/// The offset of [`UNIX_OFFSET_KEY`] in a file's metadata records (0 if absent).
+pub fn unix_offset(metadata: &[(String, BTreeMap<String, String>)]) -> i64 {
+    metadata
+        .iter()
+        .filter(|(name, _)| name == writer::METADATA_NAME)
+        .find_map(|(_, m)| m.get(UNIX_OFFSET_KEY)?.parse().ok())
+        .unwrap_or(0)
+}
 
 /// Encoder and sink together, for single-threaded recording.
 pub struct Recorder<W: Write + Seek> {

@@ -28,7 +28,8 @@ use std::time::{Duration, Instant};
 pub struct PlayArgs {
     /// The recording (an MCAP file written by `smokenav record`; a file cut short is fine).
     pub file: PathBuf,
-    /// Only these bus topics (default: every recorded one).
+    /// Only these bus topics, as laser/scan or /laser/scan (default: every recorded one).
+    #[arg(value_parser = crate::topic::bus_topic)]
     pub topics: Vec<String>,
     /// Speed factor on the recorded timing (2 = twice as fast).
     #[arg(long, default_value_t = 1.0)]
@@ -274,8 +275,16 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
         }
         if args.restamp {
             // Recorder receive time → now: stamps keep their lag behind it.
+            // Log times are Unix times; the stamps are on the recorder's
+            // monotonic clock, which the file's offset converts back to.
             let offset = *stamp_offset.get_or_insert_with(|| {
-                (i128::from(monotonic_now_ns()) - i128::from(played.log_time))
+                let unix_offset =
+                    smokenav_platform_recording::unix_offset(playback.source().metadata());
+                let received = smokenav_platform_recording::shift_ns(
+                    played.log_time,
+                    unix_offset.saturating_neg(),
+                );
+                (i128::from(monotonic_now_ns()) - i128::from(received))
                     .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64
             });
             played.message.shift_stamps(offset);

@@ -30,7 +30,8 @@ pub struct RecordArgs {
     /// The MCAP file to write.
     #[arg(short = 'o', long)]
     pub output: PathBuf,
-    /// Bus topics to record (default: every known topic of the instance).
+    /// Bus topics to record, as laser/scan or /laser/scan (default: every known topic of the instance).
+    #[arg(value_parser = crate::topic::bus_topic)]
     pub topics: Vec<String>,
     /// Close and flush a chunk at least this often, s: the most a crash (SIGKILL) can lose.
     #[arg(long, default_value_t = 1.0)]
@@ -155,17 +156,31 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     }
     .with_context(|| format!("cannot create {}", args.output.display()))?;
     let started_ns = monotonic_now_ns();
+    // The bus keeps the monotonic clock; the file's log and publish times are
+    // Unix times, so tools show real dates. Fixed once: an NTP step during the
+    // recording does not tear its timeline.
+    let unix_offset = smokenav_platform_recording::unix_offset_now();
     let mut meta = BTreeMap::new();
     meta.insert("instance".to_owned(), bus.instance().to_owned());
     meta.insert(
         "recorder".to_owned(),
         format!("smokenav {}", env!("CARGO_PKG_VERSION")),
     );
-    meta.insert("clock".to_owned(), "CLOCK_MONOTONIC ns".to_owned());
+    meta.insert(
+        "clock".to_owned(),
+        "log and publish times: Unix ns (bus CLOCK_MONOTONIC + unix_offset_ns); \
+         message header stamps: CLOCK_MONOTONIC ns"
+            .to_owned(),
+    );
+    meta.insert(
+        smokenav_platform_recording::UNIX_OFFSET_KEY.to_owned(),
+        unix_offset.to_string(),
+    );
     meta.insert("start_monotonic_ns".to_owned(), started_ns.to_string());
-    if let Ok(d) = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH) {
-        meta.insert("start_unix_ns".to_owned(), d.as_nanos().to_string());
-    }
+    meta.insert(
+        "start_unix_ns".to_owned(),
+        smokenav_platform_recording::shift_ns(started_ns, unix_offset).to_string(),
+    );
     meta.insert("topics".to_owned(), topics.join(","));
     if let Some(cfg) = &profile {
         meta.insert("robot".to_owned(), cfg.robot.name.clone());
@@ -200,6 +215,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     };
 
     let mut encoder = Encoder::new(profile.as_ref().map(RobotGeometry::from_config));
+    encoder.set_unix_offset(unix_offset);
     let mut first = Batch::new();
     encoder.static_transforms(started_ns, &mut first);
     to_writer.send(ToWriter::Batch(first))?;

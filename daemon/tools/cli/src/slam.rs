@@ -4,7 +4,8 @@
 
 use anyhow::Context;
 use smokenav_algorithms_eval::{
-    TrajectoryOptions, evaluate_trajectories, format_trajectory, load_trajectory,
+    TrajectoryFormat, TrajectoryOptions, evaluate_trajectories, format_trajectory_as,
+    load_trajectory,
 };
 use smokenav_algorithms_slam::graph::{GraphSlam, g2o};
 use smokenav_algorithms_slam::offline::LogScans;
@@ -26,6 +27,10 @@ pub struct SlamArgs {
     /// Output folder: trajectory.txt, map.pgm/map.yaml/map.png, stats.txt.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Trajectory file layout: `plain` (trajectory.txt, `timestamp x y theta`) or
+    /// `tum` (trajectory.tum, `timestamp x y z qx qy qz qw`, what `evo_ape tum` reads).
+    #[arg(long, value_enum, default_value_t = TrajFormat::Plain)]
+    format: TrajFormat,
     /// Robot profile whose `[slam]` section to use.
     #[arg(long, value_name = "PROFILE", conflicts_with = "slam_params")]
     profile: Option<PathBuf>,
@@ -48,6 +53,32 @@ pub struct SlamArgs {
     /// Write the pose graph (2D g2o) here at the end (graph back-end only).
     #[arg(long, value_name = "FILE.g2o")]
     save_graph: Option<PathBuf>,
+}
+
+/// `--format` of the trajectory writers.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrajFormat {
+    /// `timestamp x y theta` (s, m, m, rad).
+    Plain,
+    /// TUM RGB-D `timestamp x y z qx qy qz qw` (evo, the TUM tools).
+    Tum,
+}
+
+impl TrajFormat {
+    pub fn layout(self) -> TrajectoryFormat {
+        match self {
+            TrajFormat::Plain => TrajectoryFormat::Plain,
+            TrajFormat::Tum => TrajectoryFormat::Tum,
+        }
+    }
+
+    /// The file extension: `.tum` files are what evo's users expect to pass.
+    pub fn extension(self) -> &'static str {
+        match self {
+            TrajFormat::Plain => "txt",
+            TrajFormat::Tum => "tum",
+        }
+    }
 }
 
 /// CPU time of the process or of the calling thread, ns.
@@ -185,13 +216,14 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     let trajectory = slam.trajectory();
     let trajectory = eval_poses(&trajectory);
     let online = eval_poses(&online);
+    let ext = args.format.extension();
     write(
-        &args.out.join("trajectory.txt"),
-        &format_trajectory(&trajectory),
+        &args.out.join(format!("trajectory.{ext}")),
+        &format_trajectory_as(&trajectory, args.format.layout()),
     )?;
     write(
-        &args.out.join("trajectory_online.txt"),
-        &format_trajectory(&online),
+        &args.out.join(format!("trajectory_online.{ext}")),
+        &format_trajectory_as(&online, args.format.layout()),
     )?;
     if let Some(map) = slam.map() {
         smokenav_platform_map::save_map_server(&map, &args.out, "map")?;
@@ -323,17 +355,40 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
 
 #[derive(clap::Subcommand, Debug)]
 pub enum MapCommand {
-    /// Save the map the SLAM process publishes on `slam/map` as map.pgm + map.yaml (ROS
-    /// map_server) and map.png in DIR.
+    /// Save the map the SLAM process publishes as map.pgm|png + map.yaml (ROS map_server,
+    /// as nav2's map_saver writes it) and map.png in DIR.
     Save {
-        /// Output folder.
-        dir: PathBuf,
+        /// Output folder [default: $SMOKENAV_MAP_DIR, else ./maps].
+        #[arg(env = "SMOKENAV_MAP_DIR")]
+        dir: Option<PathBuf>,
+        /// map_server mode: trinary (free/occupied/unknown, from `slam/map`), scale
+        /// or raw (the occupancy probability, from `slam/map_probability`).
+        #[arg(long, value_enum, default_value_t = SaveMode::Trinary)]
+        mode: SaveMode,
         /// Give up if no map arrives within this many seconds.
         #[arg(long, default_value_t = 5.0)]
         timeout_s: f64,
         #[command(flatten)]
         bus: crate::topic::BusArgs,
     },
+}
+
+/// The map_server modes `map save` writes.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SaveMode {
+    Trinary,
+    Scale,
+    Raw,
+}
+
+impl From<SaveMode> for smokenav_platform_map::MapMode {
+    fn from(m: SaveMode) -> Self {
+        match m {
+            SaveMode::Trinary => Self::Trinary,
+            SaveMode::Scale => Self::Scale,
+            SaveMode::Raw => Self::Raw,
+        }
+    }
 }
 
 /// A map received from the bus as a grid, after checking its header against its payload.
@@ -377,15 +432,22 @@ fn grid_from_wire(
 pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
     let MapCommand::Save {
         dir,
+        mode,
         timeout_s,
         bus,
     } = cmd;
+    let dir = dir.unwrap_or_else(|| PathBuf::from("maps"));
+    // Scale and raw keep the probabilities; the thresholded map would lose them.
+    let topic = match mode {
+        SaveMode::Trinary => smokenav_platform_bus::topics::SLAM_MAP,
+        SaveMode::Scale | SaveMode::Raw => smokenav_platform_bus::topics::SLAM_MAP_PROBABILITY,
+    };
     anyhow::ensure!(
         timeout_s.is_finite() && timeout_s > 0.0,
         "--timeout-s must be positive"
     );
     let bus = bus.open("map-save")?;
-    let sub = bus.map_subscriber(smokenav_platform_bus::topics::SLAM_MAP)?;
+    let sub = bus.map_subscriber(topic.clone())?;
     let waiter = smokenav_platform_bus::Waiter::new()?;
     let _guard = waiter.attach(&sub)?;
     let deadline = Instant::now() + std::time::Duration::from_secs_f64(timeout_s);
@@ -400,17 +462,22 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         let now = Instant::now();
         anyhow::ensure!(
             now < deadline,
-            "no map on slam/map of instance `{}` within {timeout_s} s (is smokenav-slam running?)",
+            "no map on {} of instance `{}` within {timeout_s} s (is smokenav-slam running?)",
+            topic.name(),
             bus.instance()
         );
         waiter.wait(Some(deadline - now))?;
     };
-    smokenav_platform_map::save_map_server(&grid, &dir, "map")?;
-    grid.save_png(&dir.join("map.png"))?;
+    smokenav_platform_map::save_map_server_mode(&grid, &dir, "map", mode.into())?;
+    if mode != SaveMode::Scale {
+        // Scale mode's image is map.png itself.
+        grid.save_png(&dir.join("map.png"))?;
+    }
     println!(
-        "saved {}×{} map ({} m/cell) to {}",
+        "saved {}×{} {} map ({} m/cell) to {}",
         grid.width,
         grid.height,
+        smokenav_platform_map::MapMode::from(mode).as_str(),
         grid.resolution,
         dir.display()
     );

@@ -1,4 +1,4 @@
-//! `smokenav topic list|echo|hz`: how a user sees what flows on the bus.
+//! `smokenav topic list|echo|hz` (and `info|bw`, in `topic_info`): how a user sees what flows on the bus.
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
@@ -72,7 +72,8 @@ pub enum TopicCommand {
     },
     /// Print the messages of a topic as they arrive.
     Echo {
-        /// e.g. laser/scan, base/odom, health/hokuyo.
+        /// e.g. laser/scan, base/odom, health/hokuyo (or the ROS spelling, /laser/scan).
+        #[arg(value_parser = bus_topic)]
         topic: String,
         /// Stop after this many messages.
         #[arg(long, short = 'n')]
@@ -89,8 +90,38 @@ pub enum TopicCommand {
         #[command(flatten)]
         bus: BusArgs,
     },
+    /// Type, publishers, subscribers and QoS of a topic, as iceoryx2 reports them.
+    Info {
+        /// e.g. laser/scan (or /laser/scan).
+        #[arg(value_parser = bus_topic)]
+        topic: String,
+        /// One JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        bus: BusArgs,
+    },
+    /// Measure a topic's bandwidth on the bus (bytes per second, message sizes).
+    Bw {
+        /// e.g. laser/scan (or /laser/scan).
+        #[arg(value_parser = bus_topic)]
+        topic: String,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Messages the figures are computed over.
+        #[arg(long, default_value_t = 100)]
+        window: usize,
+        /// Print one JSON summary at the end instead of a line per second.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        bus: BusArgs,
+    },
     /// Measure a topic's rate, jitter and sequence gaps.
     Hz {
+        /// e.g. laser/scan (or /laser/scan).
+        #[arg(value_parser = bus_topic)]
         topic: String,
         /// Stop after this many seconds.
         #[arg(long)]
@@ -126,6 +157,22 @@ pub fn run(cmd: TopicCommand) -> anyhow::Result<()> {
             };
             echo(&bus, &topic, &opts)
         }
+        TopicCommand::Info { topic, json, bus } => {
+            crate::topic_info::info(&bus.open("topic-info")?, &topic, json)
+        }
+        TopicCommand::Bw {
+            topic,
+            duration,
+            window,
+            json,
+            bus,
+        } => crate::topic_info::bw(
+            &bus.open("topic-bw")?,
+            &topic,
+            duration.map(Duration::from_secs_f64),
+            window.max(2),
+            json,
+        ),
         TopicCommand::Hz {
             topic,
             duration,
@@ -170,8 +217,19 @@ struct EchoOptions {
     timeout: Option<Duration>,
 }
 
+/// A topic named on the command line, the bus's way (`laser/scan`) or the
+/// ROS way (`/laser/scan`): the bus name. Used as clap's `value_parser` for
+/// every topic argument.
+pub fn bus_topic(arg: &str) -> Result<String, String> {
+    let name = catalog::bus_topic_name(arg);
+    if name.is_empty() {
+        return Err("a topic name is needed".into());
+    }
+    Ok(name.to_owned())
+}
+
 /// The catalog type `topic` carries, or an error listing the known topics.
-fn kind_of(topic: &str) -> anyhow::Result<MessageKind> {
+pub(crate) fn kind_of(topic: &str) -> anyhow::Result<MessageKind> {
     catalog::topic_kind(topic)
         .with_context(|| format!("unknown topic `{topic}` (known: {})", known_topics()))
 }

@@ -36,6 +36,39 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// `--format` of the demo's trajectory files.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrajectoryFiles {
+    Plain,
+    Tum,
+}
+
+/// Writes `<name>.tum` beside every `<name>.txt` trajectory under `dir` (truth.txt,
+/// trajectories/*.txt): the same poses as TUM lines.
+pub(crate) fn write_tum_copies(dir: &Path) -> anyhow::Result<()> {
+    let mut files = vec![dir.join("truth.txt")];
+    if let Ok(entries) = std::fs::read_dir(dir.join("trajectories")) {
+        files.extend(
+            entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "txt")),
+        );
+    }
+    for f in files.into_iter().filter(|f| f.exists()) {
+        let poses = smokenav_algorithms_eval::load_trajectory(&f)?;
+        let out = f.with_extension("tum");
+        std::fs::write(
+            &out,
+            smokenav_algorithms_eval::format_trajectory_as(
+                &poses,
+                smokenav_algorithms_eval::TrajectoryFormat::Tum,
+            ),
+        )
+        .with_context(|| format!("cannot write {}", out.display()))?;
+    }
+    Ok(())
+}
+
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
     /// Scenario: a bundled one (r32-dense-crossing, r32-light-puff, mrl-clean, corridor) or a scenario TOML file.
@@ -63,6 +96,10 @@ pub struct DemoArgs {
     /// (in dense smoke one run's map error varies by 10–20 % with the seed alone).
     #[arg(long, value_name = "N", default_value_t = 3)]
     pub seeds: usize,
+    /// Trajectory files: `plain` (`timestamp x y theta`) or `tum` (also writes
+    /// truth.tum and trajectories/*.tum, `t x y z qx qy qz qw`, for `evo_ape tum`).
+    #[arg(long, value_enum, default_value_t = TrajectoryFiles::Plain)]
+    pub format: TrajectoryFiles,
 }
 
 /// Where progress messages go: stderr with `--json` (stdout is for the JSON), else stdout.
@@ -385,6 +422,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     }
 
     report::write_summary(&main, clean.as_ref(), &args.out)?;
+    if args.format == TrajectoryFiles::Tum {
+        write_tum_copies(&args.out)?;
+        if clean.is_some() {
+            write_tum_copies(&args.out.join("clean-reference"))?;
+        }
+    }
     if args.json {
         println!("{}", report::json(&main, clean.as_ref()));
     } else {
