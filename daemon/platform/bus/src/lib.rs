@@ -82,6 +82,7 @@ mod port;
 mod publisher;
 mod service;
 mod subscriber;
+pub mod tap;
 pub mod topics;
 mod waiter;
 
@@ -93,5 +94,6 @@ pub use publisher::Publisher;
 pub use service::{PortInfo, TopicPorts};
 pub use smokenav_shared_types::Message;
 pub use subscriber::{Sample, Subscriber};
+pub use tap::{Tap, TapError};
 pub use topics::{Qos, Topic, TopicFamily};
 pub use waiter::{Attachment, WaitOutcome, Waiter, Wakeable};

@@ -208,7 +208,7 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     // Every topic the recording could hold: checked before the first message,
     // so a refusal publishes nothing at all.
     let playable: Vec<String> = if args.topics.is_empty() {
-        crate::record::default_topics()
+        smokenav_platform_bus::tap::default_topics()
     } else {
         args.topics.clone()
     };

@@ -9,14 +9,13 @@
 use crate::topic::{BusArgs, known_topics};
 use anyhow::{Context, bail};
 use clap::Args;
-use smokenav_platform_bus::{
-    Attachment, Bus, MapSubscriber, Subscriber, SubscriberStats, Waiter, topics,
-};
+use smokenav_platform_bus::tap::{self, Tap};
+use smokenav_platform_bus::{Attachment, Waiter};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_recording::{
     AnyMessageRef, Batch, Compression, Encoder, McapSink, RobotGeometry, SinkOptions,
 };
-use smokenav_shared_types::catalog::{self, Cataloged, MessageVisitor};
+use smokenav_shared_types::catalog;
 use smokenav_shared_types::clock::monotonic_now_ns;
 use std::collections::BTreeMap;
 use std::io::{BufWriter, Write};
@@ -57,142 +56,6 @@ pub struct RecordArgs {
 /// 256 batches ≈ 25 s of every topic at 10 Hz: a disk stall of that length
 /// costs no message.
 const BATCHES_IN_FLIGHT: usize = 256;
-
-/// A subscriber of one topic, whatever its type.
-trait Tap {
-    fn topic(&self) -> &str;
-    fn attach<'w>(&'w self, waiter: &'w Waiter) -> anyhow::Result<Attachment<'w, 'w>>;
-    /// Hands every queued message to `f`; returns how many there were.
-    fn drain(
-        &self,
-        f: &mut dyn FnMut(&str, AnyMessageRef<'_>) -> anyhow::Result<()>,
-    ) -> anyhow::Result<u64>;
-    fn stats(&self) -> SubscriberStats;
-}
-
-struct TypedTap<T: Cataloged> {
-    topic: String,
-    sub: Subscriber<T>,
-}
-
-impl<T: Cataloged> Tap for TypedTap<T> {
-    fn topic(&self) -> &str {
-        &self.topic
-    }
-
-    fn attach<'w>(&'w self, waiter: &'w Waiter) -> anyhow::Result<Attachment<'w, 'w>> {
-        Ok(waiter.attach(&self.sub)?)
-    }
-
-    fn drain(
-        &self,
-        f: &mut dyn FnMut(&str, AnyMessageRef<'_>) -> anyhow::Result<()>,
-    ) -> anyhow::Result<u64> {
-        let mut n = 0;
-        while let Some(sample) = self.sub.receive()? {
-            f(&self.topic, sample.as_any())?;
-            n += 1;
-        }
-        Ok(n)
-    }
-
-    fn stats(&self) -> SubscriberStats {
-        self.sub.stats()
-    }
-}
-
-/// `slam/map`: a map info header and its cells.
-struct MapTap {
-    topic: String,
-    sub: MapSubscriber,
-}
-
-impl Tap for MapTap {
-    fn topic(&self) -> &str {
-        &self.topic
-    }
-
-    fn attach<'w>(&'w self, waiter: &'w Waiter) -> anyhow::Result<Attachment<'w, 'w>> {
-        Ok(waiter.attach(&self.sub)?)
-    }
-
-    fn drain(
-        &self,
-        f: &mut dyn FnMut(&str, AnyMessageRef<'_>) -> anyhow::Result<()>,
-    ) -> anyhow::Result<u64> {
-        let mut n = 0;
-        while let Some(sample) = self.sub.receive()? {
-            f(
-                &self.topic,
-                AnyMessageRef::Map(sample.user_header(), sample.payload()),
-            )?;
-            n += 1;
-        }
-        Ok(n)
-    }
-
-    fn stats(&self) -> SubscriberStats {
-        self.sub.stats()
-    }
-}
-
-/// Opens the tap of one topic, whatever catalog type it carries.
-struct OpenTap<'a> {
-    bus: &'a Bus,
-    topic: &'a str,
-}
-
-impl MessageVisitor for OpenTap<'_> {
-    type Output = anyhow::Result<Box<dyn Tap>>;
-
-    fn fixed<M: Cataloged>(&mut self) -> Self::Output {
-        let topic = topics::lookup::<M>(self.topic)
-            .with_context(|| format!("topic `{}` does not carry {}", self.topic, M::NAME))?;
-        Ok(Box::new(TypedTap::<M> {
-            topic: self.topic.to_owned(),
-            sub: self
-                .bus
-                .subscriber(topic)
-                .with_context(|| format!("cannot subscribe to {}", self.topic))?,
-        }))
-    }
-
-    fn map(&mut self) -> Self::Output {
-        let topic = topics::lookup_map(self.topic)
-            .with_context(|| format!("topic `{}` does not carry the map", self.topic))?;
-        Ok(Box::new(MapTap {
-            topic: self.topic.to_owned(),
-            sub: self
-                .bus
-                .map_subscriber(topic)
-                .with_context(|| format!("cannot subscribe to {}", self.topic))?,
-        }))
-    }
-}
-
-fn open_tap(bus: &Bus, topic: &str) -> anyhow::Result<Box<dyn Tap>> {
-    let Some(kind) = catalog::topic_kind(topic) else {
-        bail!("unknown topic `{topic}`");
-    };
-    kind.visit(&mut OpenTap { bus, topic })
-}
-
-/// Every fixed topic of the catalog and the health topic of every role.
-pub fn default_topics() -> Vec<String> {
-    catalog::TOPICS
-        .iter()
-        .flat_map(|t| {
-            if t.family {
-                topics::ROLES
-                    .iter()
-                    .map(|r| format!("{}{r}", t.name))
-                    .collect()
-            } else {
-                vec![t.name.to_owned()]
-            }
-        })
-        .collect()
-}
 
 enum ToWriter {
     Batch(Batch),
@@ -262,7 +125,7 @@ fn writer_thread(
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     smokenav_platform_runtime::init_logging("record");
     let topics = if args.topics.is_empty() {
-        default_topics()
+        tap::default_topics()
     } else {
         args.topics.clone()
     };
@@ -335,8 +198,8 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
 
     let taps: Vec<Box<dyn Tap>> = topics
         .iter()
-        .map(|t| open_tap(&bus, t))
-        .collect::<anyhow::Result<_>>()?;
+        .map(|t| tap::open(&bus, t))
+        .collect::<Result<_, _>>()?;
 
     let (to_writer, batches) = sync_channel::<ToWriter>(BATCHES_IN_FLIGHT);
     let (empties_tx, empties) = sync_channel::<Batch>(BATCHES_IN_FLIGHT);
@@ -374,7 +237,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let attached: Vec<Attachment> = taps
         .iter()
         .map(|t| t.attach(&waiter))
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<Result<_, _>>()?;
     let mut send = |topic: &str, msg: AnyMessageRef<'_>| -> anyhow::Result<()> {
         let mut batch = match empties.try_recv() {
             Ok(b) => b,
@@ -393,7 +256,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         // Data, a signal or the timeout all lead to a drain of every topic.
         waiter.wait(Some(Duration::from_millis(100)))?;
         for tap in &taps {
-            tap.drain(&mut send)?;
+            tap.drain(&mut |t, m| send(t, m).map_err(Into::into))?;
         }
         if stop.requested() || end.is_some_and(|e| Instant::now() >= e) || writer.is_finished() {
             break;
