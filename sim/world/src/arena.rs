@@ -33,17 +33,24 @@ pub enum BuiltinArena {
     R32,
     /// SmokeNav Fig. 5/6: a plain corridor, where the Pioneer's oblique sonars see nothing.
     Corridor,
+    /// Two 20 m aisles either side of a rack: parallel walls longer than the laser's range.
+    Aisles,
 }
 
 impl BuiltinArena {
-    pub const ALL: [BuiltinArena; 3] =
-        [BuiltinArena::Mrl, BuiltinArena::R32, BuiltinArena::Corridor];
+    pub const ALL: [BuiltinArena; 4] = [
+        BuiltinArena::Mrl,
+        BuiltinArena::R32,
+        BuiltinArena::Corridor,
+        BuiltinArena::Aisles,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             BuiltinArena::Mrl => "mrl",
             BuiltinArena::R32 => "r3.2",
             BuiltinArena::Corridor => "corridor",
+            BuiltinArena::Aisles => "aisles",
         }
     }
 
@@ -57,6 +64,7 @@ impl BuiltinArena {
             BuiltinArena::Mrl => include_str!("../../arenas/mrl.toml"),
             BuiltinArena::R32 => include_str!("../../arenas/r3.2.toml"),
             BuiltinArena::Corridor => include_str!("../../arenas/corridor.toml"),
+            BuiltinArena::Aisles => include_str!("../../arenas/aisles.toml"),
         }
     }
 

@@ -55,7 +55,7 @@ use smokenav_smoke_codec::mq303a::SensorParams;
 use std::path::{Path, PathBuf};
 
 /// Scenarios shipped with the simulator: (name, text).
-pub const BUILTIN_SCENARIOS: [(&str, &str); 4] = [
+pub const BUILTIN_SCENARIOS: [(&str, &str); 5] = [
     ("mrl-clean", include_str!("../../scenarios/mrl-clean.toml")),
     (
         "r32-light-puff",
@@ -66,6 +66,7 @@ pub const BUILTIN_SCENARIOS: [(&str, &str); 4] = [
         include_str!("../../scenarios/r32-dense-crossing.toml"),
     ),
     ("corridor", include_str!("../../scenarios/corridor.toml")),
+    ("aisles", include_str!("../../scenarios/aisles.toml")),
 ];
 
 /// Most smoke sources, patches, waypoints or pulses a file may list.
