@@ -18,10 +18,18 @@
 //!    Hess et al. 2016). A quadratic prior keeps the result near the
 //!    prediction where the scan cannot tell (a featureless corridor, or
 //!    someone walking along with the robot).
-//! 3. The particles use the corrected motion as their odometry.
+//! 3. Degeneracy check ([`ScanConstraint`]): where the scan's own geometry
+//!    does not constrain the pose (along a corridor longer than the laser's
+//!    range, or a scan smoke reduced to two side walls), the prior is too
+//!    weak to hold the optimum, which drifts to wherever the local map ends;
+//!    the match's correction is kept only in the directions the scan
+//!    constrains and the prediction is used in the others.
+//! 4. The particles use the corrected motion as their odometry.
 //!
 //! Deterministic: no randomness, ties go to the first candidate in a fixed order.
 
+use crate::degeneracy::{DegeneracyParams, ScanConstraint};
+use nalgebra::{Matrix3, Vector3};
 use smokenav_shared_types::Pose2;
 use std::collections::VecDeque;
 
@@ -69,7 +77,17 @@ pub struct Tracked {
     pub score: Option<f64>,
     /// The odometry had not changed since the previous scan.
     pub stale_odometry: bool,
+    /// Directions (of x, y, θ in the robot frame) the scan left to the prediction.
+    pub degenerate_directions: u8,
+    /// Covariance of `pose` relative to the previous scan's, in the robot
+    /// frame (m², m·rad, rad²): the match's where the scan constrains the
+    /// pose, the prediction's elsewhere (all of it when the match failed).
+    pub covariance: Matrix3<f64>,
 }
+
+/// σ of an endpoint's distance to its surface the matcher reaches, m (the
+/// table's cells; the covariance of a match is this over the scan's information).
+const POINT_SIGMA_CELLS: f64 = 1.0;
 
 #[derive(Debug, Clone, Copy)]
 struct Fresh {
@@ -102,6 +120,9 @@ pub struct FrontEnd {
     prior_t: f64,
     prior_r: f64,
     blur: Vec<u8>,
+    degeneracy: DegeneracyParams,
+    /// Scans whose match had at least one direction replaced by the prediction.
+    degenerate_matches: u64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -144,6 +165,8 @@ impl FrontEnd {
             prior_t: 0.0,
             prior_r: 0.0,
             blur,
+            degeneracy: DegeneracyParams::default(),
+            degenerate_matches: 0,
         }
     }
 
@@ -173,6 +196,8 @@ impl FrontEnd {
                 pose,
                 score: None,
                 stale_odometry: false,
+                degenerate_directions: 3,
+                covariance: Matrix3::zeros(),
             };
         };
         let prediction = self.predict(&last_pose, odom, stamp_ns, stale);
@@ -189,16 +214,36 @@ impl FrontEnd {
         let sigma_r = sr.0 + sr.1 * step.theta.abs();
         self.prior_t = 0.5 * PRIOR_WEIGHT / (sigma_t * sigma_t);
         self.prior_r = 0.5 * PRIOR_WEIGHT / (sigma_r * sigma_r);
-        let (pose, score) = match self.search(&prediction) {
-            Some((pose, score)) => (pose, Some(score)),
-            None => (prediction, None),
+        let pred_cov = Matrix3::from_diagonal(&Vector3::new(
+            sigma_t * sigma_t,
+            sigma_t * sigma_t,
+            sigma_r * sigma_r,
+        ));
+        let (pose, score, degenerate, covariance) = match self.search(&prediction) {
+            Some((matched, score)) => {
+                let c = ScanConstraint::from_points(&self.points);
+                let degenerate = c.degenerate_directions(&self.degeneracy) as u8;
+                self.degenerate_matches += u64::from(degenerate > 0);
+                let pose = c.remap(&prediction, &matched, &self.degeneracy);
+                let sigma = POINT_SIGMA_CELLS * self.p.resolution;
+                let cov = c.covariance(sigma * sigma, &pred_cov, &self.degeneracy);
+                (pose, Some(score), degenerate, cov)
+            }
+            None => (prediction, None, 3, pred_cov),
         };
         self.accept(pose, odom, stamp_ns, stale);
         Tracked {
             pose,
             score,
             stale_odometry: stale,
+            degenerate_directions: degenerate,
+            covariance,
         }
+    }
+
+    /// Scans so far whose match was followed in some directions only (a degenerate scene).
+    pub fn degenerate_matches(&self) -> u64 {
+        self.degenerate_matches
     }
 
     /// Matches `endpoints` (robot frame) against `map` (map-frame points of
