@@ -51,18 +51,30 @@ pub struct ScanConstraint {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DegeneracyParams {
     /// Eigenvalue (endpoints' worth of constraint) at which a match's
-    /// correction is taken half; far above it fully, far below it not at all.
+    /// correction is taken half; twice it almost fully (94 %), half of it
+    /// hardly (6 %). A simulated aisle leaves its length direction below 0.5;
+    /// the weakest direction of a real office scan is typically 3–10.
     pub min_information: f64,
     /// The same as a share of the endpoints with a normal (each adds 1 to
     /// the translation's trace; the larger of the two applies).
     pub min_share: f64,
+    /// σ of a prediction (along a direction) at which the floors apply as
+    /// they are; a worse prediction lowers them by (this / its σ)², m.
+    pub reference_sigma_m: f64,
+}
+
+/// A robot-frame covariance in the scaled coordinates (x, y, θ·[`ROTATION_SCALE_M`]).
+fn scaled(c: &Matrix3<f64>) -> Matrix3<f64> {
+    let s = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, ROTATION_SCALE_M));
+    s * c * s
 }
 
 impl Default for DegeneracyParams {
     fn default() -> Self {
         Self {
-            min_information: 8.0,
-            min_share: 0.02,
+            min_information: 1.0,
+            min_share: 0.01,
+            reference_sigma_m: 0.07,
         }
     }
 }
@@ -134,28 +146,59 @@ impl ScanConstraint {
     }
 
     /// Per eigen-direction, the share (0–1) of a match's correction to keep.
-    pub fn weights(&self, p: &DegeneracyParams) -> Vector3<f64> {
+    /// With the prediction's covariance (robot frame), the floor scales with
+    /// how good the prediction is: a direction weakly constrained by the scan
+    /// is still the match's when the prediction is worse (odometry that
+    /// repeated, a reset), and the prediction's when odometry is good.
+    pub fn weights(&self, p: &DegeneracyParams, prediction: Option<&Matrix3<f64>>) -> Vector3<f64> {
         let floor = p
             .min_information
             .max(p.min_share * self.normals as f64)
             .max(1e-9);
-        self.eigenvalues.map(|l| {
-            let r = l / floor;
-            r * r / (1.0 + r * r)
+        let pred = prediction.map(scaled);
+        Vector3::from_fn(|i, _| {
+            let floor = match &pred {
+                Some(c) => {
+                    let e = self.eigenvectors.column(i);
+                    let var = (e.transpose() * c * e)[0].max(1e-12);
+                    floor * (p.reference_sigma_m * p.reference_sigma_m / var).min(1.0)
+                }
+                None => floor,
+            };
+            // Sharp around the floor: the weakly constrained directions of a
+            // real scan (door frames along a corridor) are still followed.
+            let r = (self.eigenvalues[i] / floor.max(1e-9)).powi(4);
+            r / (1.0 + r)
         })
     }
 
     /// Eigen-directions with less than half of a match's correction kept.
-    pub fn degenerate_directions(&self, p: &DegeneracyParams) -> usize {
-        self.weights(p).iter().filter(|&&w| w < 0.5).count()
+    pub fn degenerate_directions(
+        &self,
+        p: &DegeneracyParams,
+        prediction: Option<&Matrix3<f64>>,
+    ) -> usize {
+        self.weights(p, prediction)
+            .iter()
+            .filter(|&&w| w < 0.5)
+            .count()
     }
 
     /// `matched` with its correction from `predicted` kept only in the
     /// directions the scan constrains: the prediction's value elsewhere.
-    pub fn remap(&self, predicted: &Pose2, matched: &Pose2, p: &DegeneracyParams) -> Pose2 {
+    pub fn remap(
+        &self,
+        predicted: &Pose2,
+        matched: &Pose2,
+        p: &DegeneracyParams,
+        prediction: Option<&Matrix3<f64>>,
+    ) -> Pose2 {
         let d = predicted.between(matched);
         let d = Vector3::new(d.x, d.y, d.theta * ROTATION_SCALE_M);
-        let w = self.weights(p);
+        let w = self.weights(p, prediction);
+        if w.iter().all(|&w| w > 1.0 - 1e-9) {
+            return *matched;
+        }
         let v = &self.eigenvectors;
         let mut kept = Vector3::zeros();
         for i in 0..3 {
@@ -167,17 +210,18 @@ impl ScanConstraint {
 
     /// Covariance of a match in the robot frame, given the variance of one
     /// endpoint's distance to its surface (m²) and the prediction's
-    /// covariance (robot frame, used where the scan does not constrain).
-    /// Both blended per eigen-direction by [`Self::weights`].
+    /// covariance (robot frame) times `prediction_share`, used where the scan
+    /// does not constrain: information blended per eigen-direction by
+    /// [`Self::weights`] (of the unscaled prediction, as [`Self::remap`] has them).
     pub fn covariance(
         &self,
         point_variance: f64,
         prediction: &Matrix3<f64>,
+        prediction_share: f64,
         p: &DegeneracyParams,
     ) -> Matrix3<f64> {
-        let s = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, ROTATION_SCALE_M));
-        let pred = s * prediction * s;
-        let w = self.weights(p);
+        let pred = scaled(prediction) * prediction_share;
+        let w = self.weights(p, Some(prediction));
         let v = &self.eigenvectors;
         let mut cov = Matrix3::zeros();
         for i in 0..3 {
@@ -218,14 +262,14 @@ mod tests {
     fn a_corridor_leaves_only_the_direction_along_it_free() {
         let c = ScanConstraint::from_points(&corridor());
         let p = DegeneracyParams::default();
-        assert_eq!(c.degenerate_directions(&p), 1, "{c:?}");
+        assert_eq!(c.degenerate_directions(&p, None), 1, "{c:?}");
         let free = c.eigenvectors.column(0);
         assert!(free[0].abs() > 0.99, "free direction {free:?}");
         // A match that slid 0.4 m along and corrected 5 cm across and 0.02 rad
         // keeps the correction across and the turn, not the slide.
         let pred = Pose2::new(2.0, 1.0, 0.0);
         let matched = Pose2::new(1.6, 1.05, 0.02);
-        let r = c.remap(&pred, &matched, &p);
+        let r = c.remap(&pred, &matched, &p, None);
         assert!((r.x - 2.0).abs() < 0.01, "{r:?}");
         assert!((r.y - 1.05).abs() < 0.005, "{r:?}");
         assert!((r.theta - 0.02).abs() < 0.002, "{r:?}");
@@ -237,10 +281,10 @@ mod tests {
         pts.extend(segment((3.0, 2.0), (-3.0, 2.0)));
         let c = ScanConstraint::from_points(&pts);
         let p = DegeneracyParams::default();
-        assert_eq!(c.degenerate_directions(&p), 0, "{c:?}");
+        assert_eq!(c.degenerate_directions(&p, None), 0, "{c:?}");
         let pred = Pose2::new(0.0, 0.0, 0.0);
         let matched = Pose2::new(0.3, -0.2, 0.05);
-        let r = c.remap(&pred, &matched, &p);
+        let r = c.remap(&pred, &matched, &p, None);
         assert!(
             (r.x - 0.3).abs() < 0.01 && (r.y + 0.2).abs() < 0.01,
             "{r:?}"
@@ -256,7 +300,10 @@ mod tests {
             .map(|(x, y)| (c * x - s * y, s * x + c * y))
             .collect();
         let k = ScanConstraint::from_points(&turned);
-        assert_eq!(k.degenerate_directions(&DegeneracyParams::default()), 1);
+        assert_eq!(
+            k.degenerate_directions(&DegeneracyParams::default(), None),
+            1
+        );
         let free = k.eigenvectors.column(0);
         assert!(
             (free[0] - c).abs() < 0.02 || (free[0] + c).abs() < 0.02,
@@ -269,7 +316,7 @@ mod tests {
         let c = ScanConstraint::from_points(&corridor());
         let p = DegeneracyParams::default();
         let pred = Matrix3::from_diagonal(&Vector3::new(0.04, 0.04, 0.01));
-        let cov = c.covariance(0.03f64.powi(2), &pred, &p);
+        let cov = c.covariance(0.03f64.powi(2), &pred, 1.0, &p);
         assert!(cov[(0, 0)] > 0.03, "{cov}");
         assert!(cov[(1, 1)] < 1e-4, "{cov}");
         assert!(cov[(2, 2)] < 1e-4, "{cov}");
@@ -281,8 +328,8 @@ mod tests {
         let c = ScanConstraint::from_points(&[(1.0, 0.0), (1.0, 0.1)]);
         assert_eq!(c.normals, 0);
         let p = DegeneracyParams::default();
-        assert_eq!(c.degenerate_directions(&p), 3);
+        assert_eq!(c.degenerate_directions(&p, None), 3);
         let pred = Pose2::new(1.0, 2.0, 0.3);
-        assert_eq!(c.remap(&pred, &Pose2::new(0.0, 0.0, 0.0), &p), pred);
+        assert_eq!(c.remap(&pred, &Pose2::new(0.0, 0.0, 0.0), &p, None), pred);
     }
 }

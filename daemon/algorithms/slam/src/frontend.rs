@@ -85,9 +85,13 @@ pub struct Tracked {
     pub covariance: Matrix3<f64>,
 }
 
-/// σ of an endpoint's distance to its surface the matcher reaches, m (the
-/// table's cells; the covariance of a match is this over the scan's information).
-const POINT_SIGMA_CELLS: f64 = 1.0;
+/// σ of an endpoint's distance to its surface the matcher reaches, in cells
+/// (sub-cell refinement; a match's covariance is its square over the scan's information).
+const POINT_SIGMA_CELLS: f64 = 0.5;
+/// The prediction's σ in a match's covariance, as a share of the search
+/// prior's: the prior is kept wide so the search never cuts off the true pose,
+/// wider than the corrected odometry's actual error.
+const PREDICTION_SIGMA_SHARE: f64 = 0.5;
 
 #[derive(Debug, Clone, Copy)]
 struct Fresh {
@@ -222,14 +226,20 @@ impl FrontEnd {
         let (pose, score, degenerate, covariance) = match self.search(&prediction) {
             Some((matched, score)) => {
                 let c = ScanConstraint::from_points(&self.points);
-                let degenerate = c.degenerate_directions(&self.degeneracy) as u8;
+                let degenerate = c.degenerate_directions(&self.degeneracy, Some(&pred_cov)) as u8;
                 self.degenerate_matches += u64::from(degenerate > 0);
-                let pose = c.remap(&prediction, &matched, &self.degeneracy);
+                let pose = c.remap(&prediction, &matched, &self.degeneracy, Some(&pred_cov));
                 let sigma = POINT_SIGMA_CELLS * self.p.resolution;
-                let cov = c.covariance(sigma * sigma, &pred_cov, &self.degeneracy);
+                let share = PREDICTION_SIGMA_SHARE * PREDICTION_SIGMA_SHARE;
+                let cov = c.covariance(sigma * sigma, &pred_cov, share, &self.degeneracy);
                 (pose, Some(score), degenerate, cov)
             }
-            None => (prediction, None, 3, pred_cov),
+            None => (
+                prediction,
+                None,
+                3,
+                pred_cov * PREDICTION_SIGMA_SHARE * PREDICTION_SIGMA_SHARE,
+            ),
         };
         self.accept(pose, odom, stamp_ns, stale);
         Tracked {

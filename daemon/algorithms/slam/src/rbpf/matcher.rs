@@ -499,7 +499,7 @@ pub fn refine(grid: &TiledGrid, scan: &PreparedScan, start: &Pose2, p: &MatchPar
         }
     }
     if let Some(c) = &scan.constraint {
-        let kept = c.remap(start, &pose, &p.degeneracy);
+        let kept = c.remap(start, &pose, &p.degeneracy, None);
         if kept != pose {
             pose = kept;
             best = score(grid, scan, &pose);
