@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
-    /// Scenario: a bundled one (mrl-clean, r32-light-puff, r32-dense-crossing, corridor) or a scenario TOML file.
+    /// Scenario: a bundled one (mrl-clean, r32-light-puff, r32-dense-crossing, corridor, aisles) or a scenario TOML file.
     pub scenario: String,
     /// Where to write the robot profile that points the drivers at the emulated devices
     /// (default: OUT/robot.toml).

@@ -35,14 +35,17 @@ pub enum BuiltinArena {
     Corridor,
     /// A room with table tops and low obstacles out of the laser's plane.
     Heights,
+    /// Two 20 m aisles either side of a rack: parallel walls longer than the laser's range.
+    Aisles,
 }
 
 impl BuiltinArena {
-    pub const ALL: [BuiltinArena; 4] = [
+    pub const ALL: [BuiltinArena; 5] = [
         BuiltinArena::Mrl,
         BuiltinArena::R32,
         BuiltinArena::Corridor,
         BuiltinArena::Heights,
+        BuiltinArena::Aisles,
     ];
 
     pub fn name(self) -> &'static str {
@@ -51,6 +54,7 @@ impl BuiltinArena {
             BuiltinArena::R32 => "r3.2",
             BuiltinArena::Corridor => "corridor",
             BuiltinArena::Heights => "heights",
+            BuiltinArena::Aisles => "aisles",
         }
     }
 
@@ -65,6 +69,7 @@ impl BuiltinArena {
             BuiltinArena::R32 => include_str!("../../arenas/r3.2.toml"),
             BuiltinArena::Corridor => include_str!("../../arenas/corridor.toml"),
             BuiltinArena::Heights => include_str!("../../arenas/heights.toml"),
+            BuiltinArena::Aisles => include_str!("../../arenas/aisles.toml"),
         }
     }
 

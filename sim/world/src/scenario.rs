@@ -55,7 +55,7 @@ use smokenav_smoke_codec::mq303a::SensorParams;
 use std::path::{Path, PathBuf};
 
 /// Scenarios shipped with the simulator: (name, text).
-pub const BUILTIN_SCENARIOS: [(&str, &str); 5] = [
+pub const BUILTIN_SCENARIOS: [(&str, &str); 6] = [
     ("mrl-clean", include_str!("../../scenarios/mrl-clean.toml")),
     (
         "r32-light-puff",
@@ -67,6 +67,7 @@ pub const BUILTIN_SCENARIOS: [(&str, &str); 5] = [
     ),
     ("corridor", include_str!("../../scenarios/corridor.toml")),
     ("heights", include_str!("../../scenarios/heights.toml")),
+    ("aisles", include_str!("../../scenarios/aisles.toml")),
 ];
 
 /// Most smoke sources, patches, waypoints or pulses a file may list.

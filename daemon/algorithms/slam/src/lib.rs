@@ -24,6 +24,7 @@
 
 pub mod backend;
 pub mod carmen;
+pub mod degeneracy;
 pub mod frontend;
 pub mod graph;
 pub mod grid;

@@ -20,14 +20,24 @@
 //!    (`closure_max_chi2`): a closure the rest of the graph contradicts is
 //!    taken out again and the previous poses restored.
 //! 4. The map is rendered from the nodes' scans at their optimised poses.
+//!
+//! Edge covariances come from the matches, not a constant: each tracked
+//! scan's covariance (the front end's, from the information its geometry
+//! carries, with the prediction's where the scan is degenerate) is
+//! propagated along the chain to the next node, so an edge along a
+//! featureless corridor is tight across it and loose along it, and a loop
+//! closure can stretch the corridor where odometry was wrong. A closure's
+//! covariance is its own match's the same way. Edges built from scans that
+//! were mostly sonar-painted are widened by `sonar_edge_widening`.
 
 use super::pose_graph::{Edge, Information, OptimizeParams, PoseGraph, RobustKernel};
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
+use crate::degeneracy::{DegeneracyParams, ScanConstraint};
 use crate::frontend::{FrontEnd, FrontEndParams};
 use crate::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use crate::rbpf::matcher::{MatchParams, PreparedScan, RobotBeam};
 use crate::scan::RangeScan;
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
 use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
@@ -35,6 +45,9 @@ use smokenav_shared_types::Pose2;
 /// Parameters of the graph back-end.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GraphParams {
+    /// Search window of the tracker when the pipeline's front end corrected the odometry, m and rad.
+    pub tracker_window_m: f64,
+    pub tracker_window_rad: f64,
     pub node_distance_m: f64,
     pub node_angle_rad: f64,
     /// Older nodes within this distance of the new node's estimate are loop candidates, m.
@@ -55,14 +68,20 @@ pub struct GraphParams {
     pub edge_sigma_t: (f64, f64),
     /// σ of a node-to-node edge's rotation: floor (rad) plus a share of the step's turn (rad/rad).
     pub edge_sigma_r: (f64, f64),
-    /// σ of a loop-closure edge, m and rad.
+    /// σ added to every loop-closure edge's own match covariance, m and rad.
     pub closure_sigma: (f64, f64),
+    /// σ of an endpoint's distance to its surface in a closure match, m.
+    pub closure_point_sigma_m: f64,
+    /// An edge's covariance is multiplied by `1 + this × (share of sonar-painted endpoints)`.
+    pub sonar_edge_widening: f64,
     pub optimize: OptimizeParams,
 }
 
 impl Default for GraphParams {
     fn default() -> Self {
         Self {
+            tracker_window_m: 0.3,
+            tracker_window_rad: 0.15,
             node_distance_m: 0.3,
             node_angle_rad: 0.3,
             closure_search_m: 4.0,
@@ -76,6 +95,8 @@ impl Default for GraphParams {
             edge_sigma_t: (0.02, 0.05),
             edge_sigma_r: (0.005, 0.05),
             closure_sigma: (0.1, 0.04),
+            closure_point_sigma_m: 0.05,
+            sonar_edge_widening: 3.0,
             optimize: OptimizeParams {
                 max_iterations: 30,
                 relative_tolerance: 1e-6,
@@ -136,6 +157,43 @@ pub struct GraphSlam {
     last_tracked: Pose2,
     /// Bumped by every change of the exported map (a node, an optimisation).
     revision: u64,
+    /// Covariance of the tracked motion since the last node (its frame).
+    since_node_cov: Matrix3<f64>,
+    /// Sum of the sonar shares of the scans since the last node, and their number.
+    since_node_sonar: (f64, u32),
+    degeneracy: DegeneracyParams,
+}
+
+/// Covariance of `a ⊕ b` from those of `a` (`ca`) and of `b` in `a`'s frame (`cb`).
+fn compose_covariance(a: &Pose2, ca: &Matrix3<f64>, b: &Pose2, cb: &Matrix3<f64>) -> Matrix3<f64> {
+    let (s, c) = a.theta.sin_cos();
+    let ja = Matrix3::new(
+        1.0,
+        0.0,
+        -(s * b.x + c * b.y),
+        0.0,
+        1.0,
+        c * b.x - s * b.y,
+        0.0,
+        0.0,
+        1.0,
+    );
+    let jb = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+    ja * ca * ja.transpose() + jb * cb * jb.transpose()
+}
+
+/// The information of covariance `cov` plus the floors `(σ_t, σ_r)`; `None` if not positive definite.
+fn information_of(cov: &Matrix3<f64>, floor: (f64, f64)) -> Option<Information> {
+    let c = cov
+        + Matrix3::from_diagonal(&Vector3::new(
+            floor.0 * floor.0,
+            floor.0 * floor.0,
+            floor.1 * floor.1,
+        ));
+    let c = 0.5 * (c + c.transpose());
+    let inv = c.cholesky()?.inverse();
+    let info: Information = std::array::from_fn(|r| std::array::from_fn(|k| inv[(r, k)]));
+    info.iter().flatten().all(|v| v.is_finite()).then_some(info)
 }
 
 fn diagonal(sigma_t: f64, sigma_r: f64) -> Information {
@@ -145,13 +203,23 @@ fn diagonal(sigma_t: f64, sigma_r: f64) -> Information {
 
 impl GraphSlam {
     pub fn new(cfg: &SlamSection, p: GraphParams) -> Self {
-        let fe = || {
+        let fe = |window_m: f64, window_rad: f64| {
             FrontEnd::new(FrontEndParams {
                 resolution: cfg.resolution_m,
-                window_m: cfg.frontend_window_m,
-                window_rad: cfg.frontend_window_rad,
+                window_m,
+                window_rad,
                 max_scans: cfg.frontend_scans as usize,
             })
+        };
+        // Behind the pipeline's front end the odometry is corrected already:
+        // the tracker only refines it, over a narrower (cheaper) window.
+        let (tw, tr) = if cfg.frontend {
+            (
+                p.tracker_window_m.min(cfg.frontend_window_m),
+                p.tracker_window_rad.min(cfg.frontend_window_rad),
+            )
+        } else {
+            (cfg.frontend_window_m, cfg.frontend_window_rad)
         };
         Self {
             p,
@@ -164,8 +232,8 @@ impl GraphSlam {
             ),
             resolution: cfg.resolution_m,
             min_laser_points: cfg.min_match_laser_points as usize,
-            tracker: fe(),
-            closer: fe(),
+            tracker: fe(tw, tr),
+            closer: fe(cfg.frontend_window_m, cfg.frontend_window_rad),
             prepared: PreparedScan::default(),
             graph: PoseGraph::new(),
             nodes: Vec::new(),
@@ -177,6 +245,9 @@ impl GraphSlam {
             last_odom: None,
             last_tracked: Pose2::default(),
             revision: 0,
+            since_node_cov: Matrix3::zeros(),
+            since_node_sonar: (0.0, 0),
+            degeneracy: DegeneracyParams::default(),
         }
     }
 
@@ -261,11 +332,32 @@ impl GraphSlam {
             self.stats.closures_low_score += 1;
             return false;
         }
+        // The match's covariance in the new node's frame: its scan's
+        // information, and the search window where the scan is degenerate
+        // (a uniform spread over ± w has variance w²/3).
+        let constraint = ScanConstraint::from_points(
+            &self.nodes[k]
+                .points
+                .iter()
+                .map(|&(x, y)| (x as f64, y as f64))
+                .collect::<Vec<_>>(),
+        );
+        let (wt, wr) = (self.p.closure_window_m, self.p.closure_window_rad);
+        let window = Matrix3::from_diagonal(&(Vector3::new(wt * wt, wt * wt, wr * wr) / 3.0));
+        let sigma = self.p.closure_point_sigma_m;
+        let in_k = constraint.covariance(sigma * sigma, &window, 1.0, &self.degeneracy);
+        // Rotated into the frame of node j, where the measurement is expressed.
+        let measurement = poses[j].between(&matched);
+        let (sn, cs) = measurement.theta.sin_cos();
+        let rot = Matrix3::new(cs, -sn, 0.0, sn, cs, 0.0, 0.0, 0.0, 1.0);
+        let cov = rot * in_k * rot.transpose();
+        let information = information_of(&cov, self.p.closure_sigma)
+            .unwrap_or_else(|| diagonal(self.p.closure_sigma.0, self.p.closure_sigma.1));
         let edge = Edge {
             from: j,
             to: k,
-            measurement: poses[j].between(&matched),
-            information: diagonal(self.p.closure_sigma.0, self.p.closure_sigma.1),
+            measurement,
+            information,
             robust: true,
         };
         let before = self.graph.poses().to_vec();
@@ -325,7 +417,16 @@ impl SlamBackend for GraphSlam {
         }
         // Move the tracked pose by the odometry since the last scan; the
         // scan is stored as an offset from its node like any other.
-        let tracked = self.last_tracked.compose(&last_odom.between(odom));
+        let step = last_odom.between(odom);
+        let tracked = self.last_tracked.compose(&step);
+        // Odometry only: the edge floor's share of the step, per step.
+        let (st, sr) = (
+            self.p.edge_sigma_t.1 * step.translation_norm(),
+            self.p.edge_sigma_r.1 * step.theta.abs(),
+        );
+        let step_cov = Matrix3::from_diagonal(&Vector3::new(st * st, st * st, sr * sr));
+        let since = self.last_node_tracked.between(&self.last_tracked);
+        self.since_node_cov = compose_covariance(&since, &self.since_node_cov, &step, &step_cov);
         self.last_odom = Some(*odom);
         self.last_tracked = tracked;
         let rel = self.last_node_tracked.between(&tracked);
@@ -375,18 +476,24 @@ impl SlamBackend for GraphSlam {
         } else {
             Pose2::default()
         };
-        let tracked = self
-            .tracker
-            .track(
-                self.prepared
-                    .points
-                    .iter()
-                    .filter(|p| p.from_laser)
-                    .map(|p| (p.hx, p.hy)),
-                &odom,
-                stamp_ns,
-            )
-            .pose;
+        let t = self.tracker.track(
+            self.prepared
+                .points
+                .iter()
+                .filter(|p| p.from_laser)
+                .map(|p| (p.hx, p.hy)),
+            &odom,
+            stamp_ns,
+        );
+        let tracked = t.pose;
+        if !self.nodes.is_empty() {
+            let since = self.last_node_tracked.between(&self.last_tracked);
+            let step = self.last_tracked.between(&tracked);
+            self.since_node_cov =
+                compose_covariance(&since, &self.since_node_cov, &step, &t.covariance);
+        }
+        self.since_node_sonar.0 += self.prepared.sonar_share;
+        self.since_node_sonar.1 += 1;
         self.last_odom = Some(odom);
         self.last_tracked = tracked;
         if self.nodes.is_empty() {
@@ -406,16 +513,29 @@ impl SlamBackend for GraphSlam {
         let guess = self.graph.poses()[last].compose(&rel);
         let k = self.add_node(guess);
         let d = rel.translation_norm();
+        let (sum, n) = self.since_node_sonar;
+        let sonar_share = if n > 0 { sum / n as f64 } else { 0.0 };
+        let widening = 1.0 + self.p.sonar_edge_widening * sonar_share;
+        // The step's own uncertainty (a floor that grows with the step, for
+        // the matching error the scans' geometry does not show) plus what the
+        // matches along the way measured.
+        let floor = (
+            self.p.edge_sigma_t.0 + self.p.edge_sigma_t.1 * d,
+            self.p.edge_sigma_r.0 + self.p.edge_sigma_r.1 * rel.theta.abs() + 0.01 * d,
+        );
+        // Sonar-painted scans widen all of it (their matches and the map they leave are coarser).
+        let information = information_of(&self.since_node_cov, floor)
+            .unwrap_or_else(|| diagonal(floor.0, floor.1))
+            .map(|row| row.map(|v| v / widening));
         self.graph.add_edge(Edge {
             from: last,
             to: k,
             measurement: rel,
-            information: diagonal(
-                self.p.edge_sigma_t.0 + self.p.edge_sigma_t.1 * d,
-                self.p.edge_sigma_r.0 + self.p.edge_sigma_r.1 * rel.theta.abs() + 0.01 * d,
-            ),
+            information,
             robust: false,
         });
+        self.since_node_cov = Matrix3::zeros();
+        self.since_node_sonar = (0.0, 0);
         self.last_node_tracked = tracked;
         self.scans.push((stamp_ns, k, Pose2::default()));
         if k.is_multiple_of(self.p.closure_every.max(1)) {
@@ -498,9 +618,13 @@ mod tests {
     ];
 
     fn cast(x: f64, y: f64, a: f64) -> Option<f64> {
+        cast_in(&WALLS, x, y, a)
+    }
+
+    fn cast_in(walls: &[(f64, f64, f64, f64)], x: f64, y: f64, a: f64) -> Option<f64> {
         let (dx, dy) = (a.cos(), a.sin());
         let mut best: Option<f64> = None;
-        for (x1, y1, x2, y2) in WALLS {
+        for &(x1, y1, x2, y2) in walls {
             let (ex, ey) = (x2 - x1, y2 - y1);
             let den = dx * ey - dy * ex;
             if den.abs() < 1e-12 {
@@ -564,6 +688,98 @@ mod tests {
             }
         }
         (slam, worst)
+    }
+
+    /// Node edges of a straight drive in `walls` (0.1 m per scan, range
+    /// 5.6 m; with `sonar_every` = n, all beams but every n-th marked as sonar-painted).
+    fn corridor_edges(
+        walls: &[(f64, f64, f64, f64)],
+        sonar_every: Option<usize>,
+        p: GraphParams,
+    ) -> Vec<Edge> {
+        let mut slam = GraphSlam::new(&SlamSection::default(), p);
+        for k in 0..40u64 {
+            let truth = Pose2::new(0.1 * k as f64, 0.0, 0.0);
+            let mut scan = RangeScan {
+                stamp_ns: k * 100_000_000,
+                laser_noise_factor: 1.0,
+                ..Default::default()
+            };
+            for i in 0..481 {
+                let a = -2.0 + i as f64 * 4.0 / 480.0;
+                let r = cast_in(walls, truth.x, truth.y, a).filter(|&r| r < 5.6);
+                let sonar = sonar_every.is_some_and(|n| i % n != 0);
+                scan.beams.push(Beam {
+                    angle: a as f32,
+                    range: r.map(|r| r as f32),
+                    kind: if sonar {
+                        BeamKind::Sonar
+                    } else {
+                        BeamKind::Laser
+                    },
+                });
+            }
+            slam.process(&scan, &Pose2::new(truth.x * 1.01, 0.0, 0.0));
+        }
+        slam.graph().edges().to_vec()
+    }
+
+    const CORRIDOR: [(f64, f64, f64, f64); 2] =
+        [(-30.0, -1.2, 30.0, -1.2), (-30.0, 1.3, 30.0, 1.3)];
+    /// The same with a cross wall and pillars ahead and behind, in range.
+    const FEATURES: [(f64, f64, f64, f64); 5] = [
+        (-30.0, -1.2, 30.0, -1.2),
+        (-30.0, 1.3, 30.0, 1.3),
+        (7.0, -1.2, 7.0, 1.3),
+        (2.0, 1.3, 2.0, 0.9),
+        (-1.5, -1.2, -1.5, -0.8),
+    ];
+
+    #[test]
+    fn edge_covariance_follows_what_the_scans_constrain() {
+        let corridor = corridor_edges(&CORRIDOR, None, GraphParams::default());
+        let features = corridor_edges(&FEATURES, None, GraphParams::default());
+        assert!(corridor.len() >= 8 && features.len() >= 8);
+        let along = |e: &Edge| e.information[0][0];
+        let across = |e: &Edge| e.information[1][1];
+        for e in &corridor {
+            // Along a featureless corridor the edge is odometry's; across it, the walls'.
+            assert!(across(e) > 2.5 * along(e), "{:?}", e.information);
+        }
+        let mean =
+            |v: &[Edge], f: &dyn Fn(&Edge) -> f64| v.iter().map(f).sum::<f64>() / v.len() as f64;
+        assert!(
+            mean(&features, &along) > 1.8 * mean(&corridor, &along),
+            "features fix the position along the corridor: {} vs {}",
+            mean(&features, &along),
+            mean(&corridor, &along)
+        );
+    }
+
+    #[test]
+    fn edges_from_mostly_sonar_scans_are_wider() {
+        let log_det = |v: &[Edge]| {
+            v.iter()
+                .map(|e| {
+                    Matrix3::from_fn(|r, c| e.information[r][c])
+                        .determinant()
+                        .ln()
+                })
+                .sum::<f64>()
+                / v.len() as f64
+        };
+        // Two beams in three painted from sonar cones, with and without the widening.
+        let widened = log_det(&corridor_edges(&FEATURES, Some(3), GraphParams::default()));
+        let plain = log_det(&corridor_edges(
+            &FEATURES,
+            Some(3),
+            GraphParams {
+                sonar_edge_widening: 0.0,
+                ..GraphParams::default()
+            },
+        ));
+        // Share 2/3 and widening 3: covariance ×3, information determinant ÷27 (ln 27 ≈ 3.3).
+        assert!(widened < plain - 2.0, "{widened} vs {plain}");
     }
 
     #[test]

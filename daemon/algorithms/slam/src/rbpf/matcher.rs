@@ -12,7 +12,15 @@
 //! The pose is refined by deterministic hill climbing: try ± one step in x, y
 //! and θ, move to the best if it improves the score, otherwise halve the
 //! steps, `iterations` times (GMapping's optimiser).
+//!
+//! Then the degeneracy check: along a corridor longer than the laser's range
+//! the score is flat except where the particle's map ends, and the climb
+//! slides back onto it (the corridor shrinks). The refined pose keeps its
+//! correction only in the directions the scan's geometry constrains
+//! ([`ScanConstraint`]); elsewhere the particle stays where the motion model
+//! put it.
 
+use crate::degeneracy::{DegeneracyParams, ScanConstraint};
 use crate::grid::{TILE, TILE_SHIFT, Tile, TiledGrid};
 use crate::scan::{BeamKind, Endpoint, EndpointLimits, RangeScan};
 use smokenav_platform_config::SlamSection;
@@ -53,7 +61,12 @@ pub struct PreparedScan {
     pub sensor: Pose2,
     pub points: Vec<MatchPoint>,
     pub beams: Vec<RobotBeam>,
+    /// What the laser endpoints constrain (robot frame).
+    pub constraint: Option<ScanConstraint>,
+    /// Share (0–1) of the endpoints painted from sonar cones.
+    pub sonar_share: f64,
     endpoints: Vec<Endpoint>,
+    laser_xy: Vec<(f64, f64)>,
 }
 
 /// The parameters of matching, taken from the config once.
@@ -71,6 +84,7 @@ pub struct MatchParams {
     pub astep: f64,
     pub iterations: u32,
     pub null_likelihood: f64,
+    pub degeneracy: DegeneracyParams,
 }
 
 impl MatchParams {
@@ -88,6 +102,7 @@ impl MatchParams {
             astep: c.astep_rad,
             iterations: c.iterations,
             null_likelihood: c.null_likelihood,
+            degeneracy: DegeneracyParams::default(),
         }
     }
 }
@@ -154,6 +169,19 @@ impl PreparedScan {
                 from_laser: e.kind == BeamKind::Laser,
             });
         }
+        self.laser_xy.clear();
+        self.laser_xy.extend(
+            self.points
+                .iter()
+                .filter(|p| p.from_laser)
+                .map(|p| (p.hx, p.hy)),
+        );
+        self.sonar_share = if self.points.is_empty() {
+            0.0
+        } else {
+            1.0 - self.laser_xy.len() as f64 / self.points.len() as f64
+        };
+        self.constraint = Some(ScanConstraint::from_points(&self.laser_xy));
     }
 }
 
@@ -468,6 +496,14 @@ pub fn refine(grid: &TiledGrid, scan: &PreparedScan, start: &Pose2, p: &MatchPar
         if s >= best - 1e-9 * best.abs() {
             best = s;
             pose = polished;
+        }
+    }
+    if let Some(c) = &scan.constraint {
+        let kept = c.remap(start, &pose, &p.degeneracy, None);
+        if kept != pose {
+            pose = kept;
+            best = score(grid, scan, &pose);
+            evaluations += 1;
         }
     }
     pose.theta = smokenav_shared_types::odom::normalize_angle(pose.theta);
