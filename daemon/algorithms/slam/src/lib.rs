@@ -25,6 +25,7 @@
 pub mod backend;
 pub mod carmen;
 pub mod frontend;
+pub mod fuzzy;
 pub mod graph;
 pub mod grid;
 pub mod motion_filter;

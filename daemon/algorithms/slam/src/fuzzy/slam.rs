@@ -1,0 +1,322 @@
+//! The fuzzy-registration back-end behind [`SlamBackend`] (`[slam] backend = "fuzzy"`).
+//!
+//! Per scan used (the paper's flowchart):
+//! 1. the readings become a local fuzzy map `Mo(t+1)`, `Ms(t+1)` in the robot frame;
+//! 2. the motion since the last scan is predicted from the odometry (the
+//!    pipeline's, front-end corrected when `[slam] frontend` is on);
+//! 3. both local maps are cropped by the prediction (eqs. 8–9) and the new
+//!    one registered to the old by maximising their overlap over a window
+//!    around the prediction (Cuckoo search or the correlative grid);
+//! 4. the scan is painted into the global `Mo` / `Ms` at the registered
+//!    pose by fuzzy union.
+//!
+//! Registration is scan to scan: no loop closure, so the error of each step
+//! accumulates. A registration whose overlap stays below `min_overlap`, or
+//! with fewer than [`MIN_POINTS`] cells to match, keeps the prediction (counted).
+
+use super::confidence::ConfidenceModel;
+use super::map::{FuzzyBeam, FuzzyGrid, fuzzy_beams};
+use super::registration::{
+    CuckooParams, FuzzyPoint, Reference, SearchResult, Window, correlative, crop, cuckoo,
+    occupied_points,
+};
+use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
+use crate::rng::Rng;
+use crate::scan::RangeScan;
+use nalgebra::Matrix3;
+use smokenav_platform_config::{FuzzySearch, FuzzySection, SlamSection};
+use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Pose2;
+
+/// Fewer matchable cells than this and the prediction is kept.
+pub const MIN_POINTS: usize = 20;
+
+/// Counters of the fuzzy back-end.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FuzzyStats {
+    pub scans: u64,
+    pub registrations: u64,
+    /// Registrations refused (overlap below `min_overlap` or too few cells).
+    pub fallbacks: u64,
+    pub evaluations: u64,
+    /// Sum of the overlap reached by the accepted registrations.
+    pub overlap_sum: f64,
+}
+
+/// A local map and its occupied cells, in the robot frame of its scan.
+struct Local {
+    grid: FuzzyGrid,
+    points: Vec<FuzzyPoint>,
+}
+
+pub struct FuzzySlam {
+    p: FuzzySection,
+    model: ConfidenceModel,
+    max_range: f64,
+    rng: Rng,
+    beams: Vec<FuzzyBeam>,
+    prev: Option<Local>,
+    next: Local,
+    cropped_new: Vec<FuzzyPoint>,
+    cropped_prev: Vec<FuzzyPoint>,
+    reference: Reference,
+    global: FuzzyGrid,
+    initial: Pose2,
+    /// Map pose and odometry of the last scan used.
+    anchor: Option<(Pose2, Option<Pose2>)>,
+    pose: Option<Pose2>,
+    keep_trajectory: bool,
+    trajectory: Vec<StampedPose>,
+    stats: FuzzyStats,
+    last_search: Option<SearchResult>,
+    revision: u64,
+}
+
+impl FuzzySlam {
+    pub fn new(cfg: &SlamSection, keep_trajectory: bool) -> Self {
+        let p = cfg.fuzzy.clone();
+        let local = || Local {
+            grid: FuzzyGrid::square(cfg.resolution_m, p.local_radius_m),
+            points: Vec::new(),
+        };
+        Self {
+            model: ConfidenceModel::from_config(&p),
+            max_range: cfg.max_range_m.min(cfg.max_urange_m.max(p.local_radius_m)),
+            rng: Rng::new(cfg.seed),
+            beams: Vec::new(),
+            prev: None,
+            next: local(),
+            cropped_new: Vec::new(),
+            cropped_prev: Vec::new(),
+            reference: Reference::default(),
+            global: FuzzyGrid::empty(cfg.resolution_m),
+            initial: Pose2::default(),
+            anchor: None,
+            pose: None,
+            keep_trajectory,
+            trajectory: Vec::new(),
+            stats: FuzzyStats::default(),
+            last_search: None,
+            revision: 0,
+            p,
+        }
+    }
+
+    pub fn stats(&self) -> FuzzyStats {
+        self.stats
+    }
+
+    /// The global fuzzy map (`Mo`, `Ms`; eq. 7 through [`FuzzyGrid::combined`]).
+    pub fn fuzzy_map(&self) -> &FuzzyGrid {
+        &self.global
+    }
+
+    pub fn unknown_level(&self) -> f64 {
+        self.p.unknown_level
+    }
+
+    /// The last registration's search result.
+    pub fn last_search(&self) -> Option<SearchResult> {
+        self.last_search
+    }
+
+    fn update(&self, stamp_ns: u64, pose: Pose2, processed: bool) -> SlamUpdate {
+        SlamUpdate {
+            stamp_ns,
+            pose,
+            // Scan-to-scan registration gives no covariance of the pose:
+            // zero says "unknown" to the pipeline's callers, as the graph does.
+            covariance: Matrix3::zeros(),
+            n_eff: 1.0,
+            particles: 1,
+            processed,
+            resampled: false,
+        }
+    }
+
+    fn record(&mut self, stamp_ns: u64, pose: Pose2) {
+        self.pose = Some(pose);
+        if self.keep_trajectory {
+            self.trajectory.push(StampedPose { stamp_ns, pose });
+        }
+    }
+
+    /// Registers `next` to `prev` around `predicted` (prev frame ← next frame).
+    fn register(&mut self, predicted: Pose2) -> Pose2 {
+        let Some(prev) = &self.prev else {
+            return predicted;
+        };
+        crop(
+            &self.next.points,
+            &prev.grid,
+            &predicted,
+            &mut self.cropped_new,
+        );
+        crop(
+            &prev.points,
+            &self.next.grid,
+            &predicted.inverse(),
+            &mut self.cropped_prev,
+        );
+        if self.cropped_new.len() < MIN_POINTS || self.cropped_prev.len() < MIN_POINTS {
+            self.stats.fallbacks += 1;
+            self.last_search = None;
+            return predicted;
+        }
+        self.reference
+            .build(&prev.grid, &self.cropped_prev, self.p.match_radius_m);
+        let w = Window {
+            centre: predicted,
+            window_m: self.p.window_m,
+            window_rad: self.p.window_rad,
+        };
+        let (reference, points) = (&self.reference, &self.cropped_new);
+        let cost = |t: &Pose2| reference.overlap(points, t);
+        let r = match self.p.search {
+            FuzzySearch::Cuckoo => cuckoo(
+                &w,
+                &CuckooParams {
+                    nests: self.p.cuckoo_nests as usize,
+                    generations: self.p.cuckoo_generations as usize,
+                    abandon: self.p.cuckoo_abandon,
+                    beta: self.p.cuckoo_levy_beta,
+                    alpha: self.p.cuckoo_alpha,
+                },
+                &mut self.rng,
+                cost,
+            ),
+            FuzzySearch::Correlative => correlative(
+                &w,
+                self.p.correlative_step_m,
+                self.p.correlative_step_rad,
+                cost,
+            ),
+        };
+        self.stats.evaluations += u64::from(r.evaluations);
+        self.last_search = Some(r);
+        if r.cost < self.p.min_overlap {
+            self.stats.fallbacks += 1;
+            return predicted;
+        }
+        self.stats.registrations += 1;
+        self.stats.overlap_sum += r.cost;
+        r.motion
+    }
+}
+
+impl SlamBackend for FuzzySlam {
+    fn name(&self) -> &'static str {
+        "fuzzy"
+    }
+
+    fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
+        self.stats.scans += 1;
+        let odom = odom.is_finite().then_some(*odom);
+        let radius = self.p.local_radius_m;
+        fuzzy_beams(scan, &self.model, self.max_range, radius, &mut self.beams);
+        self.next.grid.clear();
+        self.next.grid.paint(&scan.sensor_pose, &self.beams, radius);
+        occupied_points(
+            &self.next.grid,
+            self.p.max_points as usize,
+            &mut self.next.points,
+        );
+        let pose = match self.anchor {
+            None => self.initial,
+            Some((anchor, anchor_odom)) => {
+                let predicted = match (anchor_odom, odom) {
+                    (Some(a), Some(o)) => a.between(&o),
+                    _ => Pose2::default(),
+                };
+                let motion = self.register(predicted);
+                anchor.compose(&motion)
+            }
+        };
+        let sensor = pose.compose(&scan.sensor_pose);
+        self.global.ensure(
+            (sensor.x - radius, sensor.y - radius),
+            (sensor.x + radius, sensor.y + radius),
+        );
+        self.global.paint(&sensor, &self.beams, radius);
+        self.revision += 1;
+        // The new local map becomes the reference; the old one's buffers are reused.
+        let old = self.prev.replace(std::mem::replace(
+            &mut self.next,
+            Local {
+                grid: FuzzyGrid::empty(0.0),
+                points: Vec::new(),
+            },
+        ));
+        self.next = old.unwrap_or_else(|| Local {
+            grid: FuzzyGrid::square(self.global.resolution, radius),
+            points: Vec::new(),
+        });
+        self.anchor = Some((pose, odom));
+        self.record(scan.stamp_ns, pose);
+        self.update(scan.stamp_ns, pose, true)
+    }
+
+    fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate {
+        let pose = match self.anchor {
+            Some((anchor, Some(a))) if odom.is_finite() => anchor.compose(&a.between(odom)),
+            Some((anchor, _)) => self.pose.unwrap_or(anchor),
+            None => return self.update(stamp_ns, self.initial, false),
+        };
+        self.record(stamp_ns, pose);
+        self.update(stamp_ns, pose, false)
+    }
+
+    fn odometry_reset(&mut self) {
+        // The next prediction cannot use the old frame: register from the
+        // last pose with no predicted motion instead.
+        if let Some((_, odom)) = &mut self.anchor {
+            *odom = None;
+        }
+        if let (Some(pose), Some((anchor, _))) = (self.pose, &mut self.anchor) {
+            *anchor = pose;
+        }
+    }
+
+    fn set_initial_pose(&mut self, pose: Pose2) {
+        if self.anchor.is_none() {
+            self.initial = pose;
+        }
+    }
+
+    fn pose(&self) -> Option<Pose2> {
+        self.pose
+    }
+
+    fn map_revision(&self) -> u64 {
+        self.revision
+    }
+
+    fn map(&self) -> Option<OccupancyGrid> {
+        self.anchor
+            .is_some()
+            .then(|| self.global.to_occupancy_grid(self.p.unknown_level))
+    }
+
+    fn trajectory(&self) -> Vec<StampedPose> {
+        self.trajectory.clone()
+    }
+
+    fn metrics(&self, emit: &mut dyn FnMut(&'static str, f64)) {
+        let s = &self.stats;
+        emit("fuzzy_registrations", s.registrations as f64);
+        emit("fuzzy_fallbacks", s.fallbacks as f64);
+        emit("fuzzy_evaluations", s.evaluations as f64);
+        emit(
+            "fuzzy_mean_overlap",
+            if s.registrations > 0 {
+                s.overlap_sum / s.registrations as f64
+            } else {
+                0.0
+            },
+        );
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
