@@ -27,7 +27,7 @@ pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::{LaserSection, ScanLayout};
 pub use robot::{BusSection, Platform, RobotSection};
 pub use slam::{SlamBackendKind, SlamInput, SlamSection};
-pub use slam_fuzzy::{FuzzySearch, FuzzySection};
+pub use slam_fuzzy::{FuzzyReference, FuzzySearch, FuzzySection};
 pub use smoke::{AdcBackend, SmokeSection};
 pub use sonar::{SonarSection, Transducer};
 pub use validate::{Issue, Validate, Validator, key_line};

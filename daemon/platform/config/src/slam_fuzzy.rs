@@ -29,6 +29,19 @@ pub enum FuzzySearch {
     Correlative,
 }
 
+/// What a new local map is registered to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum FuzzyReference {
+    /// The previous local map (the paper's section 3: scan to scan).
+    #[serde(rename = "previous")]
+    Previous,
+    /// The part of the global fuzzy map around the predicted pose (the
+    /// paper's abstract: "selected parts of a developing global fuzzy map").
+    #[default]
+    #[serde(rename = "global")]
+    Global,
+}
+
 /// `[slam.fuzzy]`: every key optional, unknown keys rejected.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -56,6 +69,8 @@ pub struct FuzzySection {
     pub local_radius_m: f64,
     /// Registration search: `cuckoo` or `correlative`.
     pub search: FuzzySearch,
+    /// What a new local map is registered to: `global` or `previous`.
+    pub reference: FuzzyReference,
     /// Translational search window around the predicted motion, ± m.
     pub window_m: f64,
     /// Rotational search window around the predicted motion, ± rad.
@@ -96,6 +111,7 @@ impl Default for FuzzySection {
             unknown_level: 0.3,
             local_radius_m: 10.0,
             search: FuzzySearch::Cuckoo,
+            reference: FuzzyReference::Global,
             window_m: 0.25,
             window_rad: 0.15,
             match_radius_m: 0.15,

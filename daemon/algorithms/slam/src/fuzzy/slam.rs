@@ -24,7 +24,7 @@ use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
 use crate::rng::Rng;
 use crate::scan::RangeScan;
 use nalgebra::Matrix3;
-use smokenav_platform_config::{FuzzySearch, FuzzySection, SlamSection};
+use smokenav_platform_config::{FuzzyReference, FuzzySearch, FuzzySection, SlamSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
 
@@ -59,6 +59,7 @@ pub struct FuzzySlam {
     next: Local,
     cropped_new: Vec<FuzzyPoint>,
     cropped_prev: Vec<FuzzyPoint>,
+    global_points: Vec<FuzzyPoint>,
     reference: Reference,
     global: FuzzyGrid,
     initial: Pose2,
@@ -88,6 +89,7 @@ impl FuzzySlam {
             next: local(),
             cropped_new: Vec::new(),
             cropped_prev: Vec::new(),
+            global_points: Vec::new(),
             reference: Reference::default(),
             global: FuzzyGrid::empty(cfg.resolution_m),
             initial: Pose2::default(),
@@ -142,7 +144,7 @@ impl FuzzySlam {
     }
 
     /// Registers `next` to `prev` around `predicted` (prev frame ← next frame).
-    fn register(&mut self, predicted: Pose2) -> Pose2 {
+    fn register(&mut self, anchor: Pose2, predicted: Pose2) -> Pose2 {
         let Some(prev) = &self.prev else {
             return predicted;
         };
@@ -152,8 +154,15 @@ impl FuzzySlam {
             &predicted,
             &mut self.cropped_new,
         );
+        let reference_points = match self.p.reference {
+            FuzzyReference::Previous => &prev.points,
+            FuzzyReference::Global => {
+                global_points(&self.global, &anchor, &prev.grid, &mut self.global_points);
+                &self.global_points
+            }
+        };
         crop(
-            &prev.points,
+            reference_points,
             &self.next.grid,
             &predicted.inverse(),
             &mut self.cropped_prev,
@@ -204,6 +213,40 @@ impl FuzzySlam {
     }
 }
 
+/// The occupied cells of `global` inside `frame`'s extent around `anchor`,
+/// in the anchor's robot frame.
+fn global_points(global: &FuzzyGrid, anchor: &Pose2, frame: &FuzzyGrid, out: &mut Vec<FuzzyPoint>) {
+    out.clear();
+    let half = 0.5 * frame.width as f64 * frame.resolution;
+    let res = global.resolution;
+    let to_cell = |v: f64, o: f64, n: usize| (((v - o) / res).floor().max(0.0) as usize).min(n);
+    let (x0, x1) = (
+        to_cell(anchor.x - half, global.origin.0, global.width),
+        to_cell(anchor.x + half, global.origin.0, global.width),
+    );
+    let (y0, y1) = (
+        to_cell(anchor.y - half, global.origin.1, global.height),
+        to_cell(anchor.y + half, global.origin.1, global.height),
+    );
+    let inv = anchor.inverse();
+    let (s, c) = inv.theta.sin_cos();
+    for gy in y0..y1 {
+        for gx in x0..x1 {
+            let i = gy * global.width + gx;
+            let w = global.mo[i];
+            if w <= 0.0 {
+                continue;
+            }
+            let (x, y) = global.centre(i);
+            out.push(FuzzyPoint {
+                x: (inv.x + c * x - s * y) as f32,
+                y: (inv.y + s * x + c * y) as f32,
+                w,
+            });
+        }
+    }
+}
+
 impl SlamBackend for FuzzySlam {
     fn name(&self) -> &'static str {
         "fuzzy"
@@ -228,7 +271,7 @@ impl SlamBackend for FuzzySlam {
                     (Some(a), Some(o)) => a.between(&o),
                     _ => Pose2::default(),
                 };
-                let motion = self.register(predicted);
+                let motion = self.register(anchor, predicted);
                 anchor.compose(&motion)
             }
         };
