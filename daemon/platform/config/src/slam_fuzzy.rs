@@ -114,7 +114,7 @@ impl Default for FuzzySection {
             reference: FuzzyReference::Global,
             window_m: 0.25,
             window_rad: 0.15,
-            match_radius_m: 0.15,
+            match_radius_m: 0.1,
             max_points: 500,
             min_overlap: 0.15,
             cuckoo_nests: 15,

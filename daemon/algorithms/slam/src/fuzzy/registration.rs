@@ -7,19 +7,26 @@
 //! new scan did: what emerged or disappeared between the scans cannot be
 //! matched and would pull the registration.
 //!
-//! **Cost.** The fuzzy intersection of the cropped maps, normalised by the
-//! new map's mass: Σₖ min(wₖ, D(T pₖ)) / Σₖ wₖ over the new map's occupied
-//! cells pₖ (confidence wₖ) moved by the candidate motion T, where D is the
-//! cropped previous `Mo` dilated by a parabola of radius `match_radius_m`
-//! (the paper's profile again, so a cell near a wall still overlaps a
-//! little and the cost has a slope for the search to climb). 1: every
-//! confident cell lands on an equally confident one.
+//! **Cost.** The overlap of the cropped maps under the product t-norm,
+//! normalised by the new map's mass: Σₖ wₖ·D(T pₖ) / Σₖ wₖ over the new local
+//! map's peaks pₖ (its readings, confidence wₖ) moved by the candidate
+//! motion T. D is the cropped reference `Mo` dilated by a parabola of
+//! radius `match_radius_m` (the paper's profile again, so a reading near a
+//! wall still overlaps a little and the cost has a slope for the search to
+//! climb), bilinear between cells.
+//!
+//! Measured and dropped: min(wₖ, D) (the minimum t-norm) saturates wherever
+//! the reference is the more confident — always against a global map built
+//! by union — leaving a plateau around the optimum; D as the reference's
+//! bare support (confidence ignored) made the registration to the global
+//! map, whose walls the union thickens, several times less accurate in the
+//! test room.
 //!
 //! **Searches.** [`cuckoo`], Cuckoo search by Lévy flights (Yang & Deb 2009),
 //! as the paper uses, seeded; and [`correlative`], an exhaustive
 //! coarse-to-fine grid on the same cost (deterministic, the comparison).
 
-use super::map::FuzzyGrid;
+use super::map::{FuzzyBeam, FuzzyGrid};
 use crate::rng::Rng;
 use smokenav_shared_types::Pose2;
 
@@ -54,6 +61,35 @@ pub fn occupied_points(g: &FuzzyGrid, max: usize, out: &mut Vec<FuzzyPoint>) {
     }
 }
 
+/// The peaks of a local map in polar form, B at each reading itself (K
+/// times its lateral confidence), in the robot frame of `sensor`, thinned
+/// evenly to at most `max` points. Matched instead of the Cartesian cells
+/// these readings light, whose centres sit up to half a cell off the
+/// reading: that rounding biases the registration, and its error adds up
+/// from scan to scan.
+pub fn reading_points(sensor: &Pose2, beams: &[FuzzyBeam], max: usize, out: &mut Vec<FuzzyPoint>) {
+    out.clear();
+    let n = beams
+        .iter()
+        .filter(|b| b.hit && b.k * b.lateral > 0.0)
+        .count();
+    let stride = n.div_ceil(max.max(1)).max(1);
+    for (k, b) in beams
+        .iter()
+        .filter(|b| b.hit && b.k * b.lateral > 0.0)
+        .enumerate()
+    {
+        if k % stride == 0 {
+            let (s, c) = (sensor.theta + b.angle).sin_cos();
+            out.push(FuzzyPoint {
+                x: (sensor.x + c * b.range) as f32,
+                y: (sensor.y + s * b.range) as f32,
+                w: (b.k * b.lateral) as f32,
+            });
+        }
+    }
+}
+
 #[inline]
 fn apply(t: &Pose2, (s, c): (f64, f64), p: &FuzzyPoint) -> (f64, f64) {
     let (x, y) = (f64::from(p.x), f64::from(p.y));
@@ -71,7 +107,7 @@ pub fn crop(points: &[FuzzyPoint], other: &FuzzyGrid, t: &Pose2, out: &mut Vec<F
     }));
 }
 
-/// The reference side of the cost: the cropped previous `Mo`, dilated.
+/// The reference side of the cost: the cropped reference `Mo`, dilated.
 #[derive(Debug, Clone, Default)]
 pub struct Reference {
     resolution: f64,
@@ -91,7 +127,7 @@ impl Reference {
         self.values.clear();
         self.values.resize(self.width * self.height, 0.0);
         let res = self.resolution;
-        let cells = (radius / res).floor() as isize;
+        let cells = (radius / res).ceil() as isize + 1;
         for p in points {
             let cx = ((f64::from(p.x) - self.origin.0) / res).floor() as isize;
             let cy = ((f64::from(p.y) - self.origin.1) / res).floor() as isize;
@@ -101,9 +137,12 @@ impl Reference {
                     if gx < 0 || gy < 0 || gx >= self.width as isize || gy >= self.height as isize {
                         continue;
                     }
-                    let d = ((dx * dx + dy * dy) as f64).sqrt() * res;
+                    // From the point itself, not its cell's centre (that rounding biases the match).
+                    let ccx = self.origin.0 + (gx as f64 + 0.5) * res;
+                    let ccy = self.origin.1 + (gy as f64 + 0.5) * res;
+                    let d = (ccx - f64::from(p.x)).hypot(ccy - f64::from(p.y));
                     let v = if radius > 0.0 {
-                        p.w * super::confidence::parabola(d, radius + 0.5 * res) as f32
+                        p.w * super::confidence::parabola(d, radius) as f32
                     } else {
                         p.w
                     };
@@ -116,15 +155,26 @@ impl Reference {
         }
     }
 
+    /// D at (x, y), bilinear between cell centres: a nearest-cell lookup
+    /// makes the cost a staircase with cell-wide flat steps, and the search
+    /// would wander anywhere on the top one.
     #[inline]
     fn at(&self, x: f64, y: f64) -> f32 {
-        let cx = ((x - self.origin.0) / self.resolution).floor();
-        let cy = ((y - self.origin.1) / self.resolution).floor();
-        if cx >= 0.0 && cy >= 0.0 && (cx as usize) < self.width && (cy as usize) < self.height {
-            self.values[cy as usize * self.width + cx as usize]
-        } else {
-            0.0
+        let u = (x - self.origin.0) / self.resolution - 0.5;
+        let v = (y - self.origin.1) / self.resolution - 0.5;
+        if !(u >= 0.0 && v >= 0.0) {
+            return 0.0;
         }
+        let (cx, cy) = (u as usize, v as usize);
+        if cx + 1 >= self.width || cy + 1 >= self.height {
+            return 0.0;
+        }
+        let (fx, fy) = ((u - cx as f64) as f32, (v - cy as f64) as f32);
+        let i = cy * self.width + cx;
+        let row0 = self.values[i] + fx * (self.values[i + 1] - self.values[i]);
+        let j = i + self.width;
+        let row1 = self.values[j] + fx * (self.values[j + 1] - self.values[j]);
+        row0 + fy * (row1 - row0)
     }
 
     /// The overlap of `points` moved by `t` with this reference, 0–1.
@@ -133,7 +183,7 @@ impl Reference {
         let (mut hit, mut mass) = (0.0f64, 0.0f64);
         for p in points {
             let (x, y) = apply(t, sc, p);
-            hit += f64::from(p.w.min(self.at(x, y)));
+            hit += f64::from(p.w * self.at(x, y));
             mass += f64::from(p.w);
         }
         if mass > 0.0 { hit / mass } else { 0.0 }
@@ -463,7 +513,8 @@ mod tests {
         assert_eq!(pts.len(), 80);
         let mut r = Reference::default();
         r.build(&g, &pts, 0.15);
-        assert!((r.overlap(&pts, &Pose2::default()) - 1.0).abs() < 1e-6);
+        // The product t-norm: a 0.7 cell on a 0.7 cell overlaps by 0.49 of its 0.7.
+        assert!((r.overlap(&pts, &Pose2::default()) - 0.7).abs() < 1e-6);
         let near = r.overlap(&pts, &Pose2::new(0.05, 0.0, 0.0));
         let far = r.overlap(&pts, &Pose2::new(0.3, 0.3, 0.0));
         assert!(near < 1.0 && near > far, "{near} {far}");
