@@ -257,6 +257,11 @@ impl FuzzyGrid {
             let dr = b.dr.max(res);
             // The angle a cell subtends at range r, or the beam's own bound if wider.
             let dth = |r: f64| b.dtheta.max((res / r.max(res)).atan());
+            // Free space takes a narrower floor (¾ cell): a ray grazing a wall
+            // must not clear the wall's cells, whose centres it passes a cell
+            // or less away — with `Ms` united over every scan, one such ray
+            // would erase the wall from the combined map for good.
+            let dth_free = |r: f64| b.dtheta.max((0.75 * res / r.max(res)).atan());
             // Ms: march along the ray; each cell met takes P at its centre.
             let reach = b.range.min(radius);
             let mut last = usize::MAX;
@@ -276,7 +281,14 @@ impl FuzzyGrid {
                 let rc = rx.hypot(ry);
                 let tc = ry.atan2(rx);
                 let p = b.lateral
-                    * confidence::free(rc, a + normalize_angle(tc - a), b.range, a, dr, dth(rc));
+                    * confidence::free(
+                        rc,
+                        a + normalize_angle(tc - a),
+                        b.range,
+                        a,
+                        dr,
+                        dth_free(rc),
+                    );
                 if p as f32 > self.ms[i] {
                     self.ms[i] = p as f32;
                 }
@@ -376,13 +388,13 @@ mod tests {
             g.mo[i]
         );
         assert!(g.mo[i] > 0.4);
-        // Free before the return: the cell centre (0.525, 0.025) lies half
-        // its own angular bound off the beam, so P ≈ 1 − 0.5² there.
+        // Free before the return: the cell centre (0.525, 0.025) lies ⅔ of
+        // its angular bound (¾ cell) off the beam, so P ≈ 1 − (⅔)² there.
         let rc = 0.525f64.hypot(0.025);
-        let p = 1.0 - (0.025f64.atan2(0.525) / (0.05 / rc).atan()).powi(2);
+        let p = 1.0 - (0.025f64.atan2(0.525) / (0.0375 / rc).atan()).powi(2);
         let ms = f64::from(g.ms[g.index(0.5, 0.0).unwrap()]);
         assert!(
-            (ms - p).abs() < 1e-6 && (ms - 0.75).abs() < 0.01,
+            (ms - p).abs() < 1e-6 && (ms - 5.0 / 9.0).abs() < 0.01,
             "free before the return: {ms}"
         );
         assert_eq!(
@@ -393,9 +405,10 @@ mod tests {
         assert_eq!(g.mo[g.index(1.3, 0.0).unwrap()], 0.0);
         let unknown = g.combined_at(1.3, 0.0, 0.3);
         assert_eq!(unknown, 0.3, "behind an obstacle: unknown");
+        // One ray leaves free space only partly sure: min(max(0.3, 0), 1 − P).
         assert!(
-            (g.combined_at(0.5, 0.0, 0.3) - (1.0 - p)).abs() < 1e-6,
-            "free space is dark"
+            (g.combined_at(0.5, 0.0, 0.3) - 0.3f64.min(1.0 - p)).abs() < 1e-6,
+            "free space of one ray"
         );
     }
 
