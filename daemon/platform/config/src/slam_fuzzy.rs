@@ -1,6 +1,6 @@
 //! `[slam.fuzzy]`: the fuzzy confidence model and the fuzzy-map registration
-//! back-end (Chen et al., "Fuzzy confidence maps for SLAM with a laser range
-//! finder": a parabolic confidence along each beam for the range error, one
+//! back-end (Hou et al. 2014, "Construction of Fuzzy Map for Autonomous Mobile
+//! Robots Based on Fuzzy Confidence Model": a parabolic confidence along each beam for the range error, one
 //! across it for the finite lateral resolution, local maps registered by
 //! Cuckoo search).
 //!

@@ -1,6 +1,4 @@
-//! The fuzzy confidence model of a range reading (Chen et al., fuzzy
-//! confidence maps for SLAM with a laser range finder, eqs. 1–4, after
-//! Oriolo et al.'s fuzzy sonar maps).
+//! The fuzzy confidence model of a range reading (Hou et al. 2014, eqs. 1–4).
 //!
 //! A reading (ρ, φ) says "obstacle near ρ along φ" with a confidence that
 //! falls parabolically with the distance to ρ (the range error bound δr,

@@ -1,5 +1,5 @@
-//! Fuzzy confidence maps and SLAM by registering them (Chen et al., fuzzy
-//! confidence maps for SLAM with a Hokuyo URG-04LX).
+//! Fuzzy confidence maps and SLAM by registering them (Hou et al. 2014, with
+//! a Hokuyo URG-04LX).
 //!
 //! - [`confidence`]: the confidence functions of a reading (eqs. 1–4) and
 //!   the combination rule (eq. 7), per beam kind.
