@@ -11,7 +11,7 @@
 
 use smokenav_algorithms_slam::fuzzy::registration::{
     CuckooParams, FuzzyPoint, Reference, SearchResult, Window, correlative, crop, cuckoo,
-    occupied_points,
+    reading_points,
 };
 use smokenav_algorithms_slam::fuzzy::{ConfidenceModel, FuzzyGrid, fuzzy_beams};
 use smokenav_algorithms_slam::offline::LogScans;
@@ -43,7 +43,7 @@ fn local(
     let mut g = FuzzyGrid::square(0.05, p.local_radius_m);
     g.paint(&scan.sensor_pose, &beams, p.local_radius_m);
     let mut pts = Vec::new();
-    occupied_points(&g, p.max_points as usize, &mut pts);
+    reading_points(&scan.sensor_pose, &beams, p.max_points as usize, &mut pts);
     (g, pts)
 }
 
