@@ -1,4 +1,4 @@
-//! Both SLAM back-ends over the MIT CSAIL log, side by side in one run, each
+//! The SLAM back-ends over the MIT CSAIL log, side by side in one run, each
 //! through the one SLAM pipeline (as the SLAM process and `smokenav slam` run
 //! them): total thread CPU time, per-scan CPU p50/p99/max and ATE of the final
 //! trajectory against GMapping's corrected poses (after the best rigid
