@@ -264,7 +264,17 @@ fn dense_smoke_sections_use_the_sonar_and_a_replay_gives_the_same_scans() {
     assert_eq!(h.metric("method"), Some(2.0));
     assert!((h.metric("sonar_usage").unwrap() - 1.0 / 3.0).abs() < 1e-9);
     assert_eq!(h.metric("sync_drops"), Some(0.0));
-    assert_eq!(h.state(), HealthState::Ok);
+    // Ok, or degraded only because the output rate fell when the test stopped
+    // feeding (health compares it with the expected 10 Hz).
+    match h.state() {
+        HealthState::Ok => {}
+        HealthState::Degraded => assert!(
+            h.last_error.as_str().contains("fused_hz"),
+            "degraded: {}",
+            h.last_error.as_str()
+        ),
+        other => panic!("fusion health {other:?}: {}", h.last_error.as_str()),
+    }
     rig.fusion.terminate(Duration::from_secs(5)).unwrap();
 }
 

@@ -81,7 +81,38 @@ fn expected_binaries() -> BTreeSet<String> {
     names
 }
 
-/// Every file an install must leave: relative path → (source, mode).
+/// `objcopy --strip-debug` copies of the expected binaries in `out`, the way
+/// the install puts them on the robot; prints the sizes before and after.
+fn stripped_binaries(bin_dir: &Path, out: &Path) -> PathBuf {
+    std::fs::create_dir_all(out).unwrap();
+    let (mut before, mut after) = (0u64, 0u64);
+    for b in expected_binaries() {
+        let (src, dst) = (bin_dir.join(&b), out.join(&b));
+        let st = Command::new("objcopy")
+            .arg("--strip-debug")
+            .arg(&src)
+            .arg(&dst)
+            .status()
+            .expect("objcopy (binutils) runs");
+        assert!(st.success(), "objcopy --strip-debug {}", src.display());
+        before += std::fs::metadata(&src).unwrap().len();
+        after += std::fs::metadata(&dst).unwrap().len();
+        let sections = Command::new("readelf").arg("-S").arg(&dst).output().unwrap();
+        assert!(
+            !String::from_utf8_lossy(&sections.stdout).contains(".debug_info"),
+            "{b} keeps its debug info"
+        );
+    }
+    eprintln!(
+        "binaries: {:.1} MB built, {:.1} MB installed without debug info",
+        before as f64 / 1e6,
+        after as f64 / 1e6
+    );
+    out.to_owned()
+}
+
+/// Every file an install must leave: relative path → (source, mode), the
+/// binaries taken from `bin_dir` (already stripped as the install strips).
 fn expected_tree(profile: &Path, bin_dir: &Path) -> BTreeMap<PathBuf, (PathBuf, u32)> {
     let mut t = BTreeMap::new();
     let mut add = |rel: PathBuf, src: PathBuf, mode: u32| {
@@ -361,7 +392,8 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
     let dest = work.path().join("dest");
     let stubs = host_command_stand_ins(work.path());
     let pioneer = workspace_root().join("config/pioneer-3dx.toml");
-    let expected = expected_tree(&pioneer, &bin_dir);
+    let stripped = stripped_binaries(&bin_dir, &work.path().join("stripped"));
+    let expected = expected_tree(&pioneer, &stripped);
     let binaries = expected_binaries();
 
     // First run: everything staged, nothing else.
@@ -407,10 +439,13 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
     assert!(out.stderr.is_empty(), "{}", text(&out));
     assert_tree(&dest, &expected, "second run");
 
-    // A different profile later: the robot's own profile is kept, the new one
-    // is put beside it for the operator to merge.
-    let scout = workspace_root().join("config/nomad-scout.toml");
-    let out = install(&dest, &scout, &bin_dir, &stubs);
+    // The same platform's profile, edited: the robot's own profile is kept,
+    // the new one put beside it for the operator to merge.
+    let edited = work.path().join("pioneer-edited.toml");
+    let mut text_of = std::fs::read_to_string(&pioneer).unwrap();
+    text_of.push_str("\n# edited\n");
+    std::fs::write(&edited, text_of).unwrap();
+    let out = install(&dest, &edited, &bin_dir, &stubs);
     assert!(out.status.success(), "{}", text(&out));
     assert!(
         String::from_utf8_lossy(&out.stdout).contains("keeping existing /etc/smokenav/robot.toml"),
@@ -420,9 +455,69 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
     let mut with_new = expected.clone();
     with_new.insert(
         PathBuf::from(PROFILE_FILE).with_extension("toml.new"),
-        (scout, 0o644),
+        (edited, 0o644),
     );
-    assert_tree(&dest, &with_new, "install of another profile");
+    assert_tree(&dest, &with_new, "install of an edited profile");
+
+    // Another platform's profile would leave the robot inconsistent (its
+    // driver enabled, the old profile kept): refused, naming the way out.
+    let scout = workspace_root().join("config/nomad-scout.toml");
+    let out = install(&dest, &scout, &bin_dir, &stubs);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("pioneer profile") && err.contains("--replace-profile"),
+        "{}",
+        text(&out)
+    );
+    assert_tree(&dest, &with_new, "refused switch");
+    // Asked for: the robot switches, the old profile kept as .old.
+    let out = Command::new(systemd_dir().join("install"))
+        .args(["--replace-profile", "--profile"])
+        .arg(&scout)
+        .arg("--bin-dir")
+        .arg(&bin_dir)
+        .env("DESTDIR", &dest)
+        .env(
+            "PATH",
+            format!("{}:{}", stubs.display(), std::env::var("PATH").unwrap_or_default()),
+        )
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+    let mut switched = expected.clone();
+    switched.insert(PROFILE_FILE.into(), (scout.clone(), 0o644));
+    switched.insert(
+        PathBuf::from(PROFILE_FILE).with_extension("toml.old"),
+        (pioneer.clone(), 0o644),
+    );
+    assert_tree(&dest, &switched, "switch to the Scout");
+
+    // Uninstall: everything but the profiles; --purge: nothing at all.
+    let uninstall = |purge: bool| {
+        let mut c = Command::new(systemd_dir().join("uninstall"));
+        if purge {
+            c.arg("--purge");
+        }
+        c.env("DESTDIR", &dest)
+            .env(
+                "PATH",
+                format!("{}:{}", stubs.display(), std::env::var("PATH").unwrap_or_default()),
+            )
+            .output()
+            .unwrap()
+    };
+    let out = uninstall(false);
+    assert!(out.status.success(), "{}", text(&out));
+    let kept: BTreeMap<_, _> = switched
+        .iter()
+        .filter(|(rel, _)| rel.starts_with("etc/smokenav"))
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    assert_tree(&dest, &kept, "uninstall");
+    let out = uninstall(true);
+    assert!(out.status.success(), "{}", text(&out));
+    assert_tree(&dest, &BTreeMap::new(), "uninstall --purge");
 
     let calls = std::fs::read_to_string(work.path().join("calls.log")).unwrap_or_default();
     assert!(calls.is_empty(), "DESTDIR mode ran host commands:\n{calls}");
@@ -459,4 +554,91 @@ fn unit_references_resolve_and_the_rundir_unit_creates_the_runtime_directory() {
         }
     }
     assert_eq!(creators, ["smokenav-rundir.service"]);
+}
+
+/// `systemd/package` builds a Debian package with exactly the install's file
+/// set; dpkg installs it into an empty root (as `--root`, scripts outside a
+/// chroot with `DPKG_ROOT` set, so they leave the host alone), removes it
+/// keeping the operator's files, and purges it.
+#[test]
+fn debian_package_installs_the_install_file_set_into_a_fresh_root() {
+    if !have("dpkg-deb", "--version") {
+        panic!("dpkg-deb is missing: this test runs on Debian, where dpkg is essential");
+    }
+    let bin_dir = bin("smokenav").parent().unwrap().to_owned();
+    let work = tempfile::tempdir().unwrap();
+    let stubs = host_command_stand_ins(work.path());
+    let pioneer = workspace_root().join("config/pioneer-3dx.toml");
+    let stripped = stripped_binaries(&bin_dir, &work.path().join("stripped"));
+    let expected = expected_tree(&pioneer, &stripped);
+    let path = format!("{}:{}", stubs.display(), std::env::var("PATH").unwrap_or_default());
+
+    let out = Command::new(systemd_dir().join("package"))
+        .arg("--bin-dir")
+        .arg(&bin_dir)
+        .arg("--out")
+        .arg(work.path())
+        .env("PATH", &path)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+    let deb = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
+    assert!(deb.exists(), "{}", text(&out));
+    eprintln!(
+        "{}: {:.1} MB",
+        deb.display(),
+        std::fs::metadata(&deb).unwrap().len() as f64 / 1e6
+    );
+
+    let root = work.path().join("root");
+    let db = root.join("var/lib/dpkg");
+    for d in ["info", "updates", "triggers"] {
+        std::fs::create_dir_all(db.join(d)).unwrap();
+    }
+    std::fs::write(db.join("status"), "").unwrap();
+    std::fs::write(db.join("available"), "").unwrap();
+    let dpkg = |args: &[&str]| {
+        let out = Command::new("dpkg")
+            .arg(format!("--root={}", root.display()))
+            .args([
+                "--force-not-root",
+                "--force-script-chrootless",
+                "--force-bad-path",
+                "--force-depends",
+                "--no-triggers",
+            ])
+            .arg(format!("--log={}", work.path().join("dpkg.log").display()))
+            .args(args)
+            .env("PATH", &path)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "dpkg {args:?}: {}", text(&out));
+    };
+    let installed = |root: &Path| {
+        let mut t = files_under(root);
+        t.retain(|p, _| !p.starts_with("var/lib/dpkg"));
+        t
+    };
+    dpkg(&["-i", deb.to_str().unwrap()]);
+    let mut found = installed(&root);
+    let mut want = expected.clone();
+    for (rel, (src, mode)) in &expected {
+        assert_eq!(found.remove(rel), Some(*mode), "{} from the .deb", rel.display());
+        assert!(same_bytes(&root.join(rel), src), "{} differs", rel.display());
+    }
+    assert!(found.is_empty(), "the .deb installs more than install does: {found:?}");
+    dpkg(&["-r", "smokenav"]);
+    want.retain(|rel, _| {
+        [PROFILE_FILE, SUDOERS_FILE]
+            .iter()
+            .any(|k| rel == Path::new(k))
+            || rel.starts_with(UDEV_DIR)
+    });
+    let left: BTreeSet<_> = installed(&root).into_keys().collect();
+    let want: BTreeSet<_> = want.into_keys().collect();
+    assert_eq!(left, want, "remove keeps exactly the operator's files");
+    dpkg(&["-P", "smokenav"]);
+    assert!(installed(&root).is_empty(), "{:?}", installed(&root));
+    let calls = std::fs::read_to_string(work.path().join("calls.log")).unwrap_or_default();
+    assert!(calls.is_empty(), "the package scripts ran host commands:\n{calls}");
 }

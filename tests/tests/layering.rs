@@ -160,3 +160,46 @@ fn nothing_on_the_robot_side_depends_on_the_simulator_or_an_emulator() {
         "robot-side crates linking the simulator: {offenders:#?}"
     );
 }
+
+/// Dependencies an algorithm library must not have: algorithms know nothing
+/// of the bus or of the processes that wire them.
+fn is_wiring(name: &str) -> bool {
+    name.starts_with("iceoryx2")
+        || name == "smokenav-platform-bus"
+        || name == "smokenav-platform-runtime"
+        || name.starts_with("smokenav-nodes-")
+        || name == "smokenav-tools-cli"
+}
+
+#[test]
+fn algorithms_know_nothing_of_the_bus_or_the_processes() {
+    let packages = packages();
+    let algorithms: Vec<&Package> = packages
+        .iter()
+        .filter(|p| p.folder.starts_with("daemon/algorithms/"))
+        .collect();
+    // The layer is populated (a rename of the folder would make this test vacuous).
+    for name in [
+        "smokenav-algorithms-fusion",
+        "smokenav-algorithms-slam",
+        "smokenav-algorithms-mapping",
+    ] {
+        assert!(
+            algorithms.iter().any(|p| p.name == name),
+            "{name} is not under daemon/algorithms/"
+        );
+    }
+    let offenders: BTreeSet<String> = algorithms
+        .iter()
+        .flat_map(|p| {
+            p.deps
+                .iter()
+                .filter(|(dep, kind)| kind.as_deref() != Some("dev") && is_wiring(dep))
+                .map(move |(dep, _)| format!("{} -> {dep}", p.name))
+        })
+        .collect();
+    assert!(
+        offenders.is_empty(),
+        "algorithm libraries depending on the bus or a process: {offenders:#?}"
+    );
+}

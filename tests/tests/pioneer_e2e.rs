@@ -234,7 +234,8 @@ fn crashed_controller_stops_the_robot_within_the_0_5_s_command_timeout() {
 }
 
 /// Issue #22 point 3: from the controller's SIGKILL to wheels at rest, with
-/// the profile's command timeout and the emulator's 1 m/s² deceleration.
+/// the profile's command timeout and E_STOP (the emulator's ramp would be
+/// 1 m/s²: 523 ms and 0.114 m with a plain VEL 0).
 #[test]
 fn crashed_controller_at_0_3_mps_leaves_the_robot_at_standstill_within_0_5_s() {
     let robot = RobotConfig::default();
@@ -271,19 +272,19 @@ fn crashed_controller_at_0_3_mps_leaves_the_robot_at_standstill_within_0_5_s() {
         (st.robot.pose.x_mm - at_kill.x_mm).hypot(st.robot.pose.y_mm - at_kill.y_mm) / 1000.0;
     eprintln!(
         "standstill {:.0} ms and {coast_m:.3} m after the controller was killed at 0.3 m/s \
-         (cmd_timeout_s {timeout_s}, decel {decel_mps2} m/s²)",
+         (cmd_timeout_s {timeout_s}, E_STOP; ramp {decel_mps2} m/s²)",
         dt.as_secs_f64() * 1e3
     );
-    // Last command ≤ 0.1 s before the kill, then the timeout, then v / decel,
-    // plus the driver's loop and the motor model's 10 ms step.
-    let budget = Duration::from_secs_f64(timeout_s + 0.3 / decel_mps2 + 0.03);
+    // Last command ≤ 0.1 s before the kill, then the timeout, then E_STOP
+    // (no ramp: v / decel would add 0.3 s), plus the driver's loop and the
+    // motor model's 10 ms step. The goal is at rest within 0.5 s.
     assert!(
-        dt <= Duration::from_millis(530).min(budget),
-        "at rest {dt:?} after the crash (budget {budget:?})"
+        dt <= Duration::from_millis(500),
+        "at rest {dt:?} after the crash"
     );
-    // Braking distance at 0.3 m/s: ≤ 0.3 m/s · timeout + v² / 2a.
+    // Coasting: at most the time until the timeout at 0.3 m/s.
     assert!(
-        coast_m <= 0.3 * timeout_s + 0.09 / (2.0 * decel_mps2) + 0.01,
+        coast_m <= 0.3 * (timeout_s + 0.15),
         "coasted {coast_m:.3} m"
     );
     assert_eq!(st.robot.counters.watchdog_trips, 0);

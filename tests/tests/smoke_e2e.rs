@@ -110,6 +110,12 @@ fn serial_rig(test: &str, warmup: &str) -> (Rig, SerialEmulator) {
 }
 
 fn iio_rig(test: &str) -> (Rig, FakeIio) {
+    iio_rig_with(test, 12, true)
+}
+
+/// A 12-bit IIO device (stating its resolution in `scan_elements` or not)
+/// under a profile whose `adc_bits` says `profile_bits`.
+fn iio_rig_with(test: &str, profile_bits: u8, scan_type: bool) -> (Rig, FakeIio) {
     bin("smokenav-smoke");
     let dir = tempfile::tempdir().unwrap();
     let device = dir.path().join("iio:device0");
@@ -117,10 +123,40 @@ fn iio_rig(test: &str) -> (Rig, FakeIio) {
     // the driver's 10 Hz polling.
     let cfg = IioConfig {
         rate_hz: 50.0,
+        scan_type,
         ..IioConfig::new(board(12))
     };
     let emu = FakeIio::start_at(&device, cfg).unwrap();
-    (spawn_driver(test, dir, &device, 12, "0"), emu)
+    (spawn_driver(test, dir, &device, profile_bits, "0"), emu)
+}
+
+#[test]
+fn a_12_bit_iio_adc_reads_under_a_profile_that_says_10_bits() {
+    // Clean air is 3000 mV: 2457 counts of a 12-bit, 5 V device, above a
+    // 10-bit range. IIO states its own scale (and, with buffer support, its
+    // resolution), so the profile's guess must not refuse every reading.
+    for (name, scan_type) in [
+        ("smoke_iio_bits_typed", true),
+        ("smoke_iio_bits_scale", false),
+    ] {
+        let (rig, _emu) = iio_rig_with(name, 10, scan_type);
+        let ready = rig.wait_ready();
+        let last = ready.last().unwrap();
+        assert!(
+            (2450..=2465).contains(&last.raw_counts) && (last.raw_mv - 3000.0).abs() < 5.0,
+            "{name}: {} counts, {} mV",
+            last.raw_counts,
+            last.raw_mv
+        );
+        let h = rig.health_until(Duration::from_secs(5), |h| {
+            h.metric("samples").unwrap_or(0.0) >= 5.0
+        });
+        assert_eq!(
+            h.last().unwrap().metric("out_of_range"),
+            Some(0.0),
+            "{name}"
+        );
+    }
 }
 
 /// A puff: 12 ppm over 1 s, held 3 s, cleared over 1 s (t = 0 is now).

@@ -6,10 +6,13 @@
 //!   on PTYs; run the real drivers against them.
 //! - `smokenav-lab demo`: the smoke experiment of SmokeNav (Santos et al. 2015) end to end (what
 //!   `./demo` runs).
+//! - `smokenav-lab map3d`: laser + 3D sonar-cone occupancy fusion per rule
+//!   on a scenario with out-of-plane obstacles; writes an OctoMap `.bt`.
 
 use clap::{Parser, Subcommand};
 
 mod demo;
+mod map3d;
 mod sim;
 
 #[derive(Parser)]
@@ -29,11 +32,14 @@ enum Command {
     Sim(sim::SimArgs),
     /// The SmokeNav paper's smoke experiment end to end: live run, then laser-only vs SmokeNav v1 vs v2.
     Demo(demo::DemoArgs),
+    /// 2D/3D occupancy fusion compared per rule (LOP, LIOP, IOP, Bayes) on a scenario with out-of-plane obstacles.
+    Map3d(map3d::Map3dArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Sim(args) => sim::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Map3d(args) => map3d::run(args),
     }
 }

@@ -12,7 +12,7 @@
 //! update.
 
 use smokenav_sim_world::laser::{LaserModel, LaserParams, URG_STEPS};
-use smokenav_sim_world::rng::Rng;
+use smokenav_shared_types::Rng;
 use smokenav_sim_world::smoke::{SmokeField, SmokeParams};
 use smokenav_sim_world::sonar::{SonarModel, SonarParams};
 use smokenav_sim_world::{BuiltinArena, Pose2, Scenario, StepOutput, Vec2, World};

@@ -33,17 +33,24 @@ pub enum BuiltinArena {
     R32,
     /// SmokeNav Fig. 5/6: a plain corridor, where the Pioneer's oblique sonars see nothing.
     Corridor,
+    /// A room with table tops and low obstacles out of the laser's plane.
+    Heights,
 }
 
 impl BuiltinArena {
-    pub const ALL: [BuiltinArena; 3] =
-        [BuiltinArena::Mrl, BuiltinArena::R32, BuiltinArena::Corridor];
+    pub const ALL: [BuiltinArena; 4] = [
+        BuiltinArena::Mrl,
+        BuiltinArena::R32,
+        BuiltinArena::Corridor,
+        BuiltinArena::Heights,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             BuiltinArena::Mrl => "mrl",
             BuiltinArena::R32 => "r3.2",
             BuiltinArena::Corridor => "corridor",
+            BuiltinArena::Heights => "heights",
         }
     }
 
@@ -57,6 +64,7 @@ impl BuiltinArena {
             BuiltinArena::Mrl => include_str!("../../arenas/mrl.toml"),
             BuiltinArena::R32 => include_str!("../../arenas/r3.2.toml"),
             BuiltinArena::Corridor => include_str!("../../arenas/corridor.toml"),
+            BuiltinArena::Heights => include_str!("../../arenas/heights.toml"),
         }
     }
 
@@ -90,6 +98,9 @@ struct VectorFile {
 #[serde(deny_unknown_fields)]
 struct WallSpec {
     points: Vec<[f64; 2]>,
+    /// `[base, top]` above the floor, m; omitted: floor to ceiling.
+    #[serde(default)]
+    height_m: Option<[f64; 2]>,
     /// Join the last point back to the first.
     #[serde(default)]
     closed: bool,
@@ -103,6 +114,10 @@ struct BoxSpec {
     size: [f64; 2],
     #[serde(default)]
     yaw_deg: f64,
+    /// `[base, top]` above the floor, m (a table top: `[0.45, 0.55]`; a
+    /// low box: `[0.0, 0.2]`); omitted: floor to ceiling.
+    #[serde(default)]
+    height_m: Option<[f64; 2]>,
 }
 
 /// A round obstacle (column, bin), drawn as a 24-gon.
@@ -111,6 +126,9 @@ struct BoxSpec {
 struct CircleSpec {
     center: [f64; 2],
     radius: f64,
+    /// `[base, top]` above the floor, m; omitted: floor to ceiling.
+    #[serde(default)]
+    height_m: Option<[f64; 2]>,
 }
 
 /// A ray's first wall.
@@ -137,6 +155,8 @@ pub struct Arena {
     cell_items: Vec<u32>,
     /// When loaded from a pixel map: that map, returned as the ground truth.
     source_grid: Option<OccupancyGrid>,
+    /// Whether any segment spans less than the full height.
+    has_heights: bool,
 }
 
 impl Arena {
@@ -202,6 +222,7 @@ impl Arena {
             cell_items.extend_from_slice(l);
             cell_start.push(cell_items.len() as u32);
         }
+        let has_heights = segments.iter().any(|s| !s.is_full_height());
         Ok(Self {
             name: name.to_owned(),
             segments,
@@ -212,6 +233,7 @@ impl Arena {
             cell_start,
             cell_items,
             source_grid: None,
+            has_heights,
         })
     }
 
@@ -223,8 +245,23 @@ impl Arena {
             key,
             reason,
         };
+        let height = |key: String, h: Option<[f64; 2]>| -> Result<[f64; 2], SimError> {
+            match h {
+                None => Ok(crate::geom::FULL_HEIGHT),
+                Some([lo, hi])
+                    if lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi && hi <= 100.0 =>
+                {
+                    Ok([lo, hi])
+                }
+                Some(h) => Err(invalid(
+                    key,
+                    format!("[base, top] must satisfy 0 ≤ base < top ≤ 100 m, got {h:?}"),
+                )),
+            }
+        };
         let mut segs = Vec::new();
         for (i, w) in spec.wall.iter().enumerate() {
+            let z = height(format!("wall[{i}].height_m"), w.height_m)?;
             if w.points.len() < 2 {
                 return Err(invalid(
                     format!("wall[{i}].points"),
@@ -239,13 +276,14 @@ impl Arena {
             }
             let pts: Vec<Vec2> = w.points.iter().map(|p| Vec2::new(p[0], p[1])).collect();
             for pair in pts.windows(2) {
-                segs.push(Segment::new(pair[0], pair[1]));
+                segs.push(Segment::new(pair[0], pair[1]).with_height(z));
             }
             if w.closed && pts.len() > 2 {
-                segs.push(Segment::new(pts[pts.len() - 1], pts[0]));
+                segs.push(Segment::new(pts[pts.len() - 1], pts[0]).with_height(z));
             }
         }
         for (i, b) in spec.boxes.iter().enumerate() {
+            let z = height(format!("box[{i}].height_m"), b.height_m)?;
             if !(b.size[0] > 0.0 && b.size[1] > 0.0) {
                 return Err(invalid(
                     format!("box[{i}].size"),
@@ -260,7 +298,7 @@ impl Arena {
                 .map(|&(x, y)| c + Vec2::new(x, y).rotated(yaw))
                 .collect();
             for k in 0..4 {
-                segs.push(Segment::new(corners[k], corners[(k + 1) % 4]));
+                segs.push(Segment::new(corners[k], corners[(k + 1) % 4]).with_height(z));
             }
         }
         for (i, c) in spec.circle.iter().enumerate() {
@@ -270,6 +308,7 @@ impl Arena {
                     format!("must be > 0 m, got {}", c.radius),
                 ));
             }
+            let z = height(format!("circle[{i}].height_m"), c.height_m)?;
             const SIDES: usize = 24;
             let ctr = Vec2::new(c.center[0], c.center[1]);
             for k in 0..SIDES {
@@ -280,7 +319,7 @@ impl Arena {
                     ctr + Vec2::from_angle(a1) * c.radius,
                 );
                 s.normal = Vec2::from_angle((a0 + a1) / 2.0); // radial, as the real column's
-                segs.push(s);
+                segs.push(s.with_height(z));
             }
         }
         let name = if spec.name.is_empty() {
@@ -349,7 +388,12 @@ impl Arena {
                 last.b = b;
                 return;
             }
-            segs.push(Segment { a, b, normal: n });
+            segs.push(Segment {
+                a,
+                b,
+                normal: n,
+                z: crate::geom::FULL_HEIGHT,
+            });
         };
         // Horizontal edges, row by row (bottom edge: free below; top edge: free above).
         for y in 0..h as i64 {
@@ -383,6 +427,12 @@ impl Arena {
         Ok(arena)
     }
 
+    /// Whether some obstacle spans less than floor to ceiling (otherwise the
+    /// world is planar and sensors need not look at heights).
+    pub fn has_heights(&self) -> bool {
+        self.has_heights
+    }
+
     pub fn segments(&self) -> &[Segment] {
         &self.segments
     }
@@ -402,6 +452,26 @@ impl Arena {
     /// Walks the index grid cell by cell (Amanatides & Woo, "A fast voxel
     /// traversal algorithm", 1987), testing only the walls listed in each cell.
     pub fn cast(&self, o: Vec2, d: Vec2, max_range: f64) -> Option<Hit> {
+        self.cast_where(o, d, max_range, |_, _| true)
+    }
+
+    /// [`Arena::cast`] through the horizontal plane at height `z`: segments
+    /// that do not reach `z` (a table top above a laser, a low box below it)
+    /// are passed by.
+    pub fn cast_at_height(&self, o: Vec2, d: Vec2, max_range: f64, z: f64) -> Option<Hit> {
+        self.cast_where(o, d, max_range, |s, _| s.spans(z))
+    }
+
+    /// [`Arena::cast`] counting only hits `accept(segment, distance)` keeps
+    /// (a climbing or falling sonar ray accepts a segment only where the ray's
+    /// height at that distance is within the segment's).
+    pub fn cast_where(
+        &self,
+        o: Vec2,
+        d: Vec2,
+        max_range: f64,
+        accept: impl Fn(&Segment, f64) -> bool,
+    ) -> Option<Hit> {
         let cell = INDEX_CELL_M;
         // Clip the ray to the index box.
         let (mut t0, mut t1) = (0.0f64, max_range);
@@ -455,6 +525,7 @@ impl Arena {
                 if let Some(t) = s.ray_hit(o, d)
                     && t <= max_range
                     && best.is_none_or(|b| t < b.distance)
+                    && accept(s, t)
                 {
                     best = Some(Hit {
                         distance: t,
@@ -512,13 +583,26 @@ impl Arena {
         {
             return g.clone();
         }
+        self.truth_map_where(resolution, start, |_| true)
+    }
+
+    /// The true map of the segments `keep` accepts (e.g. those a laser at
+    /// one height sees, or the obstacles out of its plane), on the same
+    /// grid as [`Arena::truth_map`]; free space is flood-filled from `start`
+    /// around the kept segments only.
+    pub fn truth_map_where(
+        &self,
+        resolution: f64,
+        start: Vec2,
+        keep: impl Fn(&Segment) -> bool,
+    ) -> OccupancyGrid {
         let margin = 2.0 * resolution;
         let (lo, hi) = self.wall_extent();
         let origin = Vec2::new(lo.x - margin, lo.y - margin);
         let w = (((hi.x - lo.x) + 2.0 * margin) / resolution).ceil() as usize + 1;
         let h = (((hi.y - lo.y) + 2.0 * margin) / resolution).ceil() as usize + 1;
         let mut grid = OccupancyGrid::new(w, h, resolution, [origin.x, origin.y, 0.0]);
-        for s in &self.segments {
+        for s in self.segments.iter().filter(|s| keep(s)) {
             for_each_cell_on_segment(s.a, s.b, origin, resolution, w, h, |x, y| {
                 grid.cells[y * w + x] = OCCUPIED;
             });
@@ -681,6 +765,44 @@ mod tests {
                 "beam {k}: brute {brute} grid {got}"
             );
         }
+    }
+
+    #[test]
+    fn a_ray_at_one_height_passes_over_low_boxes_and_under_table_tops() {
+        let text = r#"
+            [[wall]]
+            points = [[0.0, 0.0], [10.0, 0.0], [10.0, 4.0], [0.0, 4.0]]
+            closed = true
+            [[box]]
+            center = [3.0, 2.0]
+            size = [1.0, 1.0]
+            height_m = [0.0, 0.2]
+            [[box]]
+            center = [6.0, 2.0]
+            size = [1.0, 1.0]
+            height_m = [0.45, 0.55]
+        "#;
+        let a = Arena::from_vector_str(text, Path::new("t.toml")).unwrap();
+        let (o, d) = (Vec2::new(1.0, 2.0), Vec2::new(1.0, 0.0));
+        let at = |z: f64| a.cast_at_height(o, d, 20.0, z).unwrap().distance;
+        assert!((at(0.40) - 9.0).abs() < 1e-9, "laser plane: both passed");
+        assert!((at(0.10) - 1.5).abs() < 1e-9, "crate height");
+        assert!((at(0.50) - 4.5).abs() < 1e-9, "table-top height");
+        // Without a height, every segment counts (the robot's collisions).
+        assert!((a.cast(o, d, 20.0).unwrap().distance - 1.5).abs() < 1e-9);
+        // The truth of one plane leaves the other obstacles out.
+        let all = a.truth_map(0.1, o);
+        let plane = a.truth_map_where(0.1, o, |s| s.spans(0.40));
+        let (cx, cy) = all.world_to_cell(2.5, 2.0).unwrap();
+        assert_eq!(all.get(cx, cy), Some(OCCUPIED));
+        assert_eq!(plane.get(cx, cy), Some(FREE));
+    }
+
+    #[test]
+    fn heights_must_be_ordered_and_non_negative() {
+        let text = "[[box]]\ncenter = [1.0, 1.0]\nsize = [1.0, 1.0]\nheight_m = [0.5, 0.2]\n";
+        let e = Arena::from_vector_str(text, Path::new("h.toml")).unwrap_err();
+        assert!(e.to_string().contains("box[0].height_m"), "{e}");
     }
 
     #[test]

@@ -95,7 +95,14 @@ pub struct Segment {
     pub a: Vec2,
     pub b: Vec2,
     pub normal: Vec2,
+    /// Heights it spans above the floor, m: `[base, top]`. Walls span
+    /// [`FULL_HEIGHT`]; a table top or a low box spans less, so a planar
+    /// laser above or below it passes by while a sonar cone may hit it.
+    pub z: [f64; 2],
 }
+
+/// The height range of a wall: floor to infinity.
+pub const FULL_HEIGHT: [f64; 2] = [0.0, f64::INFINITY];
 
 impl Segment {
     pub fn new(a: Vec2, b: Vec2) -> Self {
@@ -103,7 +110,23 @@ impl Segment {
             a,
             b,
             normal: (b - a).perp().normalized(),
+            z: FULL_HEIGHT,
         }
+    }
+
+    /// The same segment spanning `z` (`[base, top]`, m).
+    pub fn with_height(self, z: [f64; 2]) -> Self {
+        Self { z, ..self }
+    }
+
+    /// Whether the segment reaches height `h`.
+    pub fn spans(&self, h: f64) -> bool {
+        h >= self.z[0] && h <= self.z[1]
+    }
+
+    /// Whether the whole of it is full height.
+    pub fn is_full_height(&self) -> bool {
+        self.z == FULL_HEIGHT
     }
 
     pub fn length(&self) -> f64 {

@@ -36,7 +36,7 @@
 
 use crate::arena::Arena;
 use crate::geom::{Pose2, Position, Vec2, normalize_angle};
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 use crate::smoke::SmokeField;
 
 /// Angular resolution: steps per full turn (PP ARES).
@@ -83,7 +83,13 @@ pub struct LaserParams {
     pub noise_near_m: f64,
     /// 1σ relative noise beyond 1 m (data sheet ±1 % as 2σ).
     pub noise_far_frac: f64,
+    /// Height of the scan plane above the floor, m: obstacles that do not
+    /// reach it are invisible to the beam.
+    pub height_m: f64,
 }
+
+/// A URG-04LX on top of a Nomad Scout or a Pioneer's plate.
+pub const DEFAULT_LASER_HEIGHT_M: f64 = 0.40;
 
 impl Default for LaserParams {
     fn default() -> Self {
@@ -94,6 +100,7 @@ impl Default for LaserParams {
             patchiness: 0.3,
             noise_near_m: 0.005,
             noise_far_frac: 0.005,
+            height_m: DEFAULT_LASER_HEIGHT_M,
         }
     }
 }
@@ -148,7 +155,9 @@ impl LaserModel {
         let (z_patch, noise) = self.rng.normal_pair();
         let caught = self.rng.uniform();
         let patch = (p.patchiness * z_patch - 0.5 * p.patchiness * p.patchiness).exp();
-        let wall = arena.cast(o, d, dmax).map(|h| h.distance);
+        let wall = arena
+            .cast_at_height(o, d, dmax, p.height_m)
+            .map(|h| h.distance);
         let end = wall.unwrap_or(dmax);
         // Backscatter power W and its first moment M along the beam, cell by cell
         // (σ constant in a cell); `trans` is the two-way transmission e^{−2τ} so far.

@@ -25,7 +25,6 @@ pub mod arena;
 pub mod geom;
 pub mod laser;
 pub mod mq303a;
-pub mod rng;
 pub mod robot;
 pub mod scenario;
 pub mod smoke;

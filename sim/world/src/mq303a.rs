@@ -15,7 +15,7 @@
 //! an extinction of ≈ 1.4 /m (visibility ≈ 2 m, where Sevcik & Oh 2007 saw the URG
 //! fail to penetrate fog).
 
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 use smokenav_smoke_codec::mq303a::{Mq303a, SensorParams};
 
 #[derive(Debug, Clone, PartialEq)]

@@ -3,7 +3,7 @@
 
 use crate::arena::Arena;
 use crate::geom::{Pose2, Position, Vec2, normalize_angle};
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct DriveParams {

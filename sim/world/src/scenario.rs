@@ -33,8 +33,8 @@
 //! `[odometry]` (scale_left, scale_right, track_error, heading_drift_deg_per_m,
 //! slip_per_sqrt_m), `[smoke]` (cell_m, diffusion_m2ps, decay_per_s, wind_mps,
 //! layer_height_m, mass_extinction_m2pg, `[[smoke.source]]`, `[[smoke.patch]]`
-//! with center/radius_m/density_gpm3), `[laser]` (lidar_ratio_sr,
-//! wall_reflectance, min_return, patchiness), `[sonar]` (critical_angle_deg,
+//! with center/radius_m/density_gpm3), `[laser]` (height_m, lidar_ratio_sr,
+//! wall_reflectance, min_return, patchiness), `[sonar]` (height_m, critical_angle_deg,
 //! rays, noise_frac, dropout_prob, crosstalk_prob, interval_s),
 //! `[smoke_sensor]` (rise_tau_s, fall_tau_s, ppm_per_gpm3, noise_mv, cold_start),
 //! `[truth]` (rate_hz, map_resolution_m). Paths are relative to the scenario file.
@@ -55,7 +55,7 @@ use smokenav_smoke_codec::mq303a::SensorParams;
 use std::path::{Path, PathBuf};
 
 /// Scenarios shipped with the simulator: (name, text).
-pub const BUILTIN_SCENARIOS: [(&str, &str); 4] = [
+pub const BUILTIN_SCENARIOS: [(&str, &str); 5] = [
     ("mrl-clean", include_str!("../../scenarios/mrl-clean.toml")),
     (
         "r32-light-puff",
@@ -66,6 +66,7 @@ pub const BUILTIN_SCENARIOS: [(&str, &str); 4] = [
         include_str!("../../scenarios/r32-dense-crossing.toml"),
     ),
     ("corridor", include_str!("../../scenarios/corridor.toml")),
+    ("heights", include_str!("../../scenarios/heights.toml")),
 ];
 
 /// Most smoke sources, patches, waypoints or pulses a file may list.
@@ -208,6 +209,7 @@ struct PatchFile {
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct LaserFile {
+    height_m: Option<f64>,
     lidar_ratio_sr: Option<f64>,
     wall_reflectance: Option<f64>,
     min_return: Option<f64>,
@@ -217,6 +219,7 @@ struct LaserFile {
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SonarFile {
+    height_m: Option<f64>,
     critical_angle_deg: Option<f64>,
     rays: Option<usize>,
     noise_frac: Option<f64>,
@@ -439,6 +442,7 @@ impl Scenario {
             wall_reflectance: l.wall_reflectance.unwrap_or(ld.wall_reflectance),
             min_return: l.min_return.unwrap_or(ld.min_return),
             patchiness: l.patchiness.unwrap_or(ld.patchiness),
+            height_m: l.height_m.unwrap_or(ld.height_m),
             ..ld
         };
         let m = profile.laser.mount;
@@ -456,6 +460,7 @@ impl Scenario {
             noise_frac: so.noise_frac.unwrap_or(sd.noise_frac),
             dropout_prob: so.dropout_prob.unwrap_or(sd.dropout_prob),
             crosstalk_prob: so.crosstalk_prob.unwrap_or(sd.crosstalk_prob),
+            height_m: so.height_m.unwrap_or(sd.height_m),
         };
         let sonar_mounts: Vec<SonarMount> = (0..profile.sonar.count)
             .filter_map(|i| profile.sonar.transducer(i))
@@ -805,6 +810,7 @@ impl Validate for SourceFile {
 impl Validate for LaserFile {
     fn validate(&self, key: &str, v: &mut Validator) {
         let k = |name: &str| format!("{key}.{name}");
+        within(v, &k("height_m"), self.height_m, 0.01, 3.0);
         within(v, &k("lidar_ratio_sr"), self.lidar_ratio_sr, 1.0, 1000.0);
         within(v, &k("wall_reflectance"), self.wall_reflectance, 0.01, 1.0);
         within(v, &k("min_return"), self.min_return, 0.0, 1.0);
@@ -827,6 +833,7 @@ impl Validate for SonarFile {
         {
             v.fail(k("rays"), format!("must be 1–101, got {n}"));
         }
+        within(v, &k("height_m"), self.height_m, 0.01, 3.0);
         within(v, &k("noise_frac"), self.noise_frac, 0.0, 0.5);
         within(v, &k("dropout_prob"), self.dropout_prob, 0.0, 1.0);
         within(v, &k("crosstalk_prob"), self.crosstalk_prob, 0.0, 1.0);

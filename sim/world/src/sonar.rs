@@ -25,7 +25,7 @@
 
 use crate::arena::Arena;
 use crate::geom::{Pose2, Position, Vec2};
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SonarParams {
@@ -44,7 +44,12 @@ pub struct SonarParams {
     pub dropout_prob: f64,
     /// Unstable-sonar option: probability of a spurious short reading.
     pub crosstalk_prob: f64,
+    /// Height of the transducers' axes above the floor, m.
+    pub height_m: f64,
 }
+
+/// A sonar ring around the base's top plate.
+pub const DEFAULT_SONAR_HEIGHT_M: f64 = 0.30;
 
 impl SonarParams {
     /// The SmokeNav paper's Pioneer 3-DX ring: 15° cones, near-normal echoes only.
@@ -58,6 +63,7 @@ impl SonarParams {
             rays: 9,
             dropout_prob: 0.0,
             crosstalk_prob: 0.0,
+            height_m: DEFAULT_SONAR_HEIGHT_M,
         }
     }
 
@@ -72,6 +78,7 @@ impl SonarParams {
             rays: 9,
             dropout_prob: 0.0,
             crosstalk_prob: 0.0,
+            height_m: DEFAULT_SONAR_HEIGHT_M,
         }
     }
 }
@@ -110,17 +117,43 @@ impl SonarModel {
         let cos_crit = p.critical_angle_deg.to_radians().cos();
         let mut nearest = f64::INFINITY;
         let n = p.rays.max(1);
-        for k in 0..n {
-            let off = if n == 1 {
+        let spread = |k: usize, half: f64| {
+            if n == 1 {
                 0.0
             } else {
                 -half + 2.0 * half * k as f64 / (n - 1) as f64
+            }
+        };
+        // The cone is round: `n` rows of elevation, each `n` rays across the
+        // cone's width at that elevation. The level row is the planar model's
+        // fan, so full-height walls echo exactly as in 2D (a tilted ray meets
+        // them farther away).
+        // A planar world: the level row alone gives the same nearest echo.
+        let rows = if arena.has_heights() { 0..n } else { 0..1 };
+        for row in rows {
+            let elev = if arena.has_heights() {
+                spread(row, half)
+            } else {
+                0.0
             };
-            let d = Vec2::from_angle(s.theta + off);
-            if let Some(hit) = arena.cast(o, d, p.max_range_m)
-                && hit.normal.dot(d).abs() >= cos_crit
-            {
-                nearest = nearest.min(hit.distance);
+            let width = (half * half - elev * elev).max(0.0).sqrt();
+            let (tan_e, cos_e) = (elev.tan(), elev.cos());
+            // A falling ray meets the floor (which mirrors sound away) here.
+            let reach = if tan_e < 0.0 {
+                (p.height_m / -tan_e).min(p.max_range_m * cos_e)
+            } else {
+                p.max_range_m * cos_e
+            };
+            for k in 0..n {
+                let d = Vec2::from_angle(s.theta + spread(k, width));
+                let hit = arena.cast_where(o, d, reach, |seg, t| {
+                    seg.is_full_height() || seg.spans(p.height_m + t * tan_e)
+                });
+                if let Some(hit) = hit
+                    && hit.normal.dot(d).abs() * cos_e >= cos_crit
+                {
+                    nearest = nearest.min(hit.distance / cos_e);
+                }
             }
         }
         let saturated = Echo {
@@ -210,6 +243,32 @@ mod tests {
             "{:?}",
             vals.iter().fold(0.0f64, |a, v| a.max((v - 2.0).abs()))
         );
+    }
+
+    #[test]
+    fn the_cone_sees_a_low_crate_and_a_table_top_the_laser_plane_misses() {
+        let arena = |h: [f64; 2]| {
+            let text = format!(
+                "[[wall]]\npoints = [[0.0, 0.0], [10.0, 0.0], [10.0, 4.0], [0.0, 4.0]]\nclosed = true\n\
+                 [[box]]\ncenter = [3.0, 2.0]\nsize = [1.0, 1.0]\nheight_m = [{}, {}]\n",
+                h[0], h[1]
+            );
+            Arena::from_vector_str(&text, std::path::Path::new("t.toml")).unwrap()
+        };
+        let mut m = SonarModel::new(SonarParams::scout(), Rng::new(1, 2));
+        let pose = Pose2::new(1.3, 2.0, 0.0);
+        // The box's face is 1.2 m ahead; the sonar axis is at 0.30 m, its cone ±10°.
+        for h in [[0.0, 0.2], [0.45, 0.55]] {
+            let e = m.ping(&arena(h), &pose, &Pose2::default());
+            assert!(!e.saturated, "{h:?}: {e:?}");
+            assert!(e.range_m > 1.17 && e.range_m < 1.25, "{h:?}: {e:?}");
+        }
+        // Above the cone's reach at 1.2 m (0.30 + 1.2 · tan 10° = 0.51 m): the
+        // front face is unseen. (A rising ray passing under the box meets its
+        // far face at 2.2 m, 0.69 m up: the model has vertical faces only, no
+        // undersides.)
+        let e = m.ping(&arena([0.6, 0.8]), &pose, &Pose2::default());
+        assert!(e.range_m > 2.1, "{e:?}");
     }
 
     #[test]

@@ -9,7 +9,7 @@
 use crate::geom::{Pose2, Position, normalize_angle};
 use crate::laser::{LaserModel, URG_SCAN_PERIOD_NS, URG_STEPS};
 use crate::mq303a::SmokeSensor;
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 use crate::robot::{Robot, RouteFollower};
 use crate::scenario::{Scenario, SonarMount};
 use crate::smoke::SmokeField;

@@ -8,7 +8,7 @@
 use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::rbpf::Rbpf;
 use smokenav_algorithms_slam::rbpf::matcher::{MatchParams, PreparedScan, refine};
-use smokenav_algorithms_slam::rng::Rng;
+use smokenav_shared_types::Rng;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline};
 use smokenav_platform_config::{SlamSection, parse_toml};
 use std::io::BufReader;
@@ -46,7 +46,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "mode {mode:?}\nrefined from mode {:?} (score {:.1})",
         center.pose, center.score
     );
-    let mut rng = Rng::new(5);
+    let mut rng = Rng::new(5, 0);
     let mut dth = Vec::new();
     let mut dxy = Vec::new();
     for _ in 0..n {

@@ -86,6 +86,8 @@ pub enum CarmenError {
     NotUtf8,
     #[error("read error: {0}")]
     Io(String),
+    #[error("{0}")]
+    Odometry(#[from] crate::offline::ImplausibleOdometry),
 }
 
 /// A line that could not be used, with its 1-based number.

@@ -35,7 +35,6 @@ pub mod odom_buffer;
 pub mod offline;
 pub mod pipeline;
 pub mod rbpf;
-pub mod rng;
 pub mod scan;
 #[cfg(test)]
 mod testkit;

@@ -4,7 +4,7 @@
 //! the SLAM process handles them live.
 
 use crate::backend::SlamUpdate;
-use crate::carmen::{CarmenReader, LineError, Record};
+use crate::carmen::{CarmenError, CarmenReader, LineError, Record};
 use crate::pipeline::SlamPipeline;
 use crate::scan::RangeScan;
 use smokenav_shared_types::Pose2;
@@ -46,9 +46,158 @@ pub fn replay<'a>(
 /// Bad lines kept for the report; later ones are only counted.
 pub const KEPT_ERRORS: usize = 100;
 
+/// Limits past which a log's odometry cannot be real motion.
+///
+/// Generous on purpose: real logs glitch (MIT CSAIL's raw odometry has a
+/// 0.94 m step in 0.21 s, 4.5 m/s, and a 1.49 rad turn in one record), and
+/// those are the matcher's to absorb. What the gate refuses is what no robot
+/// does: metres per record, stamps running backwards, kilometre coordinates
+/// from a flipped digit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryLimits {
+    /// Fastest plausible travel, m/s.
+    pub max_speed_mps: f64,
+    /// Travel allowed whatever the time step, m (stamps are coarse).
+    pub slack_m: f64,
+    /// Largest plausible coordinate, m or rad.
+    pub max_abs: f64,
+    /// Consecutive records that agree with each other but not with the last
+    /// accepted one: taken as the odometry frame jumping (a reset), not as
+    /// corruption.
+    pub reset_after: usize,
+}
+
+impl Default for OdometryLimits {
+    fn default() -> Self {
+        Self {
+            max_speed_mps: 10.0,
+            slack_m: 0.5,
+            max_abs: 1.0e5,
+            reset_after: 3,
+        }
+    }
+}
+
+/// Why a record's odometry was refused.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum ImplausibleOdometry {
+    #[error("odometry ({x:.3}, {y:.3}, {theta:.3}) is beyond ±{max_abs} (a corrupt record?)")]
+    OutOfBounds {
+        x: f64,
+        y: f64,
+        theta: f64,
+        max_abs: f64,
+    },
+    #[error("timestamp goes back {back_s:.3} s from the previous scan")]
+    StampBackwards { back_s: f64 },
+    #[error(
+        "odometry jumps {jump_m:.2} m in {dt_s:.3} s (at most {allowed_m:.2} m is plausible): \
+         scan skipped"
+    )]
+    Jump {
+        jump_m: f64,
+        dt_s: f64,
+        allowed_m: f64,
+    },
+}
+
+/// Screens the odometry a log attaches to its scans: refuses single corrupt
+/// records, and stitches a run of records that agree among themselves onto
+/// the trajectory so far (an odometry reset), so the jump is never taken as
+/// motion.
+#[derive(Debug, Clone)]
+pub struct OdometryGate {
+    limits: OdometryLimits,
+    /// The last accepted record, as published (after stitching).
+    last: Option<(u64, Pose2)>,
+    /// Refused records since, raw, when they agree with each other.
+    suspects: Vec<(u64, Pose2)>,
+    /// Maps the log's odometry frame to the published one.
+    stitch: Pose2,
+    /// Resets detected.
+    pub resets: usize,
+}
+
+impl OdometryGate {
+    pub fn new(limits: OdometryLimits) -> Self {
+        Self {
+            limits,
+            last: None,
+            suspects: Vec::with_capacity(limits.reset_after),
+            stitch: Pose2::default(),
+            resets: 0,
+        }
+    }
+
+    fn step(&self, from: (u64, Pose2), to: (u64, Pose2)) -> Result<(), ImplausibleOdometry> {
+        if to.0 < from.0 {
+            return Err(ImplausibleOdometry::StampBackwards {
+                back_s: (from.0 - to.0) as f64 / 1e9,
+            });
+        }
+        let dt_s = (to.0 - from.0) as f64 / 1e9;
+        let jump_m = from.1.between(&to.1).translation_norm();
+        let allowed_m = self.limits.slack_m + self.limits.max_speed_mps * dt_s;
+        if jump_m > allowed_m {
+            return Err(ImplausibleOdometry::Jump {
+                jump_m,
+                dt_s,
+                allowed_m,
+            });
+        }
+        Ok(())
+    }
+
+    /// The odometry to use for a scan stamped `stamp_ns`, or why the record
+    /// is refused (the scan is then skipped).
+    pub fn check(&mut self, stamp_ns: u64, raw: Pose2) -> Result<Pose2, ImplausibleOdometry> {
+        let m = self.limits.max_abs;
+        if !(raw.x.abs() <= m && raw.y.abs() <= m && raw.theta.abs() <= m) {
+            return Err(ImplausibleOdometry::OutOfBounds {
+                x: raw.x,
+                y: raw.y,
+                theta: raw.theta,
+                max_abs: m,
+            });
+        }
+        let pose = self.stitch.compose(&raw);
+        let Some(last) = self.last else {
+            self.last = Some((stamp_ns, pose));
+            return Ok(pose);
+        };
+        let refused = match self.step(last, (stamp_ns, pose)) {
+            Ok(()) => {
+                self.suspects.clear();
+                self.last = Some((stamp_ns, pose));
+                return Ok(pose);
+            }
+            Err(e) => e,
+        };
+        // A run of refused records that agree with each other is a new frame.
+        let agrees = self
+            .suspects
+            .last()
+            .is_some_and(|&prev| self.step(prev, (stamp_ns, raw)).is_ok());
+        if !agrees {
+            self.suspects.clear();
+        }
+        self.suspects.push((stamp_ns, raw));
+        if self.suspects.len() >= self.limits.reset_after.max(1) {
+            // Continue from where the robot was last known, standing still.
+            self.stitch = last.1.compose(&raw.inverse());
+            self.suspects.clear();
+            self.resets += 1;
+            self.last = Some((stamp_ns, last.1));
+            return Ok(last.1);
+        }
+        Err(refused)
+    }
+}
+
 pub struct LogScans<R> {
     reader: CarmenReader<R>,
     scan: RangeScan,
+    gate: OdometryGate,
     /// The first [`KEPT_ERRORS`] bad lines.
     pub errors: Vec<LineError>,
     pub error_count: usize,
@@ -61,6 +210,7 @@ impl<R: BufRead> LogScans<R> {
         Self {
             reader: CarmenReader::new(input),
             scan: RangeScan::default(),
+            gate: OdometryGate::new(OdometryLimits::default()),
             errors: Vec::new(),
             error_count: 0,
             odom_records: 0,
@@ -68,30 +218,150 @@ impl<R: BufRead> LogScans<R> {
         }
     }
 
+    fn bad_line(&mut self, e: LineError) {
+        tracing::warn!("{e}");
+        self.error_count += 1;
+        if self.errors.len() < KEPT_ERRORS {
+            self.errors.push(e);
+        }
+    }
+
     /// The next laser scan and the robot's odometry pose at it, skipping (and
-    /// recording) bad lines. The scan buffer is reused.
+    /// recording) bad lines and scans whose odometry cannot be real (see
+    /// [`OdometryGate`]). The scan buffer is reused.
     pub fn next_scan(&mut self) -> Option<(&RangeScan, Pose2)> {
         loop {
             match self.reader.next()? {
                 Ok(Record::Laser(l)) => {
                     self.laser_records += 1;
-                    l.fill_range_scan(&mut self.scan);
-                    return Some((&self.scan, l.robot_pose));
-                }
-                Ok(Record::Odom(_)) => self.odom_records += 1,
-                Err(e) => {
-                    tracing::warn!("{e}");
-                    self.error_count += 1;
-                    if self.errors.len() < KEPT_ERRORS {
-                        self.errors.push(e);
+                    match self.gate.check(l.ipc_timestamp_ns, l.robot_pose) {
+                        Ok(odom) => {
+                            l.fill_range_scan(&mut self.scan);
+                            return Some((&self.scan, odom));
+                        }
+                        Err(e) => {
+                            let line = self.reader.line();
+                            self.bad_line(LineError {
+                                line,
+                                error: CarmenError::Odometry(e),
+                            });
+                        }
                     }
                 }
+                Ok(Record::Odom(_)) => self.odom_records += 1,
+                Err(e) => self.bad_line(e),
             }
         }
+    }
+
+    /// Odometry resets found in the log (runs of records that jumped together).
+    pub fn odometry_resets(&self) -> usize {
+        self.gate.resets
     }
 
     /// Number of the last line read.
     pub fn line(&self) -> usize {
         self.reader.line()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S: u64 = 1_000_000_000;
+
+    /// A robot driving 0.5 m/s along x, one scan per 0.2 s.
+    fn drive(n: u64) -> impl Iterator<Item = (u64, Pose2)> {
+        (0..n).map(|i| (i * S / 5, Pose2::new(0.1 * i as f64, 0.0, 0.0)))
+    }
+
+    #[test]
+    fn one_corrupt_record_is_refused_and_the_next_accepted() {
+        let mut gate = OdometryGate::new(OdometryLimits::default());
+        for (i, (t, p)) in drive(20).enumerate() {
+            // A flipped digit: 812 m instead of 1.2 m.
+            let raw = if i == 12 {
+                Pose2::new(812.0 + p.x, 0.0, 0.0)
+            } else {
+                p
+            };
+            let got = gate.check(t, raw);
+            if i == 12 {
+                assert!(
+                    matches!(got, Err(ImplausibleOdometry::Jump { jump_m, .. }) if jump_m > 800.0),
+                    "{got:?}"
+                );
+            } else {
+                assert_eq!(got, Ok(p), "record {i}");
+            }
+        }
+        assert_eq!(gate.resets, 0);
+    }
+
+    #[test]
+    fn a_run_of_records_in_a_new_frame_is_a_reset_not_motion() {
+        let mut gate = OdometryGate::new(OdometryLimits::default());
+        let mut out = Vec::new();
+        for (i, (t, p)) in drive(20).enumerate() {
+            // From record 10 on the base reports a frame 40 m away.
+            let raw = if i >= 10 {
+                Pose2::new(p.x - 40.0, 7.0, 1.0)
+            } else {
+                p
+            };
+            out.push(gate.check(t, raw));
+        }
+        assert_eq!(gate.resets, 1);
+        // Two refused, the third stitched: standing still across the jump,
+        // then moving on in the old frame's terms.
+        assert!(out[10].is_err() && out[11].is_err());
+        let at_reset = out[12].unwrap();
+        assert!(at_reset.between(&out[9].unwrap()).translation_norm() < 1e-9);
+        let next = out[13].unwrap();
+        let step = at_reset.between(&next);
+        assert!((step.translation_norm() - 0.1).abs() < 1e-9, "{step:?}");
+        assert!(
+            out.iter()
+                .flatten()
+                .collect::<Vec<_>>()
+                .windows(2)
+                .all(|w| { w[0].between(w[1]).translation_norm() < 0.2 })
+        );
+    }
+
+    #[test]
+    fn stamps_backwards_and_absurd_coordinates_are_refused() {
+        let mut gate = OdometryGate::new(OdometryLimits::default());
+        assert!(gate.check(10 * S, Pose2::new(1.0, 0.0, 0.0)).is_ok());
+        assert!(matches!(
+            gate.check(9 * S, Pose2::new(1.0, 0.0, 0.0)),
+            Err(ImplausibleOdometry::StampBackwards { .. })
+        ));
+        assert!(matches!(
+            gate.check(11 * S, Pose2::new(1.0, 3.0e7, 0.0)),
+            Err(ImplausibleOdometry::OutOfBounds { .. })
+        ));
+        assert!(matches!(
+            gate.check(11 * S, Pose2::new(1.0, 0.0, 1.0e9)),
+            Err(ImplausibleOdometry::OutOfBounds { .. })
+        ));
+        assert!(gate.check(11 * S, Pose2::new(1.2, 0.0, 0.3)).is_ok());
+    }
+
+    #[test]
+    fn the_real_csail_prefix_passes_the_gate_untouched() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/csail-prefix-200.clf"
+        );
+        let mut scans = LogScans::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+        let mut n = 0;
+        while scans.next_scan().is_some() {
+            n += 1;
+        }
+        assert_eq!(scans.error_count, 0, "{:?}", scans.errors);
+        assert_eq!(n, scans.laser_records);
+        assert_eq!(scans.odometry_resets(), 0);
     }
 }

@@ -83,6 +83,12 @@ pub struct PioneerOptions {
     /// s; must stay below the controller's watchdog (2 s on a P3-DX).
     #[serde(default = "pioneer_default_refresh")]
     pub refresh_s: f64,
+    /// When the controller goes silent (`cmd_timeout_s`), stop with ARCOS's
+    /// E_STOP, which overrides the deceleration, instead of VEL 0 at the
+    /// robot's configured deceleration (v / decel more coasting: 0.3 s and
+    /// 4.5 cm from 0.3 m/s at 1 m/s²). Normal stops always ramp down.
+    #[serde(default = "pioneer_default_true")]
+    pub estop_on_timeout: bool,
 }
 
 impl Default for PioneerOptions {
@@ -94,6 +100,7 @@ impl Default for PioneerOptions {
             reset_odometry: false,
             sync_timeout_s: pioneer_default_sync_timeout(),
             refresh_s: pioneer_default_refresh(),
+            estop_on_timeout: true,
         }
     }
 }

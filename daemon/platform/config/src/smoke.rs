@@ -29,7 +29,8 @@ pub struct SmokeSection {
     /// ADC reference voltage, mV.
     #[serde(default = "default_vref")]
     pub vref_mv: f64,
-    /// ADC resolution, bits.
+    /// ADC resolution, bits (the serial board's; an IIO device's own
+    /// `scan_elements` type wins, and its scale always does).
     #[serde(default = "default_bits")]
     pub adc_bits: u8,
     /// Publishing rate, Hz.

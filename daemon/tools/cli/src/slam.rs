@@ -208,11 +208,12 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     let _ = writeln!(report, "log                {}", args.carmen.display());
     let _ = writeln!(
         report,
-        "scans              {} read, {} processed, {} bad lines, {} ODOM records",
+        "scans              {} read, {} processed, {} bad lines, {} ODOM records, {} odometry resets",
         online.len(),
         processed,
         scans.error_count,
-        scans.odom_records
+        scans.odom_records,
+        scans.odometry_resets()
     );
     match cfg.backend {
         SlamBackendKind::Rbpf => writeln!(

@@ -96,6 +96,8 @@ pub struct PioneerCore {
     framer: Framer,
     session: Session,
     guard: MotionGuard,
+    /// A silent controller gets E_STOP, not a ramp (`estop_on_timeout`).
+    estop_on_timeout: bool,
     odometry: Option<OdometryIntegrator>,
     sonar: SonarAssembler,
     odom_frame: String,
@@ -139,6 +141,14 @@ impl PioneerCore {
             min_range_m: cfg.sonar.min_range_m as f32,
         };
         Self::new(session, guard, sonar, &cfg.base.odom_frame)
+            .with_estop_on_timeout(opts.estop_on_timeout)
+    }
+
+    /// Whether a silent controller gets E_STOP (default) or a plain zero
+    /// target that ramps down at the robot's deceleration.
+    pub fn with_estop_on_timeout(mut self, on: bool) -> Self {
+        self.estop_on_timeout = on;
+        self
     }
 
     pub fn new(
@@ -151,6 +161,7 @@ impl PioneerCore {
             framer: Framer::new(),
             session,
             guard,
+            estop_on_timeout: true,
             odometry: None,
             sonar: SonarAssembler::new(sonar, 1.0),
             odom_frame: odom_frame.to_owned(),
@@ -191,7 +202,12 @@ impl PioneerCore {
 
     /// Timeouts, keep-alive and the velocity target, at `now` (`link`: a port is open).
     pub fn poll(&mut self, now: u64, link: bool) {
-        self.session.set_target(self.guard.target(now));
+        let target = self.guard.target(now);
+        if self.guard.take_timeout() && self.estop_on_timeout {
+            self.session.emergency_stop();
+        } else {
+            self.session.set_target(target);
+        }
         if link {
             let (cmds, evs) = (&mut self.commands, &mut self.events);
             self.session

@@ -32,6 +32,8 @@ pub struct MotionGuard {
     /// Last accepted target and when it was received.
     last: Option<(VelocityTarget, u64)>,
     timed_out: bool,
+    /// The stream went quiet since [`MotionGuard::take_timeout`] last asked.
+    timeout_event: bool,
     counters: MotionCounters,
 }
 
@@ -42,6 +44,7 @@ impl MotionGuard {
             limits,
             last: None,
             timed_out: false,
+            timeout_event: false,
             counters: MotionCounters::default(),
         }
     }
@@ -81,6 +84,7 @@ impl MotionGuard {
             Some((t, _)) => {
                 if !self.timed_out && t != VelocityTarget::default() {
                     self.counters.timeouts += 1;
+                    self.timeout_event = true;
                     tracing::warn!(
                         "no velocity command for {} ms: stopping",
                         self.timeout_ns / 1_000_000
@@ -91,6 +95,12 @@ impl MotionGuard {
             }
             None => VelocityTarget::default(),
         }
+    }
+
+    /// True once after the command stream went quiet with the robot moving
+    /// (the caller may stop harder than a plain zero target).
+    pub fn take_timeout(&mut self) -> bool {
+        std::mem::take(&mut self.timeout_event)
     }
 
     /// When the current command expires (ns), if one is active.

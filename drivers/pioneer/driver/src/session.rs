@@ -112,6 +112,8 @@ pub struct SessionCounters {
     pub undecodable: u64,
     pub commands_sent: u64,
     pub pulses: u64,
+    /// E_STOPs sent because the controller went silent.
+    pub estops: u64,
 }
 
 /// Velocity target in ARCOS units: VEL mm/s, RVEL deg/s.
@@ -129,6 +131,8 @@ pub struct Session {
     /// What the robot was last told, and when.
     sent: Option<(VelocityTarget, u64)>,
     target: VelocityTarget,
+    /// E_STOP goes out with the next zero target (the controller died).
+    estop_pending: bool,
     silent_tries: u32,
     counters: SessionCounters,
 }
@@ -146,6 +150,7 @@ impl Session {
             last_sip_ns: 0,
             sent: None,
             target: VelocityTarget::default(),
+            estop_pending: false,
             silent_tries: 0,
             counters: SessionCounters::default(),
         }
@@ -166,6 +171,16 @@ impl Session {
     /// The velocity the robot should have; sent on the next [`Session::poll`].
     pub fn set_target(&mut self, t: VelocityTarget) {
         self.target = t;
+        if t != VelocityTarget::default() {
+            self.estop_pending = false;
+        }
+    }
+
+    /// Stop as hard as the robot can (ARCOS E_STOP, which overrides the
+    /// deceleration) if it is moving, then hold a zero target.
+    pub fn emergency_stop(&mut self) {
+        self.target = VelocityTarget::default();
+        self.estop_pending = true;
     }
 
     fn tx(&mut self, c: Command<'static>, now: u64, out: &mut impl FnMut(Command<'static>)) {
@@ -386,6 +401,13 @@ impl Session {
         };
         if due {
             let t = self.target;
+            let moving = self
+                .sent
+                .is_some_and(|(s, _)| s != VelocityTarget::default());
+            if std::mem::take(&mut self.estop_pending) && moving {
+                self.counters.estops += 1;
+                self.tx(Command::EStop, now, out);
+            }
             self.tx(Command::Vel(t.vel), now, out);
             self.tx(Command::RVel(t.rvel), now, out);
             self.sent = Some((t, now));
@@ -627,6 +649,41 @@ mod tests {
         o.feed(&mut s, &sip_payload(), 1000 * MS);
         o.poll(&mut s, 1100 * MS);
         assert_eq!(o.take(), [Command::Pulse]);
+    }
+
+    #[test]
+    fn a_dead_controller_gets_one_estop_and_a_normal_stop_none() {
+        let (mut s, mut o) = connected(SessionConfig::default());
+        o.poll(&mut s, 60 * MS);
+        o.take();
+        let drive = VelocityTarget { vel: 300, rvel: 0 };
+        s.set_target(drive);
+        o.poll(&mut s, 70 * MS);
+        o.take();
+        s.emergency_stop();
+        o.poll(&mut s, 80 * MS);
+        assert_eq!(
+            o.take(),
+            [Command::EStop, Command::Vel(0), Command::RVel(0)]
+        );
+        // Held at zero without repeating E_STOP.
+        s.set_target(VelocityTarget::default());
+        o.feed(&mut s, &sip_payload(), 500 * MS);
+        o.poll(&mut s, 600 * MS);
+        assert_eq!(o.take(), [Command::Pulse]);
+        assert_eq!(s.counters().estops, 1);
+        // Standing still, a dead controller needs no E_STOP; a commanded
+        // stop ramps down as the robot is configured to.
+        s.emergency_stop();
+        o.poll(&mut s, 700 * MS);
+        assert!(!o.take().contains(&Command::EStop));
+        s.set_target(drive);
+        o.poll(&mut s, 800 * MS);
+        o.take();
+        s.set_target(VelocityTarget::default());
+        o.poll(&mut s, 900 * MS);
+        assert_eq!(o.take(), [Command::Vel(0), Command::RVel(0)]);
+        assert_eq!(s.counters().estops, 1);
     }
 
     #[test]

@@ -32,6 +32,13 @@ pub fn offset_attr(channel: u8) -> String {
     format!("in_voltage{channel}_offset")
 }
 
+/// The channel's sample format, `scan_elements/in_voltage<channel>_type`
+/// (present on ADCs with buffer support): the one place IIO states the
+/// converter's resolution.
+pub fn type_attr(channel: u8) -> String {
+    format!("scan_elements/in_voltage{channel}_type")
+}
+
 /// Scale shared by every voltage channel.
 pub const SHARED_SCALE_ATTR: &str = "in_voltage_scale";
 /// Offset shared by every voltage channel.
@@ -149,6 +156,60 @@ pub fn parse_offset(text: &[u8]) -> Result<f64, IioError> {
     })
 }
 
+/// `scan_elements/in_voltageY_type`: `[be|le]:[s|u]BITS/STORAGE[XREPEAT][>>SHIFT]`
+/// (the kernel's IIO ABI); returns BITS, the converter's resolution.
+pub fn parse_type(text: &[u8]) -> Result<u8, IioError> {
+    const ATTR: &str = "in_voltage_type";
+    let t = trimmed(text, ATTR)?;
+    let bad = || IioError::BadNumber {
+        attr: ATTR,
+        expected: "le:u12/16>>0 (endianness:sign bits/storage bits)",
+        found: Snippet::new(t),
+    };
+    let rest = match t {
+        [b'l' | b'b', b'e', b':', rest @ ..] => rest,
+        _ => return Err(bad()),
+    };
+    let rest = match rest {
+        [b's' | b'u', rest @ ..] => rest,
+        _ => return Err(bad()),
+    };
+    let slash = rest.iter().position(|&b| b == b'/').ok_or_else(bad)?;
+    let (bits, storage) = (rest.get(..slash).ok_or_else(bad)?, rest.get(slash + 1..));
+    let storage_digits = storage
+        .map(|s| s.iter().take_while(|b| b.is_ascii_digit()).count())
+        .unwrap_or(0);
+    let bits = parse_integer(bits)
+        .filter(|b| (1..=32).contains(b))
+        .ok_or_else(bad)?;
+    let storage = storage
+        .and_then(|s| s.get(..storage_digits))
+        .and_then(parse_integer)
+        .ok_or_else(bad)?;
+    if storage < bits {
+        return Err(bad());
+    }
+    u8::try_from(bits).map_err(|_| bad())
+}
+
+/// What a raw value is checked against.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum IioRange {
+    /// The device stated its resolution (its `_type` attribute): counts
+    /// above `2^bits − 1` cannot come from the converter.
+    Counts { bits: u8 },
+    /// The device states only its scale: the value in mV must lie below the
+    /// profile's reference voltage (nothing on the board can exceed it).
+    BelowReference { vref_mv: f64 },
+}
+
+impl IioRange {
+    /// Largest count for a stated resolution.
+    pub fn max_counts(bits: u8) -> u32 {
+        u32::try_from((1u64 << bits.min(32)) - 1).unwrap_or(u32::MAX)
+    }
+}
+
 /// How an IIO channel's raw value becomes millivolts.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IioCalibration {
@@ -159,22 +220,42 @@ pub struct IioCalibration {
 }
 
 impl IioCalibration {
-    /// `raw` checked against `0..=max_counts` (the configured resolution).
-    pub fn measure(&self, raw: i64, max_counts: u32) -> Result<Measurement, RangeError> {
+    /// `raw` checked against what the device says it can produce (never
+    /// against the profile's `adc_bits`: IIO states its own scale).
+    pub fn measure(&self, raw: i64, range: IioRange) -> Result<Measurement, RangeError> {
         if raw < 0 {
             return Err(RangeError::NegativeCounts { counts: raw });
         }
-        match u32::try_from(raw) {
-            Ok(c) if c <= max_counts => Ok(Measurement {
-                raw_counts: c,
-                raw_mv: (raw as f64 + self.offset) * self.scale_mv,
-            }),
-            _ => Err(RangeError::CountsAboveMax {
-                counts: raw,
-                max: max_counts,
-                bits: (u32::BITS - max_counts.leading_zeros()) as u8,
-            }),
+        let above_max = |max: u32, bits: u8| RangeError::CountsAboveMax {
+            counts: raw,
+            max,
+            bits,
+        };
+        let counts = match range {
+            IioRange::Counts { bits } => {
+                let max = IioRange::max_counts(bits);
+                u32::try_from(raw)
+                    .ok()
+                    .filter(|c| *c <= max)
+                    .ok_or_else(|| above_max(max, bits))?
+            }
+            IioRange::BelowReference { .. } => {
+                u32::try_from(raw).map_err(|_| above_max(u32::MAX, 32))?
+            }
+        };
+        let raw_mv = (raw as f64 + self.offset) * self.scale_mv;
+        if let IioRange::BelowReference { vref_mv } = range
+            && raw_mv >= vref_mv
+        {
+            return Err(RangeError::MillivoltsOutOfRange {
+                mv: raw_mv,
+                vref_mv,
+            });
         }
+        Ok(Measurement {
+            raw_counts: counts,
+            raw_mv,
+        })
     }
 }
 
@@ -251,23 +332,66 @@ mod tests {
             scale_mv: 1.220703125,
             offset: 0.0,
         };
-        let m = cal.measure(2048, 4095).unwrap();
+        let twelve = IioRange::Counts { bits: 12 };
+        let m = cal.measure(2048, twelve).unwrap();
         assert_eq!(m.raw_counts, 2048);
         assert!((m.raw_mv - 2500.0).abs() < 1e-9);
         let cal = IioCalibration {
             scale_mv: 2.0,
             offset: -10.0,
         };
-        assert!((cal.measure(110, 4095).unwrap().raw_mv - 200.0).abs() < 1e-9);
+        assert!((cal.measure(110, twelve).unwrap().raw_mv - 200.0).abs() < 1e-9);
         assert_eq!(
-            cal.measure(4096, 4095),
+            cal.measure(4096, twelve),
             Err(RangeError::CountsAboveMax {
                 counts: 4096,
                 max: 4095,
                 bits: 12
             })
         );
-        assert!(cal.measure(-1, 4095).is_err());
+        assert!(cal.measure(-1, twelve).is_err());
+    }
+
+    #[test]
+    fn scan_type_states_the_resolution() {
+        // ads1015 (12 bits, shifted), ti-ads8688 (16 of 16), a 10-bit MCP3008.
+        assert_eq!(parse_type(b"be:s12/16>>4\n"), Ok(12));
+        assert_eq!(parse_type(b"le:u16/16>>0\n"), Ok(16));
+        assert_eq!(parse_type(b"le:u10/16\n"), Ok(10));
+        assert_eq!(parse_type(b"le:s24/32X2>>8"), Ok(24));
+        for bad in [
+            &b"u12/16"[..],
+            b"le:x12/16",
+            b"le:u0/16",
+            b"le:u17/16",
+            b"le:u/16",
+            b"le:u12",
+        ] {
+            assert!(
+                matches!(parse_type(bad), Err(IioError::BadNumber { .. })),
+                "{bad:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_12_bit_reading_passes_whatever_a_profile_guessed() {
+        // A 12-bit ADC against a 5 V reference: 3000 counts is 3662 mV.
+        let cal = IioCalibration {
+            scale_mv: 1.220703125,
+            offset: 0.0,
+        };
+        let m = cal
+            .measure(3000, IioRange::BelowReference { vref_mv: 5000.0 })
+            .unwrap();
+        assert!((m.raw_mv - 3662.109375).abs() < 1e-9);
+        // Full scale and beyond cannot come from the converter.
+        assert!(matches!(
+            cal.measure(4096, IioRange::BelowReference { vref_mv: 5000.0 }),
+            Err(RangeError::MillivoltsOutOfRange { .. })
+        ));
+        assert!(cal.measure(4095, IioRange::Counts { bits: 12 }).is_ok());
+        assert_eq!(IioRange::max_counts(32), u32::MAX);
     }
 
     #[test]
@@ -275,5 +399,6 @@ mod tests {
         assert_eq!(raw_attr(3), "in_voltage3_raw");
         assert_eq!(scale_attr(0), "in_voltage0_scale");
         assert_eq!(offset_attr(1), "in_voltage1_offset");
+        assert_eq!(type_attr(2), "scan_elements/in_voltage2_type");
     }
 }

@@ -33,7 +33,7 @@ pub mod trend;
 
 pub use adc::{AdcConfigError, AdcScale, Measurement, RangeError};
 pub use decimate::RateDecimator;
-pub use iio::{IioCalibration, IioError};
+pub use iio::{IioCalibration, IioError, IioRange};
 pub use line::{
     ChecksumPolicy, Eol, Line, LineError, Sample, SampleValue, encode_sample, parse_line,
 };

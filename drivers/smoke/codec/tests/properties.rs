@@ -2,7 +2,9 @@
 //! bounded, and framing does not depend on how the bytes were chunked.
 
 use proptest::prelude::*;
-use smokenav_smoke_codec::iio::{IioCalibration, parse_offset, parse_raw, parse_scale};
+use smokenav_smoke_codec::iio::{
+    IioCalibration, IioRange, parse_offset, parse_raw, parse_scale, parse_type,
+};
 use smokenav_smoke_codec::line::xor_checksum;
 use smokenav_smoke_codec::{
     AdcScale, BaselineMode, ChecksumPolicy, Eol, Line, Measurement, Sample, SampleValue,
@@ -118,14 +120,22 @@ proptest! {
         if let Ok(v) = parse_offset(&bytes) {
             prop_assert!(v.is_finite());
         }
+        if let Ok(bits) = parse_type(&bytes) {
+            prop_assert!((1..=32).contains(&bits));
+        }
     }
 
     #[test]
     fn any_raw_value_either_measures_in_range_or_is_refused(raw in any::<i64>(), scale in 0.001f64..10.0) {
         let cal = IioCalibration { scale_mv: scale, offset: 0.0 };
-        match cal.measure(raw, 4095) {
+        match cal.measure(raw, IioRange::Counts { bits: 12 }) {
             Ok(m) => prop_assert!(m.raw_counts <= 4095 && m.raw_mv >= 0.0),
             Err(_) => prop_assert!(!(0..=4095).contains(&raw)),
+        }
+        let vref_mv = 5000.0;
+        match cal.measure(raw, IioRange::BelowReference { vref_mv }) {
+            Ok(m) => prop_assert!(m.raw_mv >= 0.0 && m.raw_mv < vref_mv),
+            Err(_) => prop_assert!(raw < 0 || (raw as f64) * scale >= vref_mv || raw > i64::from(u32::MAX)),
         }
         let adc = AdcScale::new(5000.0, 12).unwrap();
         prop_assert_eq!(adc.measure_counts(raw).is_ok(), (0..=4095).contains(&raw));

@@ -6,8 +6,8 @@ use crate::settings::Settings;
 use smokenav_platform_runtime::{Reconnect, ReconnectPolicy};
 use smokenav_shared_types::Clock;
 use smokenav_smoke_codec::iio::{
-    IioCalibration, SHARED_OFFSET_ATTR, SHARED_SCALE_ATTR, offset_attr, parse_offset, parse_raw,
-    parse_scale, raw_attr, scale_attr,
+    IioCalibration, IioRange, SHARED_OFFSET_ATTR, SHARED_SCALE_ATTR, offset_attr, parse_offset,
+    parse_raw, parse_scale, parse_type, raw_attr, scale_attr, type_attr,
 };
 use smokenav_smoke_codec::{
     AdcScale, ChecksumPolicy, IioError, Measurement, RangeError, SerialDecoder, StreamError,
@@ -258,10 +258,12 @@ impl SerialLink {
 pub struct IioLink {
     dir: PathBuf,
     channel: u8,
-    max_counts: u32,
+    /// The profile's guesses, used only where the device says nothing.
+    profile_bits: u8,
+    vref_mv: f64,
     period: Duration,
     next_read: Option<Instant>,
-    calibration: Option<IioCalibration>,
+    calibration: Option<(IioCalibration, IioRange)>,
     raw_path: PathBuf,
     reconnect: Reconnect,
     failing: bool,
@@ -300,7 +302,8 @@ impl IioLink {
             raw_path: dir.join(raw_attr(s.channel)),
             dir,
             channel: s.channel,
-            max_counts: s.adc.max_counts(),
+            profile_bits: s.adc.bits(),
+            vref_mv: s.adc.vref_mv(),
             period: Duration::from_secs_f64(1.0 / s.rate_hz),
             next_read: None,
             calibration: None,
@@ -309,8 +312,10 @@ impl IioLink {
         }
     }
 
-    /// Scale (per channel, else shared) and offset (likewise, else 0).
-    fn read_calibration(&self) -> Result<IioCalibration, String> {
+    /// Scale (per channel, else shared), offset (likewise, else 0) and the
+    /// range the device can produce: its stated resolution where it has a
+    /// `scan_elements` type, else below the profile's reference voltage.
+    fn read_calibration(&self) -> Result<(IioCalibration, IioRange), String> {
         let mut buf = [0u8; ATTR_BUF];
         let scale_name = scale_attr(self.channel);
         let scale_path =
@@ -334,7 +339,27 @@ impl IioLink {
         if !self.raw_path.exists() {
             return Err(format!("{} does not exist", self.raw_path.display()));
         }
-        Ok(IioCalibration { scale_mv, offset })
+        let type_path = self.dir.join(type_attr(self.channel));
+        let range = if type_path.exists() {
+            let text = read_attr(&type_path, &mut buf)
+                .map_err(|e| format!("{}: {e}", type_path.display()))?;
+            let bits = parse_type(text).map_err(|e| format!("{}: {e}", type_path.display()))?;
+            if bits != self.profile_bits {
+                tracing::warn!(
+                    device_bits = bits,
+                    profile_bits = self.profile_bits,
+                    "the IIO device states a {bits}-bit converter, the profile's \
+                     [smoke] adc_bits says {}: using the device's",
+                    self.profile_bits
+                );
+            }
+            IioRange::Counts { bits }
+        } else {
+            IioRange::BelowReference {
+                vref_mv: self.vref_mv,
+            }
+        };
+        Ok((IioCalibration { scale_mv, offset }, range))
     }
 
     pub fn step(&mut self, max_wait: Duration, clock: &dyn Clock, out: &mut Vec<LinkEvent>) {
@@ -361,7 +386,12 @@ impl IioLink {
                     self.calibration = Some(c);
                     self.failing = false;
                     self.reconnect.opened(clock.now_ns());
-                    tracing::info!(scale_mv = c.scale_mv, offset = c.offset, "IIO calibration");
+                    tracing::info!(
+                        scale_mv = c.0.scale_mv,
+                        offset = c.0.offset,
+                        range = ?c.1,
+                        "IIO calibration"
+                    );
                     out.push(LinkEvent::Connected {
                         stamp_ns: clock.now_ns(),
                         device: self.dir.display().to_string(),
@@ -398,7 +428,7 @@ impl IioLink {
                     stamp_ns,
                     error: Malformed::Iio(e),
                 },
-                Ok(raw) => match calibration.measure(raw, self.max_counts) {
+                Ok(raw) => match calibration.0.measure(raw, calibration.1) {
                     Ok(measurement) => LinkEvent::Sample {
                         stamp_ns,
                         measurement,

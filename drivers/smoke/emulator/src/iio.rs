@@ -10,7 +10,7 @@
 
 use crate::board::{Board, BoardConfig, BoardStats, Command, Fault, Output};
 use crate::model::Profile;
-use smokenav_smoke_codec::iio::{SHARED_SCALE_ATTR, offset_attr, raw_attr, scale_attr};
+use smokenav_smoke_codec::iio::{SHARED_SCALE_ATTR, offset_attr, raw_attr, scale_attr, type_attr};
 use std::collections::VecDeque;
 use std::fs;
 use std::io;
@@ -31,6 +31,9 @@ pub struct IioConfig {
     pub offset: Option<i32>,
     /// Write the scale as the shared `in_voltage_scale` instead of per channel.
     pub shared_scale: bool,
+    /// Write `scan_elements/in_voltageN_type` (`le:uBITS/16>>0`), as an ADC
+    /// with buffer support does; without it the device states only its scale.
+    pub scan_type: bool,
     /// Device name written to `name`.
     pub name: String,
     pub schedule: Vec<(f64, Fault)>,
@@ -44,6 +47,7 @@ impl IioConfig {
             channel: 0,
             offset: None,
             shared_scale: false,
+            scan_type: true,
             name: "smokenav-fake-adc".into(),
             schedule: Vec::new(),
         }
@@ -106,6 +110,19 @@ fn create_device(dir: &Path, cfg: &IioConfig, raw: &[u8]) -> io::Result<()> {
             &offset_attr(cfg.channel),
             format!("{off}\n").as_bytes(),
         )?;
+    }
+    if cfg.scan_type {
+        let bits = cfg.board.adc.bits();
+        let storage = if bits <= 16 { 16 } else { 32 };
+        let attr = staging.join(type_attr(cfg.channel));
+        if let (Some(folder), Some(name)) = (attr.parent(), attr.file_name()) {
+            fs::create_dir_all(folder)?;
+            write_atomic(
+                folder,
+                &name.to_string_lossy(),
+                format!("le:u{bits}/{storage}>>0\n").as_bytes(),
+            )?;
+        }
     }
     write_atomic(&staging, &raw_attr(cfg.channel), raw)?;
     fs::rename(&staging, dir)

@@ -39,7 +39,7 @@ fn device_has_the_abi_attributes_and_clean_air_reads_3000_mv() {
         scale_mv: scale,
         offset: 0.0,
     }
-    .measure(raw, 4095)
+    .measure(raw, smokenav_smoke_codec::IioRange::Counts { bits: 12 })
     .unwrap()
     .raw_mv;
     assert!((mv - 3000.0).abs() < 10.0, "{raw} counts = {mv} mV");
@@ -64,7 +64,7 @@ fn shared_scale_and_offset_give_the_same_millivolts() {
         scale_mv: scale,
         offset,
     }
-    .measure(raw, 4095)
+    .measure(raw, smokenav_smoke_codec::IioRange::Counts { bits: 12 })
     .unwrap()
     .raw_mv;
     assert!((mv - 3000.0).abs() < 10.0, "{mv}");

@@ -27,7 +27,7 @@ use super::motion::MotionModel;
 use super::resample;
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
 use crate::grid::{BeamEnd, LogOddsModel, TiledGrid};
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 use crate::scan::RangeScan;
 use nalgebra::{Matrix3, Vector3};
 use smokenav_platform_config::SlamSection;
@@ -160,7 +160,7 @@ impl Rbpf {
     pub fn new(p: RbpfParams, keep_paths: bool) -> Self {
         Self {
             particles: Vec::new(),
-            rng: Rng::new(p.seed),
+            rng: Rng::new(p.seed, 0),
             keep_paths,
             prepared: PreparedScan::default(),
             last_odom: None,

@@ -1,6 +1,6 @@
 //! The odometry motion model: the four GMapping noise terms.
 
-use crate::rng::Rng;
+use smokenav_shared_types::Rng;
 use smokenav_platform_config::SlamSection;
 use smokenav_shared_types::Pose2;
 
@@ -50,7 +50,7 @@ mod tests {
     #[test]
     fn standing_still_adds_no_noise() {
         let m = MotionModel::from_config(&SlamSection::default());
-        let mut rng = Rng::new(1);
+        let mut rng = Rng::new(1, 0);
         let p = Pose2::new(1.0, 2.0, 0.5);
         assert_eq!(m.sample(&p, &Pose2::default(), &mut rng), p);
     }
@@ -59,7 +59,7 @@ mod tests {
     fn one_metre_forward_spreads_by_srr_and_str() {
         // srr 0.1 → σx = 0.1 m; str 0.1 → σθ = 0.1 rad for 1 m of travel.
         let m = MotionModel::from_config(&SlamSection::default());
-        let mut rng = Rng::new(3);
+        let mut rng = Rng::new(3, 0);
         let n = 20_000;
         let d = Pose2::new(1.0, 0.0, 0.0);
         let samples: Vec<Pose2> = (0..n)
