@@ -15,9 +15,9 @@ use smokenav_algorithms_slam::fuzzy::registration::{
 };
 use smokenav_algorithms_slam::fuzzy::{ConfidenceModel, FuzzyGrid, fuzzy_beams};
 use smokenav_algorithms_slam::offline::LogScans;
-use smokenav_algorithms_slam::rng::Rng;
 use smokenav_algorithms_slam::{Pose2, RangeScan};
 use smokenav_platform_config::FuzzySection;
+use smokenav_shared_types::Rng;
 use std::io::BufReader;
 use std::path::PathBuf;
 
@@ -162,7 +162,7 @@ fn main() {
     let results: Vec<Vec<(SearchResult, u64)>> = searches
         .iter()
         .map(|(_, search)| {
-            let mut rng = Rng::new(42);
+            let mut rng = Rng::new(42, 0);
             pairs
                 .iter()
                 .map(|pair| {

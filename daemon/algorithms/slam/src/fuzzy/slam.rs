@@ -21,12 +21,12 @@ use super::registration::{
     reading_points,
 };
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
-use crate::rng::Rng;
 use crate::scan::RangeScan;
 use nalgebra::Matrix3;
 use smokenav_platform_config::{FuzzyReference, FuzzySearch, FuzzySection, SlamSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
+use smokenav_shared_types::Rng;
 
 /// Fewer matchable cells than this and the prediction is kept.
 pub const MIN_POINTS: usize = 20;
@@ -83,7 +83,7 @@ impl FuzzySlam {
         Self {
             model: ConfidenceModel::from_config(&p),
             max_range: cfg.max_range_m.min(cfg.max_urange_m.max(p.local_radius_m)),
-            rng: Rng::new(cfg.seed),
+            rng: Rng::new(cfg.seed, 0),
             beams: Vec::new(),
             prev: None,
             next: local(),
