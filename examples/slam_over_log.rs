@@ -16,7 +16,7 @@ fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let log = args
         .next()
-        .context("usage: slam_over_log LOG.clf [rbpf|graph]")?;
+        .context("usage: slam_over_log LOG.clf [rbpf|graph|fuzzy]")?;
     let mut cfg = SlamSection {
         particles: 10,
         ..SlamSection::default()
@@ -24,7 +24,8 @@ fn main() -> anyhow::Result<()> {
     cfg.backend = match args.next().as_deref() {
         None | Some("rbpf") => SlamBackendKind::Rbpf,
         Some("graph") => SlamBackendKind::Graph,
-        Some(other) => anyhow::bail!("unknown back-end {other} (rbpf or graph)"),
+        Some("fuzzy") => SlamBackendKind::Fuzzy,
+        Some(other) => anyhow::bail!("unknown back-end {other} (rbpf, graph or fuzzy)"),
     };
     let file = std::fs::File::open(&log).with_context(|| format!("cannot open {log}"))?;
     let mut scans = LogScans::new(BufReader::new(file));

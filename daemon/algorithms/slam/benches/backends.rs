@@ -1,18 +1,19 @@
-//! Both SLAM back-ends over the MIT CSAIL log, side by side in one run, each
+//! The SLAM back-ends over the MIT CSAIL log, side by side in one run, each
 //! through the one SLAM pipeline (as the SLAM process and `smokenav slam` run
 //! them): total thread CPU time, per-scan CPU p50/p99/max and ATE of the final
 //! trajectory against GMapping's corrected poses (after the best rigid
 //! alignment), plus the graph's loop-closure counters.
 //!
 //! `cargo bench -p smokenav-algorithms-slam --bench backends`
-//! Environment: `CSAIL_DIR` (the folder of the log; required), `BACKENDS` (`rbpf,graph` by default), `CSAIL_LOG` / `CSAIL_REFERENCE`
-//! (other log and reference files in that folder), `CSAIL_OUT` (folder for
+//! Environment: `CSAIL_DIR` (the folder of the log; required), `BACKENDS` (`rbpf,graph` by default; `fuzzy` too), `CSAIL_LOG` / `CSAIL_REFERENCE`
+//! (other log and reference files in that folder), `SLAM_TOML` (`[slam]` keys), `CSAIL_OUT` (folder for
 //! each back-end's map PNG and trajectory).
 
 use smokenav_algorithms_eval::{
     StampedPose as EvalPose, TrajectoryOptions, evaluate_trajectories, format_trajectory,
     load_trajectory,
 };
+use smokenav_algorithms_slam::fuzzy::FuzzySlam;
 use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam};
 use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::rbpf::RbpfParams;
@@ -73,11 +74,19 @@ fn main() {
         std::env::var("CSAIL_REFERENCE").unwrap_or_else(|_| "csail-reference-poses.txt".into());
     let reference = load_trajectory(&dir.join(&reference)).unwrap();
     let which = std::env::var("BACKENDS").unwrap_or_else(|_| "rbpf,graph".into());
-    let cfg = SlamSection::default();
+    // `SLAM_TOML='frontend = false\n[fuzzy]\nsearch = "correlative"'` overrides `[slam]` keys.
+    let cfg = match std::env::var("SLAM_TOML") {
+        Ok(text) => {
+            smokenav_platform_config::parse_toml::<SlamSection>(&text, "SLAM_TOML".as_ref())
+                .unwrap_or_else(|e| panic!("{e}"))
+        }
+        Err(_) => SlamSection::default(),
+    };
     for name in which.split(',') {
         let backend: Box<dyn SlamBackend> = match name {
             "rbpf" => Box::new(Rbpf::new(RbpfParams::from_config(&cfg), true)),
             "graph" => Box::new(GraphSlam::new(&cfg, graph_params())),
+            "fuzzy" => Box::new(FuzzySlam::new(&cfg, true)),
             other => panic!("unknown back-end {other}"),
         };
         let mut slam = SlamPipeline::new(&cfg, backend);
@@ -113,6 +122,9 @@ fn main() {
         );
         if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
             println!("backends {log} graph: {:?}", g.stats());
+        }
+        if let Some(f) = slam.backend().as_any().downcast_ref::<FuzzySlam>() {
+            println!("backends {log} fuzzy: {:?}", f.stats());
         }
         if let Ok(out) = std::env::var("CSAIL_OUT") {
             let out = PathBuf::from(out).join(name);

@@ -12,6 +12,7 @@
 //! several back-ends (which needs each one's covariance and a cheap way to
 //! tell whether its map changed).
 
+use crate::fuzzy::FuzzySlam;
 use crate::graph::{GraphParams, GraphSlam};
 use crate::rbpf::{Rbpf, RbpfParams};
 use crate::scan::RangeScan;
@@ -105,5 +106,6 @@ pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Box<dyn SlamBacke
             opts.keep_trajectory,
         )),
         SlamBackendKind::Graph => Box::new(GraphSlam::new(cfg, GraphParams::default())),
+        SlamBackendKind::Fuzzy => Box::new(FuzzySlam::new(cfg, opts.keep_trajectory)),
     }
 }

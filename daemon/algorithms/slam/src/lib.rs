@@ -10,7 +10,8 @@
 //! passed in, randomness comes from a seeded generator, so a run is reproducible.
 //!
 //! Back-ends, one folder each: [`rbpf`], the Rao-Blackwellised particle filter
-//! of the GMapping class (Grisetti et al.).
+//! of the GMapping class (Grisetti et al.); [`fuzzy`], fuzzy confidence maps
+//! registered by Cuckoo search (Hou et al. 2014).
 //!
 //! Shared pieces: [`grid`] (tiled copy-on-write occupancy grid), [`carmen`]
 //! (reader for CARMEN logs: `FLASER`, `ROBOTLASER1`, `ODOM`), [`offline`]
@@ -26,6 +27,7 @@ pub mod backend;
 pub mod carmen;
 pub mod degeneracy;
 pub mod frontend;
+pub mod fuzzy;
 pub mod graph;
 pub mod grid;
 pub mod motion_filter;

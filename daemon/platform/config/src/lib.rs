@@ -16,6 +16,7 @@ pub mod fusion;
 pub mod laser;
 pub mod robot;
 pub mod slam;
+pub mod slam_fuzzy;
 pub mod smoke;
 pub mod sonar;
 pub mod validate;
@@ -26,6 +27,7 @@ pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::{LaserSection, ScanLayout};
 pub use robot::{BusSection, Platform, RobotSection};
 pub use slam::{SlamBackendKind, SlamInput, SlamSection};
+pub use slam_fuzzy::{FuzzyReference, FuzzySearch, FuzzySection};
 pub use smoke::{AdcBackend, SmokeSection};
 pub use sonar::{SonarSection, Transducer};
 pub use validate::{Issue, Validate, Validator, key_line};
@@ -184,8 +186,13 @@ impl RobotConfig {
 
     /// Parses and validates `text`; `file` is only used in messages.
     pub fn parse(text: &str, file: &Path) -> Result<Self, ConfigError> {
-        let cfg: RobotConfig = parse_toml(text, file)?;
+        let mut cfg: RobotConfig = parse_toml(text, file)?;
         check(&cfg, text, file)?;
+        // The fuzzy model's sonar cone is the robot's unless `[slam.fuzzy]` says otherwise.
+        cfg.slam
+            .fuzzy
+            .sonar_cone_deg
+            .get_or_insert(cfg.sonar.cone_deg);
         Ok(cfg)
     }
 

@@ -29,6 +29,7 @@
 //! have matching remove it leaves a residual that accumulates), and it writes
 //! scans into the maps every 0.5 m or 0.5 rad instead of every scan.
 
+use crate::slam_fuzzy::FuzzySection;
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
 
@@ -60,9 +61,9 @@ pub enum SlamInput {
 
 /// The SLAM algorithm behind the pipeline (`[slam] backend`, and `--backend`
 /// of `smokenav-slam` and `smokenav slam` with the `clap` feature): the
-/// particle filter or the pose graph with loop closure; `fuzzy` (fuzzy-map
-/// registration) and `vote` (a vote over several back-ends) are the next
-/// ones. Unknown names are rejected.
+/// particle filter, the pose graph with loop closure or the fuzzy-map
+/// registration; `vote` (a vote over several back-ends) is the next one.
+/// Unknown names are rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum SlamBackendKind {
@@ -73,6 +74,9 @@ pub enum SlamBackendKind {
     /// Pose graph with loop closure (Karto / Cartographer class).
     #[serde(rename = "graph")]
     Graph,
+    /// Fuzzy confidence maps registered scan to scan (`[slam.fuzzy]`).
+    #[serde(rename = "fuzzy")]
+    Fuzzy,
 }
 
 impl SlamBackendKind {
@@ -80,6 +84,7 @@ impl SlamBackendKind {
         match self {
             SlamBackendKind::Rbpf => "rbpf",
             SlamBackendKind::Graph => "graph",
+            SlamBackendKind::Fuzzy => "fuzzy",
         }
     }
 }
@@ -136,7 +141,7 @@ slam_section! {
     map_rate_hz: f64 = (1.0, 1.0),
     /// Scan topic the SLAM process consumes.
     input: SlamInput = (SlamInput::Fused, SlamInput::Fused),
-    /// The SLAM algorithm (only `rbpf` so far).
+    /// The SLAM algorithm (`rbpf`, `graph` or `fuzzy`).
     backend: SlamBackendKind = (SlamBackendKind::Rbpf, SlamBackendKind::Rbpf),
     /// Seed of the filter's random numbers: the same input and seed give the same output.
     seed: u64 = (42, 42),
@@ -234,6 +239,8 @@ slam_section! {
     frontend_window_m: f64 = (1.0, 1.0),
     /// Rotational search window of the front end around its prediction, ± rad.
     frontend_window_rad: f64 = (0.4, 0.4),
+    /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
+    fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),
 }
 
 impl Default for SlamSection {
@@ -340,6 +347,7 @@ impl Validate for SlamSection {
             0.0,
             1.6,
         );
+        self.fuzzy.validate(&k("fuzzy"), v);
     }
 }
 
@@ -429,9 +437,34 @@ mod tests {
             section("backend = \"graph\"\n").backend,
             SlamBackendKind::Graph
         );
+        assert_eq!(
+            section("backend = \"fuzzy\"\n").backend,
+            SlamBackendKind::Fuzzy
+        );
         let err = parse_toml::<SlamSection>("backend = \"karto\"\n", Path::new("slam.toml"))
             .unwrap_err()
             .to_string();
         assert!(err.contains("backend") && err.contains("karto"), "{err}");
+    }
+
+    #[test]
+    fn fuzzy_keys_are_strict_and_validated() {
+        let s = section("[fuzzy]\nsearch = \"correlative\"\nsonar_k = 0.4\n");
+        assert_eq!(s.fuzzy.search, crate::slam_fuzzy::FuzzySearch::Correlative);
+        assert_eq!(s.fuzzy.sonar_k, 0.4);
+        assert_eq!(
+            s.fuzzy.laser_angular_resolution_deg, 0.36,
+            "untouched keys keep the preset"
+        );
+        let err = parse_toml::<SlamSection>("[fuzzy]\nsonar_kk = 0.4\n", Path::new("slam.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("sonar_kk"), "{err}");
+        let bad = section("[fuzzy]\ncuckoo_levy_beta = 3.0\nwindow_m = -1.0\n");
+        let mut v = Validator::default();
+        bad.validate("slam", &mut v);
+        let keys: Vec<_> = v.issues.iter().map(|i| i.key.as_str()).collect();
+        assert!(keys.contains(&"slam.fuzzy.cuckoo_levy_beta"), "{keys:?}");
+        assert!(keys.contains(&"slam.fuzzy.window_m"), "{keys:?}");
     }
 }

@@ -362,3 +362,12 @@ mod props {
         }
     }
 }
+
+#[test]
+fn fuzzy_sonar_cone_comes_from_the_robot_unless_given() {
+    let cfg = parse(&pioneer_text()).unwrap();
+    assert_eq!(cfg.slam.fuzzy.sonar_cone_deg, Some(cfg.sonar.cone_deg));
+    let text = format!("{}\n[slam.fuzzy]\nsonar_cone_deg = 30.0\n", pioneer_text());
+    let cfg = parse(&text).unwrap();
+    assert_eq!(cfg.slam.fuzzy.sonar_cone_deg, Some(30.0));
+}

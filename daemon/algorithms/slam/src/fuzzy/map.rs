@@ -1,0 +1,454 @@
+//! Fuzzy maps: `Mo` (occupied confidence) and `Ms` (free-space confidence)
+//! on a Cartesian grid, built from readings in polar form by fuzzy union
+//! (eqs. 5–6), and the combined map of eq. 7.
+//!
+//! Polar → Cartesian: a cell takes the confidence of the readings at its
+//! centre, seen from the sensor. The paper's bounds are far below a cell (±10
+//! mm, 0.36°) and a centre would fall between them, so a bound is widened to
+//! at least one cell (δr ≥ cell, δθ ≥ the angle a cell subtends): a return
+//! always lights the cell it ends in. The values at the paper's bounds are
+//! those of [`super::confidence`].
+
+use super::confidence::{self, ConfidenceModel};
+use crate::scan::{BeamKind, RangeScan};
+use smokenav_platform_map::{OccupancyGrid, UNKNOWN};
+use smokenav_shared_types::Pose2;
+use smokenav_shared_types::geometry::normalize_angle;
+
+/// One reading in the model's terms (sensor frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FuzzyBeam {
+    pub angle: f64,
+    pub range: f64,
+    /// The reading ends on an obstacle within the map's radius (else it only clears space).
+    pub hit: bool,
+    /// Peak confidence K.
+    pub k: f64,
+    pub dr: f64,
+    pub dtheta: f64,
+    /// Lateral confidence of this beam inside its sonar cone (1 for a laser beam).
+    pub lateral: f64,
+    pub kind: BeamKind,
+}
+
+/// The readings of `scan` as fuzzy beams, into `out` (cleared first).
+///
+/// A fused scan paints a sonar echo as an arc of laser-spaced beams across
+/// the cone: the echo came from somewhere on it. Each contiguous run of
+/// sonar beams is one reading whose lateral bound is half the cone (or the
+/// run's half-width, if wider as seen from the laser), so the arc is most
+/// confident on the cone's axis and fades to 0 at its edges — a wide, weak
+/// arc rather than a sharp wall.
+pub fn fuzzy_beams(
+    scan: &RangeScan,
+    model: &ConfidenceModel,
+    max_range: f64,
+    radius: f64,
+    out: &mut Vec<FuzzyBeam>,
+) {
+    out.clear();
+    let beams = &scan.beams;
+    let spacing = if beams.len() >= 2 {
+        (f64::from(beams[beams.len() - 1].angle) - f64::from(beams[0].angle)).abs()
+            / (beams.len() - 1) as f64
+    } else {
+        model.laser_dtheta
+    };
+    let mut i = 0;
+    while i < beams.len() {
+        let b = &beams[i];
+        let usable = |r: Option<f32>, a: f32| {
+            r.map(f64::from)
+                .filter(|r| r.is_finite() && *r > 0.0 && *r < max_range && a.is_finite())
+        };
+        let Some(r) = usable(b.range, b.angle) else {
+            i += 1;
+            continue;
+        };
+        match b.kind {
+            BeamKind::Laser => {
+                out.push(FuzzyBeam {
+                    angle: f64::from(b.angle),
+                    range: r,
+                    hit: r <= radius,
+                    k: model.peak(BeamKind::Laser, r),
+                    dr: model.range_error(BeamKind::Laser, r),
+                    dtheta: model.laser_dtheta,
+                    lateral: 1.0,
+                    kind: BeamKind::Laser,
+                });
+                i += 1;
+            }
+            BeamKind::Sonar => {
+                let start = i;
+                let mut end = i;
+                while end + 1 < beams.len()
+                    && beams[end + 1].kind == BeamKind::Sonar
+                    && usable(beams[end + 1].range, beams[end + 1].angle).is_some()
+                {
+                    end += 1;
+                }
+                let (a0, a1) = (f64::from(beams[start].angle), f64::from(beams[end].angle));
+                let centre = 0.5 * (a0 + a1);
+                let bound = model.sonar_half_cone.max(0.5 * (a1 - a0).abs() + spacing);
+                for s in &beams[start..=end] {
+                    let Some(r) = usable(s.range, s.angle) else {
+                        continue;
+                    };
+                    let a = f64::from(s.angle);
+                    out.push(FuzzyBeam {
+                        angle: a,
+                        range: r,
+                        hit: r <= radius,
+                        k: model.peak(BeamKind::Sonar, r),
+                        dr: model.range_error(BeamKind::Sonar, r),
+                        dtheta: spacing.max(model.laser_dtheta),
+                        lateral: confidence::parabola(a - centre, bound),
+                        kind: BeamKind::Sonar,
+                    });
+                }
+                i = end + 1;
+            }
+        }
+    }
+}
+
+/// `Mo` and `Ms` over a rectangle of cells; the global map grows as the robot explores.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FuzzyGrid {
+    pub resolution: f64,
+    /// World position of the lower-left corner of cell (0, 0).
+    pub origin: (f64, f64),
+    pub width: usize,
+    pub height: usize,
+    pub mo: Vec<f32>,
+    pub ms: Vec<f32>,
+}
+
+/// Cells the global map grows by at a time (each way), so growth is rare.
+const GROW_CELLS: usize = 256;
+
+impl FuzzyGrid {
+    /// A square grid of ± `half_extent` around (0, 0).
+    pub fn square(resolution: f64, half_extent: f64) -> Self {
+        let n = (2.0 * half_extent / resolution).ceil() as usize;
+        let h = n as f64 * resolution / 2.0;
+        Self {
+            resolution,
+            origin: (-h, -h),
+            width: n,
+            height: n,
+            mo: vec![0.0; n * n],
+            ms: vec![0.0; n * n],
+        }
+    }
+
+    /// An empty grid (no cells) that grows on [`Self::ensure`].
+    pub fn empty(resolution: f64) -> Self {
+        Self {
+            resolution,
+            origin: (0.0, 0.0),
+            width: 0,
+            height: 0,
+            mo: Vec::new(),
+            ms: Vec::new(),
+        }
+    }
+
+    pub fn clear(&mut self) {
+        self.mo.fill(0.0);
+        self.ms.fill(0.0);
+    }
+
+    /// Index of the cell holding (x, y), if inside.
+    #[inline]
+    pub fn index(&self, x: f64, y: f64) -> Option<usize> {
+        let cx = ((x - self.origin.0) / self.resolution).floor();
+        let cy = ((y - self.origin.1) / self.resolution).floor();
+        (cx >= 0.0 && cy >= 0.0 && (cx as usize) < self.width && (cy as usize) < self.height)
+            .then(|| cy as usize * self.width + cx as usize)
+    }
+
+    #[inline]
+    pub fn centre(&self, i: usize) -> (f64, f64) {
+        (
+            self.origin.0 + ((i % self.width) as f64 + 0.5) * self.resolution,
+            self.origin.1 + ((i / self.width) as f64 + 0.5) * self.resolution,
+        )
+    }
+
+    /// The sensor saw (x, y) at all: some obstacle or free-space confidence.
+    pub fn seen(&self, x: f64, y: f64) -> bool {
+        self.index(x, y)
+            .is_some_and(|i| self.mo[i] > 0.0 || self.ms[i] > 0.0)
+    }
+
+    /// Eq. 7 at cell `i`.
+    pub fn combined(&self, i: usize, unknown: f64) -> f64 {
+        confidence::combined(f64::from(self.mo[i]), f64::from(self.ms[i]), unknown)
+    }
+
+    /// Eq. 7 at the world point (x, y); `unknown` outside the grid.
+    pub fn combined_at(&self, x: f64, y: f64, unknown: f64) -> f64 {
+        self.index(x, y)
+            .map_or(unknown, |i| self.combined(i, unknown))
+    }
+
+    /// Grows (keeping the content) until the rectangle is inside.
+    pub fn ensure(&mut self, min: (f64, f64), max: (f64, f64)) {
+        let res = self.resolution;
+        let (mut x0, mut y0) = self.origin;
+        let (mut x1, mut y1) = (x0 + self.width as f64 * res, y0 + self.height as f64 * res);
+        if self.width > 0 && min.0 >= x0 && min.1 >= y0 && max.0 < x1 && max.1 < y1 {
+            return;
+        }
+        let pad = GROW_CELLS as f64 * res;
+        if self.width == 0 {
+            // Cell edges on multiples of the resolution around the first rectangle.
+            x0 = (min.0 / res).floor() * res - pad;
+            y0 = (min.1 / res).floor() * res - pad;
+            x1 = x0;
+            y1 = y0;
+        }
+        if min.0 < x0 {
+            x0 -= ((x0 - min.0) / pad).ceil() * pad;
+        }
+        if min.1 < y0 {
+            y0 -= ((y0 - min.1) / pad).ceil() * pad;
+        }
+        if max.0 >= x1 {
+            x1 += ((max.0 - x1) / pad).floor() * pad + pad;
+        }
+        if max.1 >= y1 {
+            y1 += ((max.1 - y1) / pad).floor() * pad + pad;
+        }
+        let w = ((x1 - x0) / res).round() as usize;
+        let h = ((y1 - y0) / res).round() as usize;
+        let (dx, dy) = (
+            ((self.origin.0 - x0) / res).round() as usize,
+            ((self.origin.1 - y0) / res).round() as usize,
+        );
+        let mut mo = vec![0.0; w * h];
+        let mut ms = vec![0.0; w * h];
+        for row in 0..self.height {
+            let src = row * self.width..(row + 1) * self.width;
+            let dst = (row + dy) * w + dx;
+            mo[dst..dst + self.width].copy_from_slice(&self.mo[src.clone()]);
+            ms[dst..dst + self.width].copy_from_slice(&self.ms[src]);
+        }
+        *self = Self {
+            resolution: res,
+            origin: (x0, y0),
+            width: w,
+            height: h,
+            mo,
+            ms,
+        };
+    }
+
+    /// Eqs. 5–6: unites the readings of a sensor at `sensor` (in this grid's
+    /// frame) into `Mo` and `Ms`. Free space is cleared up to `radius`.
+    pub fn paint(&mut self, sensor: &Pose2, beams: &[FuzzyBeam], radius: f64) {
+        let res = self.resolution;
+        let step = 0.5 * res;
+        for b in beams {
+            let a = sensor.theta + b.angle;
+            let (sin, cos) = a.sin_cos();
+            let dr = b.dr.max(res);
+            // The angle a cell subtends at range r, or the beam's own bound if wider.
+            let dth = |r: f64| b.dtheta.max((res / r.max(res)).atan());
+            // Free space takes a narrower floor (¾ cell): a ray grazing a wall
+            // must not clear the wall's cells, whose centres it passes a cell
+            // or less away — with `Ms` united over every scan, one such ray
+            // would erase the wall from the combined map for good.
+            let dth_free = |r: f64| b.dtheta.max((0.75 * res / r.max(res)).atan());
+            // Ms: march along the ray; each cell met takes P at its centre.
+            let reach = b.range.min(radius);
+            let mut last = usize::MAX;
+            let n = (reach / step).ceil() as usize;
+            for s in 0..=n {
+                let d = (s as f64 * step).min(reach);
+                let Some(i) = self.index(sensor.x + cos * d, sensor.y + sin * d) else {
+                    continue;
+                };
+                if i == last || self.ms[i] >= 1.0 {
+                    last = i;
+                    continue;
+                }
+                last = i;
+                let (cx, cy) = self.centre(i);
+                let (rx, ry) = (cx - sensor.x, cy - sensor.y);
+                let rc = rx.hypot(ry);
+                let tc = ry.atan2(rx);
+                let p = b.lateral
+                    * confidence::free(
+                        rc,
+                        a + normalize_angle(tc - a),
+                        b.range,
+                        a,
+                        dr,
+                        dth_free(rc),
+                    );
+                if p as f32 > self.ms[i] {
+                    self.ms[i] = p as f32;
+                }
+            }
+            if !b.hit {
+                continue;
+            }
+            // Mo: the cells around the return.
+            let (ex, ey) = (sensor.x + cos * b.range, sensor.y + sin * b.range);
+            let half = dr + b.range * dth(b.range).tan();
+            let cells = (half / res).ceil() as isize;
+            let Some(c) = self.index(ex, ey) else {
+                continue;
+            };
+            let (cx0, cy0) = ((c % self.width) as isize, (c / self.width) as isize);
+            for gy in (cy0 - cells).max(0)..=(cy0 + cells).min(self.height as isize - 1) {
+                for gx in (cx0 - cells).max(0)..=(cx0 + cells).min(self.width as isize - 1) {
+                    let i = gy as usize * self.width + gx as usize;
+                    let (cx, cy) = self.centre(i);
+                    let (rx, ry) = (cx - sensor.x, cy - sensor.y);
+                    let rc = rx.hypot(ry);
+                    let tc = a + normalize_angle(ry.atan2(rx) - a);
+                    let o = b.lateral * confidence::occupied(b.k, rc, tc, b.range, a, dr, dth(rc));
+                    if o as f32 > self.mo[i] {
+                        self.mo[i] = o as f32;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The combined map (eq. 7) as an occupancy grid, confidence scaled
+    /// 0–100; cells no reading touched are unknown (-1).
+    pub fn to_occupancy_grid(&self, unknown: f64) -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(
+            self.width,
+            self.height,
+            self.resolution,
+            [self.origin.0, self.origin.1, 0.0],
+        );
+        for (i, cell) in g.cells.iter_mut().enumerate() {
+            *cell = if self.mo[i] == 0.0 && self.ms[i] == 0.0 {
+                UNKNOWN
+            } else {
+                (self.combined(i, unknown) * 100.0)
+                    .round()
+                    .clamp(0.0, 100.0) as i8
+            };
+        }
+        g
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scan::Beam;
+
+    fn scan(beams: &[(f32, f32, BeamKind)]) -> RangeScan {
+        RangeScan {
+            beams: beams
+                .iter()
+                .map(|&(angle, r, kind)| Beam {
+                    angle,
+                    range: Some(r),
+                    kind,
+                })
+                .collect(),
+            laser_noise_factor: 1.0,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_laser_return_lights_its_cell_with_the_urg_confidence_and_clears_the_way() {
+        let m = ConfidenceModel::default();
+        let s = scan(&[(0.0, 1.0, BeamKind::Laser)]);
+        let mut beams = Vec::new();
+        fuzzy_beams(&s, &m, 80.0, 8.0, &mut beams);
+        let mut g = FuzzyGrid::square(0.05, 3.0);
+        g.paint(&Pose2::default(), &beams, 8.0);
+        // The endpoint's cell centre (1.025, 0.025) is 25 mm behind the
+        // return, 0.025 rad off the axis: inside the cell-wide bounds.
+        let i = g.index(1.0, 0.0).unwrap();
+        let expect = confidence::occupied(
+            m.peak(BeamKind::Laser, 1.0),
+            1.025f64.hypot(0.025),
+            0.025f64.atan2(1.025),
+            1.0,
+            0.0,
+            0.05,
+            (0.05f64 / 1.025f64.hypot(0.025)).atan(),
+        );
+        assert!(
+            (f64::from(g.mo[i]) - expect).abs() < 1e-6,
+            "{} vs {expect}",
+            g.mo[i]
+        );
+        assert!(g.mo[i] > 0.4);
+        // Free before the return: the cell centre (0.525, 0.025) lies ⅔ of
+        // its angular bound (¾ cell) off the beam, so P ≈ 1 − (⅔)² there.
+        let rc = 0.525f64.hypot(0.025);
+        let p = 1.0 - (0.025f64.atan2(0.525) / (0.0375 / rc).atan()).powi(2);
+        let ms = f64::from(g.ms[g.index(0.5, 0.0).unwrap()]);
+        assert!(
+            (ms - p).abs() < 1e-6 && (ms - 5.0 / 9.0).abs() < 0.01,
+            "free before the return: {ms}"
+        );
+        assert_eq!(
+            g.ms[g.index(1.3, 0.0).unwrap()],
+            0.0,
+            "nothing known behind it"
+        );
+        assert_eq!(g.mo[g.index(1.3, 0.0).unwrap()], 0.0);
+        let unknown = g.combined_at(1.3, 0.0, 0.3);
+        assert_eq!(unknown, 0.3, "behind an obstacle: unknown");
+        // One ray leaves free space only partly sure: min(max(0.3, 0), 1 − P).
+        assert!(
+            (g.combined_at(0.5, 0.0, 0.3) - 0.3f64.min(1.0 - p)).abs() < 1e-6,
+            "free space of one ray"
+        );
+    }
+
+    #[test]
+    fn a_sonar_arc_is_weak_and_fades_towards_the_cone_edges() {
+        let m = ConfidenceModel {
+            sonar_half_cone: 7.5f64.to_radians(),
+            ..Default::default()
+        };
+        // A 15° arc of beams 0.5° apart at 2 m, as the fusion paints it.
+        let arc: Vec<_> = (0..=30)
+            .map(|k| ((-7.5 + 0.5 * k as f32).to_radians(), 2.0, BeamKind::Sonar))
+            .collect();
+        let mut beams = Vec::new();
+        fuzzy_beams(&scan(&arc), &m, 80.0, 8.0, &mut beams);
+        assert_eq!(beams.len(), 31);
+        assert!((beams[15].lateral - 1.0).abs() < 1e-9, "on axis");
+        assert!(
+            beams[0].lateral < 0.2 && beams[30].lateral < 0.2,
+            "{}",
+            beams[0].lateral
+        );
+        let mut g = FuzzyGrid::square(0.05, 3.0);
+        g.paint(&Pose2::default(), &beams, 8.0);
+        let axis = g.mo[g.index(2.0, 0.0).unwrap()];
+        let (s, c) = 6.5f64.to_radians().sin_cos();
+        let edge = g.mo[g.index(2.0 * c, 2.0 * s).unwrap()];
+        assert!(axis <= 0.5 && axis > 0.3, "{axis}");
+        assert!(edge < axis / 2.0, "{edge} vs {axis}");
+    }
+
+    #[test]
+    fn growing_keeps_what_was_painted() {
+        let mut g = FuzzyGrid::empty(0.05);
+        g.ensure((-1.0, -1.0), (1.0, 1.0));
+        let i = g.index(0.52, 0.33).unwrap();
+        g.mo[i] = 0.7;
+        g.ensure((-30.0, -2.0), (1.0, 40.0));
+        assert!(g.index(-29.9, 39.9).is_some());
+        assert_eq!(g.mo[g.index(0.52, 0.33).unwrap()], 0.7);
+        assert_eq!(g.mo.iter().filter(|v| **v > 0.0).count(), 1);
+    }
+}
