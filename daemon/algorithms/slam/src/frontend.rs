@@ -705,7 +705,7 @@ mod tests {
     /// (y = −1.2 and 1.3) every 2 cm, within a 5.6 m range, with ±2 cm of
     /// range noise (a fixed pseudo-random sequence): nothing else.
     fn corridor_from(pose: &Pose2, seed: u64) -> Vec<(f64, f64)> {
-        let mut rng = crate::rng::Rng::new(seed);
+        let mut rng = smokenav_shared_types::Rng::new(seed, 0);
         let mut out = Vec::new();
         for wall in [-1.2, 1.3] {
             for i in 0..5000 {
