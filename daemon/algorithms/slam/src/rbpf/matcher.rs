@@ -65,6 +65,8 @@ pub struct PreparedScan {
     pub constraint: Option<ScanConstraint>,
     /// Share (0–1) of the endpoints painted from sonar cones.
     pub sonar_share: f64,
+    /// The laser endpoints leave some direction of the pose unconstrained.
+    pub degenerate: bool,
     endpoints: Vec<Endpoint>,
     laser_xy: Vec<(f64, f64)>,
 }
@@ -181,7 +183,9 @@ impl PreparedScan {
         } else {
             1.0 - self.laser_xy.len() as f64 / self.points.len() as f64
         };
-        self.constraint = Some(ScanConstraint::from_points(&self.laser_xy));
+        let constraint = ScanConstraint::from_points(&self.laser_xy);
+        self.degenerate = constraint.degenerate_directions(&p.degeneracy, None) > 0;
+        self.constraint = Some(constraint);
     }
 }
 
@@ -352,6 +356,21 @@ pub fn log_likelihood(
             Some(m) => {
                 total += (-m.d2 * pt.lik_k).max(-null);
                 matched += 1;
+            }
+            // In a degenerate scan (a corridor longer than the range) the only
+            // thing that tells particles apart along it is where each one's map
+            // ends: penalising endpoints in space a particle never observed
+            // favours those that lag behind, and shrinks the corridor. There
+            // such an endpoint says nothing. (Elsewhere it still counts: with
+            // features in view it does separate good particles from bad.)
+            None if scan.degenerate => {
+                let (s, c) = sc;
+                let wx = pose.x + c * pt.hx - s * pt.hy;
+                let wy = pose.y + s * pt.hx + c * pt.hy;
+                let (cx, cy) = grid.world_to_cell(wx, wy);
+                if grid.get(cx, cy) != crate::grid::UNKNOWN {
+                    total -= null;
+                }
             }
             None => total -= null,
         }
