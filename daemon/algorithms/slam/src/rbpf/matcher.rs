@@ -635,6 +635,58 @@ mod tests {
         );
     }
 
+    /// A scan from `pose` of a corridor's walls (y = ±1.2), ranges up to 5 m.
+    fn corridor_scan_from(pose: &Pose2) -> RangeScan {
+        let mut scan = RangeScan {
+            laser_noise_factor: 1.0,
+            ..Default::default()
+        };
+        for i in 0..481 {
+            let a = -2.0 + i as f64 * 4.0 / 480.0;
+            let s = (pose.theta + a).sin();
+            let r = if s > 1e-9 {
+                (1.2 - pose.y) / s
+            } else if s < -1e-9 {
+                (-1.2 - pose.y) / s
+            } else {
+                f64::INFINITY
+            };
+            scan.beams.push(Beam {
+                angle: a as f32,
+                range: (r < 5.0).then_some(r as f32),
+                kind: BeamKind::Laser,
+            });
+        }
+        scan
+    }
+
+    #[test]
+    fn a_corridor_scan_does_not_favour_a_pose_that_lags_behind_the_map() {
+        // The map holds the corridor's walls for x ≤ 3 only (seen from the origin, 3 m range).
+        let mut grid = TiledGrid::new(0.05);
+        let m = LogOddsModel::new(0.9, 0.4, 4.0);
+        let ends: Vec<BeamEnd> = (0..=120)
+            .flat_map(|i| {
+                let x = -3.0 + i as f64 * 0.05;
+                [(x, 1.2), (x, -1.2)]
+            })
+            .map(|(ex, ey)| BeamEnd { ex, ey, hit: true })
+            .collect();
+        for _ in 0..3 {
+            grid.integrate(&Pose2::default(), &ends, &m);
+        }
+        // The robot is at x = 1 and sees the walls out to x = 5.6, past the map's end.
+        let truth = Pose2::new(1.0, 0.0, 0.0);
+        let mut prepared = PreparedScan::default();
+        prepared.prepare(&corridor_scan_from(&truth), &params());
+        assert!(prepared.degenerate);
+        let null = params().null_likelihood;
+        let (at_truth, _) = log_likelihood(&grid, &prepared, &truth, null);
+        let (lagging, _) = log_likelihood(&grid, &prepared, &Pose2::new(0.5, 0.0, 0.0), null);
+        // Pulled back, more endpoints fall on the mapped walls; that is no evidence.
+        assert!(at_truth >= lagging - 1.0, "{at_truth} vs {lagging}");
+    }
+
     #[test]
     fn exp_table_matches_exp() {
         for i in 0..2000 {
