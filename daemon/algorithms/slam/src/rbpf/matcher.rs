@@ -65,6 +65,8 @@ pub struct PreparedScan {
     pub constraint: Option<ScanConstraint>,
     /// Share (0–1) of the endpoints painted from sonar cones.
     pub sonar_share: f64,
+    /// The laser endpoints leave some direction of the pose unconstrained.
+    pub degenerate: bool,
     endpoints: Vec<Endpoint>,
     laser_xy: Vec<(f64, f64)>,
 }
@@ -181,7 +183,9 @@ impl PreparedScan {
         } else {
             1.0 - self.laser_xy.len() as f64 / self.points.len() as f64
         };
-        self.constraint = Some(ScanConstraint::from_points(&self.laser_xy));
+        let constraint = ScanConstraint::from_points(&self.laser_xy);
+        self.degenerate = constraint.degenerate_directions(&p.degeneracy, None) > 0;
+        self.constraint = Some(constraint);
     }
 }
 
@@ -352,6 +356,21 @@ pub fn log_likelihood(
             Some(m) => {
                 total += (-m.d2 * pt.lik_k).max(-null);
                 matched += 1;
+            }
+            // In a degenerate scan (a corridor longer than the range) the only
+            // thing that tells particles apart along it is where each one's map
+            // ends: penalising endpoints in space a particle never observed
+            // favours those that lag behind, and shrinks the corridor. There
+            // such an endpoint says nothing. (Elsewhere it still counts: with
+            // features in view it does separate good particles from bad.)
+            None if scan.degenerate => {
+                let (s, c) = sc;
+                let wx = pose.x + c * pt.hx - s * pt.hy;
+                let wy = pose.y + s * pt.hx + c * pt.hy;
+                let (cx, cy) = grid.world_to_cell(wx, wy);
+                if grid.get(cx, cy) != crate::grid::UNKNOWN {
+                    total -= null;
+                }
             }
             None => total -= null,
         }
@@ -614,6 +633,58 @@ mod tests {
             matched as f64 > 0.9 * prepared.points.len() as f64,
             "{matched}"
         );
+    }
+
+    /// A scan from `pose` of a corridor's walls (y = ±1.2), ranges up to 5 m.
+    fn corridor_scan_from(pose: &Pose2) -> RangeScan {
+        let mut scan = RangeScan {
+            laser_noise_factor: 1.0,
+            ..Default::default()
+        };
+        for i in 0..481 {
+            let a = -2.0 + i as f64 * 4.0 / 480.0;
+            let s = (pose.theta + a).sin();
+            let r = if s > 1e-9 {
+                (1.2 - pose.y) / s
+            } else if s < -1e-9 {
+                (-1.2 - pose.y) / s
+            } else {
+                f64::INFINITY
+            };
+            scan.beams.push(Beam {
+                angle: a as f32,
+                range: (r < 5.0).then_some(r as f32),
+                kind: BeamKind::Laser,
+            });
+        }
+        scan
+    }
+
+    #[test]
+    fn a_corridor_scan_does_not_favour_a_pose_that_lags_behind_the_map() {
+        // The map holds the corridor's walls for x ≤ 3 only (seen from the origin, 3 m range).
+        let mut grid = TiledGrid::new(0.05);
+        let m = LogOddsModel::new(0.9, 0.4, 4.0);
+        let ends: Vec<BeamEnd> = (0..=120)
+            .flat_map(|i| {
+                let x = -3.0 + i as f64 * 0.05;
+                [(x, 1.2), (x, -1.2)]
+            })
+            .map(|(ex, ey)| BeamEnd { ex, ey, hit: true })
+            .collect();
+        for _ in 0..3 {
+            grid.integrate(&Pose2::default(), &ends, &m);
+        }
+        // The robot is at x = 1 and sees the walls out to x = 5.6, past the map's end.
+        let truth = Pose2::new(1.0, 0.0, 0.0);
+        let mut prepared = PreparedScan::default();
+        prepared.prepare(&corridor_scan_from(&truth), &params());
+        assert!(prepared.degenerate);
+        let null = params().null_likelihood;
+        let (at_truth, _) = log_likelihood(&grid, &prepared, &truth, null);
+        let (lagging, _) = log_likelihood(&grid, &prepared, &Pose2::new(0.5, 0.0, 0.0), null);
+        // Pulled back, more endpoints fall on the mapped walls; that is no evidence.
+        assert!(at_truth >= lagging - 1.0, "{at_truth} vs {lagging}");
     }
 
     #[test]
