@@ -97,7 +97,11 @@ fn stripped_binaries(bin_dir: &Path, out: &Path) -> PathBuf {
         assert!(st.success(), "objcopy --strip-debug {}", src.display());
         before += std::fs::metadata(&src).unwrap().len();
         after += std::fs::metadata(&dst).unwrap().len();
-        let sections = Command::new("readelf").arg("-S").arg(&dst).output().unwrap();
+        let sections = Command::new("readelf")
+            .arg("-S")
+            .arg(&dst)
+            .output()
+            .unwrap();
         assert!(
             !String::from_utf8_lossy(&sections.stdout).contains(".debug_info"),
             "{b} keeps its debug info"
@@ -480,7 +484,11 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
         .env("DESTDIR", &dest)
         .env(
             "PATH",
-            format!("{}:{}", stubs.display(), std::env::var("PATH").unwrap_or_default()),
+            format!(
+                "{}:{}",
+                stubs.display(),
+                std::env::var("PATH").unwrap_or_default()
+            ),
         )
         .output()
         .unwrap();
@@ -502,7 +510,11 @@ fn destdir_install_stages_units_rules_user_profile_and_binaries_and_reruns_uncha
         c.env("DESTDIR", &dest)
             .env(
                 "PATH",
-                format!("{}:{}", stubs.display(), std::env::var("PATH").unwrap_or_default()),
+                format!(
+                    "{}:{}",
+                    stubs.display(),
+                    std::env::var("PATH").unwrap_or_default()
+                ),
             )
             .output()
             .unwrap()
@@ -571,7 +583,11 @@ fn debian_package_installs_the_install_file_set_into_a_fresh_root() {
     let pioneer = workspace_root().join("config/pioneer-3dx.toml");
     let stripped = stripped_binaries(&bin_dir, &work.path().join("stripped"));
     let expected = expected_tree(&pioneer, &stripped);
-    let path = format!("{}:{}", stubs.display(), std::env::var("PATH").unwrap_or_default());
+    let path = format!(
+        "{}:{}",
+        stubs.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
 
     let out = Command::new(systemd_dir().join("package"))
         .arg("--bin-dir")
@@ -623,10 +639,22 @@ fn debian_package_installs_the_install_file_set_into_a_fresh_root() {
     let mut found = installed(&root);
     let mut want = expected.clone();
     for (rel, (src, mode)) in &expected {
-        assert_eq!(found.remove(rel), Some(*mode), "{} from the .deb", rel.display());
-        assert!(same_bytes(&root.join(rel), src), "{} differs", rel.display());
+        assert_eq!(
+            found.remove(rel),
+            Some(*mode),
+            "{} from the .deb",
+            rel.display()
+        );
+        assert!(
+            same_bytes(&root.join(rel), src),
+            "{} differs",
+            rel.display()
+        );
     }
-    assert!(found.is_empty(), "the .deb installs more than install does: {found:?}");
+    assert!(
+        found.is_empty(),
+        "the .deb installs more than install does: {found:?}"
+    );
     dpkg(&["-r", "smokenav"]);
     want.retain(|rel, _| {
         [PROFILE_FILE, SUDOERS_FILE]
@@ -640,5 +668,8 @@ fn debian_package_installs_the_install_file_set_into_a_fresh_root() {
     dpkg(&["-P", "smokenav"]);
     assert!(installed(&root).is_empty(), "{:?}", installed(&root));
     let calls = std::fs::read_to_string(work.path().join("calls.log")).unwrap_or_default();
-    assert!(calls.is_empty(), "the package scripts ran host commands:\n{calls}");
+    assert!(
+        calls.is_empty(),
+        "the package scripts ran host commands:\n{calls}"
+    );
 }

@@ -11,8 +11,8 @@
 //! laser scan in clean air and in smoke, one sonar ring and one smoke-field
 //! update.
 
-use smokenav_sim_world::laser::{LaserModel, LaserParams, URG_STEPS};
 use smokenav_shared_types::Rng;
+use smokenav_sim_world::laser::{LaserModel, LaserParams, URG_STEPS};
 use smokenav_sim_world::smoke::{SmokeField, SmokeParams};
 use smokenav_sim_world::sonar::{SonarModel, SonarParams};
 use smokenav_sim_world::{BuiltinArena, Pose2, Scenario, StepOutput, Vec2, World};

@@ -36,8 +36,8 @@
 
 use crate::arena::Arena;
 use crate::geom::{Pose2, Position, Vec2, normalize_angle};
-use smokenav_shared_types::Rng;
 use crate::smoke::SmokeField;
+use smokenav_shared_types::Rng;
 
 /// Angular resolution: steps per full turn (PP ARES).
 pub const URG_ARES: u32 = 1024;

@@ -9,13 +9,13 @@
 use crate::geom::{Pose2, Position, normalize_angle};
 use crate::laser::{LaserModel, URG_SCAN_PERIOD_NS, URG_STEPS};
 use crate::mq303a::SmokeSensor;
-use smokenav_shared_types::Rng;
 use crate::robot::{Robot, RouteFollower};
 use crate::scenario::{Scenario, SonarMount};
 use crate::smoke::SmokeField;
 use crate::sonar::SonarModel;
 use crate::{SimError, TruthSample};
 use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Rng;
 use std::time::Duration;
 
 /// The simulation tick, ns.

@@ -8,9 +8,9 @@
 use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::rbpf::Rbpf;
 use smokenav_algorithms_slam::rbpf::matcher::{MatchParams, PreparedScan, refine};
-use smokenav_shared_types::Rng;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline};
 use smokenav_platform_config::{SlamSection, parse_toml};
+use smokenav_shared_types::Rng;
 use std::io::BufReader;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -27,12 +27,12 @@ use super::motion::MotionModel;
 use super::resample;
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
 use crate::grid::{BeamEnd, LogOddsModel, TiledGrid};
-use smokenav_shared_types::Rng;
 use crate::scan::RangeScan;
 use nalgebra::{Matrix3, Vector3};
 use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
+use smokenav_shared_types::Rng;
 use std::collections::HashSet;
 use std::sync::Arc;
 

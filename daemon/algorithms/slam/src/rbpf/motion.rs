@@ -1,8 +1,8 @@
 //! The odometry motion model: the four GMapping noise terms.
 
-use smokenav_shared_types::Rng;
 use smokenav_platform_config::SlamSection;
 use smokenav_shared_types::Pose2;
+use smokenav_shared_types::Rng;
 
 /// Samples where a particle went given an odometry delta. The standard
 /// deviations grow linearly with the motion, as in GMapping:
