@@ -844,7 +844,7 @@ impl JsonForm for VoxelCloud {
         }
     }
     fn write_record(r: &VoxelCloudRecord, out: &mut Self) -> Result<(), ConversionError> {
-        if r.xyz.len() % 3 != 0 {
+        if !r.xyz.len().is_multiple_of(3) {
             return Err(ConversionError::LengthMismatch {
                 field: "xyz",
                 len: r.xyz.len(),
