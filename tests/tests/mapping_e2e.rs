@@ -267,6 +267,8 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
         "mapping_e2e: out-of-plane recall {p_recall:.3} projected, {g_recall:.3} fused laser-plane grid; walls {p_walls:.3} projected"
     );
     assert!(p_recall >= 0.8, "projected map found {p_recall:.3}");
+    // The same obstacles in the fused grid of the laser plane: height is what finds them.
+    assert!(g_recall <= 0.1, "the laser-plane grid found {g_recall:.3}");
     assert!(
         p_walls >= 0.8,
         "projected map found {p_walls:.3} of the walls"
@@ -274,6 +276,20 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
 
     // The voxels: 3D, some under the laser plane (the sonar's out-of-plane obstacles).
     assert!(voxels.len() > 1000, "{} voxels", voxels.len());
+    // An overfull cloud is thinned evenly: voxels all over the arena, not one corner.
+    let (lo, hi) = voxels
+        .points()
+        .iter()
+        .fold(([f32::MAX; 2], [f32::MIN; 2]), |(lo, hi), p| {
+            (
+                [lo[0].min(p[0]), lo[1].min(p[1])],
+                [hi[0].max(p[0]), hi[1].max(p[1])],
+            )
+        });
+    assert!(
+        lo[0] < 0.5 && lo[1] < 0.5 && hi[0] > 8.5 && hi[1] > 7.5,
+        "{lo:?} … {hi:?}"
+    );
     assert_eq!(voxels.header.frame_id.as_str(), "map");
     assert!((voxels.resolution - 0.05).abs() < 1e-6);
     let low = voxels

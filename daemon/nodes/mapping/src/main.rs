@@ -30,7 +30,9 @@ use smokenav_platform_bus::{MapPublisher, Publisher, WaitOutcome, Waiter, topics
 use smokenav_platform_config::{MappingRule, MappingSection};
 use smokenav_platform_runtime::{CommonArgs, Process};
 use smokenav_shared_types::geometry::Pose2;
-use smokenav_shared_types::{Header, LaserScan, MapInfo, PoseEstimate, SonarRing, VoxelCloud};
+use smokenav_shared_types::{
+    Header, LaserScan, MAX_VOXELS, MapInfo, PoseEstimate, SonarRing, VoxelCloud,
+};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -200,20 +202,31 @@ fn fill_cells(grid: &ProbGrid, cells: &mut Vec<i8>) {
     }));
 }
 
-/// The octree's occupied voxel centres into `cloud` (the rest counted as truncated).
+/// The octree's occupied voxel centres into `cloud`. When there are more
+/// than it holds, every k-th is kept so the cloud still covers the whole
+/// map evenly (a prefix in traversal order would show one corner), and the
+/// rest are counted in `truncated`.
 fn fill_voxels(tree: &Octree, stamp_ns: u64, cloud: &mut VoxelCloud) {
     cloud.header = Header::new(stamp_ns, 0, "map");
     cloud.resolution = tree.resolution() as f32;
     cloud.clear();
+    let mut occupied = 0usize;
+    tree.for_each_voxel(|_, l| occupied += usize::from(l > 0.0));
+    let stride = occupied.div_ceil(MAX_VOXELS).max(1);
+    let mut i = 0usize;
     tree.for_each_voxel(|k, l| {
         if l > 0.0 {
-            cloud.push([
-                tree.coord(k[0]) as f32,
-                tree.coord(k[1]) as f32,
-                tree.coord(k[2]) as f32,
-            ]);
+            if i.is_multiple_of(stride) {
+                cloud.push([
+                    tree.coord(k[0]) as f32,
+                    tree.coord(k[1]) as f32,
+                    tree.coord(k[2]) as f32,
+                ]);
+            }
+            i += 1;
         }
     });
+    cloud.truncated = u32::try_from(occupied - cloud.len()).unwrap_or(u32::MAX);
 }
 
 /// Writes the octree to `dir/octree.bt` through a temporary file, so a
@@ -510,5 +523,29 @@ mod tests {
         assert_eq!(cloud.len(), 1);
         let [x, y, z] = cloud.points()[0];
         assert!((x - 1.025).abs() < 1e-6 && (y - 2.025).abs() < 1e-6 && (z - 0.325).abs() < 1e-6);
+    }
+
+    #[test]
+    fn an_overfull_cloud_keeps_an_even_subset_and_counts_the_rest() {
+        let mut tree = Octree::new(0.05, ClampLogOdds::from(Clamping::default()));
+        // A 200 × 100 wall of occupied voxels, one voxel thick: 20 000 > MAX_VOXELS.
+        let n = 20_000;
+        for i in 0..200 {
+            for j in 0..100 {
+                let k = tree.key([0.01 + i as f64 * 0.05, 1.01, 0.01 + j as f64 * 0.05]);
+                tree.integrate(k.unwrap(), true);
+            }
+        }
+        let mut cloud = Box::<VoxelCloud>::default();
+        fill_voxels(&tree, 1, &mut cloud);
+        assert_eq!(cloud.len() + cloud.truncated as usize, n);
+        assert!(cloud.len() >= n / 2, "{}", cloud.len());
+        // Spread over the whole wall, not a corner of it.
+        let xs = cloud.points().iter().map(|p| p[0]);
+        let (lo, hi) = xs.fold((f32::MAX, f32::MIN), |(a, b), x| (a.min(x), b.max(x)));
+        assert!(lo < 0.2 && hi > 9.8, "{lo} … {hi}");
+        let zs = cloud.points().iter().map(|p| p[2]);
+        let (lo, hi) = zs.fold((f32::MAX, f32::MIN), |(a, b), z| (a.min(z), b.max(z)));
+        assert!(lo < 0.2 && hi > 4.8, "{lo} … {hi}");
     }
 }

@@ -393,10 +393,14 @@ fn summary(r: &TopicRecord) -> String {
         ),
         Message::VoxelCloud(v) => {
             let n = v.xyz.len() / 3;
-            let (lo, hi) = v.xyz.iter().skip(2).step_by(3).fold(
-                (f32::INFINITY, f32::NEG_INFINITY),
-                |(a, b), &z| (a.min(z), b.max(z)),
-            );
+            let (lo, hi) = v
+                .xyz
+                .iter()
+                .skip(2)
+                .step_by(3)
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &z| {
+                    (a.min(z), b.max(z))
+                });
             format!(
                 "{head} VoxelCloud {n} voxels @ {:.3} m ({} truncated) z {:.2}..{:.2} m",
                 v.resolution,
