@@ -167,7 +167,9 @@ smokenav_shared_types::for_each_message!(typed_topics);
 pub const HEALTH_PREFIX: &str = HEALTH.prefix();
 
 /// The process roles; each has a `health/<role>` topic.
-pub const ROLES: &[&str] = &["hokuyo", "pioneer", "scout", "smoke", "fusion", "slam"];
+pub const ROLES: &[&str] = &[
+    "hokuyo", "pioneer", "scout", "smoke", "fusion", "slam", "mapping",
+];
 
 /// The health topic of `role`.
 pub fn health(role: &str) -> Topic<Health> {
