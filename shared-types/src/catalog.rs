@@ -154,6 +154,18 @@ macro_rules! for_each_message {
                     companion: Some(("/extras", "smokenav_msgs/msg/PoseExtras")),
                     latched: false,
                 }
+                VoxelCloud {
+                    doc: "The 3D map's occupied voxel centres, at most `MAX_VOXELS` (the rest counted in `truncated`).",
+                    rust: $crate::voxels::VoxelCloud,
+                    header: [header],
+                    owned: Box<$crate::voxels::VoxelCloud>,
+                    json: $crate::record::VoxelCloudRecord,
+                    topics: [MAPPING_VOXELS = "mapping/voxels"],
+                    family: [],
+                    ros2: "sensor_msgs/msg/PointCloud2",
+                    companion: Some(("/extras", "smokenav_msgs/msg/VoxelExtras")),
+                    latched: true,
+                }
                 Health {
                     doc: "A process's periodic health report.",
                     rust: $crate::health::Health,
@@ -174,7 +186,12 @@ macro_rules! for_each_message {
                     info: $crate::slam::MapInfo,
                     cell: i8,
                     json: $crate::record::MapInfoRecord,
-                    topics: [SLAM_MAP = "slam/map", SLAM_MAP_PROBABILITY = "slam/map_probability"],
+                    topics: [
+                        SLAM_MAP = "slam/map",
+                        SLAM_MAP_PROBABILITY = "slam/map_probability",
+                        MAPPING_GRID = "mapping/grid",
+                        MAPPING_PROJECTED = "mapping/projected"
+                    ],
                     ros2: "nav_msgs/msg/OccupancyGrid",
                     companion: Some(("/extras", "smokenav_msgs/msg/MapExtras")),
                     latched: true,

@@ -7,7 +7,7 @@
 
 use crate::{
     FusedScan, Header, Health, LaserScan, MapInfo, Odometry, PoseEstimate, SmokeReading, SonarRing,
-    VelocityCommand,
+    VelocityCommand, VoxelCloud,
 };
 
 /// Equality by bit pattern, NaN payloads, unused capacity and reserved bytes included.
@@ -154,6 +154,15 @@ impl BitIdentical for PoseEstimate {
                 self.processing_us,
                 self._reserved,
             ) == (o.particles, o.scans_skipped, o.processing_us, o._reserved)
+    }
+}
+
+impl BitIdentical for VoxelCloud {
+    fn bit_identical(&self, o: &Self) -> bool {
+        self.header.bit_identical(&o.header)
+            && self.resolution.to_bits() == o.resolution.to_bits()
+            && (self.count, self.truncated, self._reserved) == (o.count, o.truncated, o._reserved)
+            && self.points.iter().zip(&o.points).all(|(a, b)| f32s(a, b))
     }
 }
 

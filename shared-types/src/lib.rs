@@ -29,6 +29,7 @@ pub mod slam;
 pub mod smoke;
 pub mod sonar;
 pub mod text;
+pub mod voxels;
 
 pub use catalog::{AnyMessage, AnyMessageRef, Cataloged, Message, MessageKind, MessageVisitor};
 pub use clock::{Clock, MockClock, MonotonicClock, Stamp};
@@ -44,6 +45,7 @@ pub use slam::{MapInfo, PoseEstimate};
 pub use smoke::{SmokeReading, SmokeSensorState, SmokeTrend};
 pub use sonar::{MAX_SONARS, SonarReading, SonarRing, SonarStatus};
 pub use text::FixedStr;
+pub use voxels::{MAX_VOXELS, VoxelCloud};
 
 /// Re-exported so crates deriving bus messages need no direct iceoryx2 dependency.
 pub use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;

@@ -28,6 +28,7 @@ use crate::slam::{MapInfo, PoseEstimate};
 use crate::smoke::{SmokeReading, SmokeSensorState, SmokeTrend};
 use crate::sonar::{MAX_SONARS, SonarReading, SonarRing, SonarStatus};
 use crate::text::FixedStr;
+use crate::voxels::{MAX_VOXELS, VoxelCloud};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
@@ -813,6 +814,60 @@ impl JsonForm for PoseEstimate {
     }
     fn write_record(r: &PoseEstimateRecord, out: &mut Self) -> Result<(), ConversionError> {
         *out = r.into();
+        Ok(())
+    }
+}
+
+/// [`VoxelCloud`] as JSON.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct VoxelCloudRecord {
+    /// Stamp, sequence number, map frame.
+    pub header: HeaderRecord,
+    /// Voxel side, m.
+    #[serde(with = "float")]
+    pub resolution: f32,
+    /// Occupied voxels left out because the message was full.
+    pub truncated: u32,
+    /// Voxel centres, `x, y, z` after one another, m.
+    #[serde(with = "float::vec")]
+    pub xyz: Vec<f32>,
+}
+
+impl JsonForm for VoxelCloud {
+    type Record = VoxelCloudRecord;
+    fn to_record(&self) -> VoxelCloudRecord {
+        VoxelCloudRecord {
+            header: (&self.header).into(),
+            resolution: self.resolution,
+            truncated: self.truncated,
+            xyz: self.points().iter().flatten().copied().collect(),
+        }
+    }
+    fn write_record(r: &VoxelCloudRecord, out: &mut Self) -> Result<(), ConversionError> {
+        if !r.xyz.len().is_multiple_of(3) {
+            return Err(ConversionError::LengthMismatch {
+                field: "xyz",
+                len: r.xyz.len(),
+                expected: r.xyz.len() / 3 * 3,
+            });
+        }
+        let n = r.xyz.len() / 3;
+        if n > MAX_VOXELS {
+            return Err(ConversionError::TooLong {
+                field: "xyz",
+                len: n,
+                capacity: MAX_VOXELS,
+            });
+        }
+        out.header = (&r.header).into();
+        out.resolution = r.resolution;
+        out.truncated = r.truncated;
+        out._reserved = 0;
+        out.count = n as u32;
+        for (p, c) in out.points.iter_mut().zip(r.xyz.chunks_exact(3)) {
+            *p = [c[0], c[1], c[2]];
+        }
+        out.points[n..].fill([0.0; 3]);
         Ok(())
     }
 }

@@ -55,6 +55,8 @@ fn topics_resolve_to_their_kind_and_families_to_their_members() {
     assert_eq!(topic_kind("laser/scan"), Some(MessageKind::LaserScan));
     assert_eq!(topic_kind("fusion/scan"), Some(MessageKind::FusedScan));
     assert_eq!(topic_kind("slam/map"), Some(MessageKind::Map));
+    assert_eq!(topic_kind("mapping/projected"), Some(MessageKind::Map));
+    assert_eq!(topic_kind("mapping/voxels"), Some(MessageKind::VoxelCloud));
     assert_eq!(topic_kind("health/hokuyo"), Some(MessageKind::Health));
     assert_eq!(
         topic_kind("health/"),
@@ -326,6 +328,25 @@ fn pose_estimate() -> impl Strategy<Value = PoseEstimate> {
         )
 }
 
+fn voxel_cloud() -> impl Strategy<Value = Box<crate::VoxelCloud>> {
+    (
+        header(),
+        f32s(),
+        any::<u32>(),
+        proptest::collection::vec((f32s(), f32s(), f32s()), 0..40),
+    )
+        .prop_map(|(header, resolution, truncated, points)| {
+            let mut c = Box::<crate::VoxelCloud>::default();
+            c.header = header;
+            c.resolution = resolution;
+            for (x, y, z) in points {
+                c.push([x, y, z]);
+            }
+            c.truncated = truncated;
+            c
+        })
+}
+
 fn health() -> impl Strategy<Value = Box<Health>> {
     (
         header(),
@@ -400,6 +421,7 @@ fn messages(kind: MessageKind) -> BoxedStrategy<AnyMessage> {
         MessageKind::FusedScan => fused_scan().prop_map(AnyMessage::FusedScan).boxed(),
         MessageKind::PoseEstimate => pose_estimate().prop_map(AnyMessage::PoseEstimate).boxed(),
         MessageKind::Health => health().prop_map(AnyMessage::Health).boxed(),
+        MessageKind::VoxelCloud => voxel_cloud().prop_map(AnyMessage::VoxelCloud).boxed(),
         MessageKind::Map => map().prop_map(|(i, c)| AnyMessage::Map(i, c)).boxed(),
     }
 }

@@ -167,7 +167,9 @@ smokenav_shared_types::for_each_message!(typed_topics);
 pub const HEALTH_PREFIX: &str = HEALTH.prefix();
 
 /// The process roles; each has a `health/<role>` topic.
-pub const ROLES: &[&str] = &["hokuyo", "pioneer", "scout", "smoke", "fusion", "slam"];
+pub const ROLES: &[&str] = &[
+    "hokuyo", "pioneer", "scout", "smoke", "fusion", "slam", "mapping",
+];
 
 /// The health topic of `role`.
 pub fn health(role: &str) -> Topic<Health> {
@@ -211,6 +213,14 @@ const SENSOR: Qos = Qos {
     max_subscribers: 16,
 };
 
+/// Maps are large and only the newest matters.
+const MAP: Qos = Qos {
+    history: 1,
+    buffer: 2,
+    max_publishers: 2,
+    max_subscribers: 6,
+};
+
 /// The QoS of bus topic `topic`.
 pub fn qos(topic: &str) -> Qos {
     match topic {
@@ -222,12 +232,15 @@ pub fn qos(topic: &str) -> Qos {
             max_subscribers: 8,
         },
         // Maps are large and only the newest matters.
-        t if t == SLAM_MAP.name() || t == SLAM_MAP_PROBABILITY.name() => Qos {
-            history: 1,
-            buffer: 2,
-            max_publishers: 2,
-            max_subscribers: 6,
-        },
+        t if t == SLAM_MAP.name()
+            || t == SLAM_MAP_PROBABILITY.name()
+            || t == MAPPING_GRID.name()
+            || t == MAPPING_PROJECTED.name() =>
+        {
+            MAP
+        }
+        // The voxel cloud is 192 KiB and only the newest matters, like a map.
+        t if t == MAPPING_VOXELS.name() => MAP,
         t if t.starts_with(HEALTH_PREFIX) => Qos {
             history: 1,
             buffer: 4,
@@ -295,6 +308,8 @@ mod tests {
     fn qos_keys_on_the_topic_name() {
         assert_eq!(qos(BASE_CMD_VEL.name()).history, 0);
         assert_eq!(qos(SLAM_MAP.name()).buffer, 2);
+        assert_eq!(qos(MAPPING_PROJECTED.name()), qos(SLAM_MAP.name()));
+        assert_eq!(qos(MAPPING_VOXELS.name()), MAP);
         assert_eq!(qos(health("slam").name()).buffer, 4);
         assert_eq!(qos(LASER_SCAN.name()), SENSOR);
     }

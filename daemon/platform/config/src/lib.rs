@@ -14,6 +14,7 @@ pub mod base;
 pub mod common;
 pub mod fusion;
 pub mod laser;
+pub mod mapping;
 pub mod robot;
 pub mod slam;
 pub mod slam_fuzzy;
@@ -25,6 +26,7 @@ pub use base::{BaseSection, PioneerOptions, ScoutOptions, WheelOrder};
 pub use common::MountPose;
 pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::{LaserSection, ScanLayout};
+pub use mapping::{MappingRule, MappingSection};
 pub use robot::{BusSection, Platform, RobotSection};
 pub use slam::{SlamBackendKind, SlamInput, SlamSection};
 pub use slam_fuzzy::{FuzzyReference, FuzzySearch, FuzzySection};
@@ -68,6 +70,8 @@ pub struct RobotConfig {
     pub fusion: FusionSection,
     #[serde(default)]
     pub slam: SlamSection,
+    #[serde(default)]
+    pub mapping: MappingSection,
 }
 
 impl Validate for RobotConfig {
@@ -80,6 +84,7 @@ impl Validate for RobotConfig {
         self.smoke.validate("smoke", v);
         self.fusion.validate("fusion", v);
         self.slam.validate("slam", v);
+        self.mapping.validate("mapping", v);
         match self.robot.platform {
             Platform::Scout if self.base.scout.is_none() => v.fail(
                 "base.scout",

@@ -371,3 +371,37 @@ fn fuzzy_sonar_cone_comes_from_the_robot_unless_given() {
     let cfg = parse(&text).unwrap();
     assert_eq!(cfg.slam.fuzzy.sonar_cone_deg, Some(30.0));
 }
+
+#[test]
+fn mapping_defaults_to_bayes_at_five_centimetres() {
+    let cfg = parse(&pioneer_text()).unwrap();
+    assert_eq!(cfg.mapping.rule, crate::MappingRule::Bayes);
+    assert_eq!(cfg.mapping.resolution_m, 0.05);
+    let cfg = parse(&format!(
+        "{}\n[mapping]\nrule = \"iop\"\nresolution_m = 0.1\n",
+        pioneer_text()
+    ))
+    .unwrap();
+    assert_eq!(cfg.mapping.rule, crate::MappingRule::Iop);
+    assert_eq!(cfg.mapping.resolution_m, 0.1);
+}
+
+#[test]
+fn mapping_keys_are_strict() {
+    let text = format!("{}\n[mapping]\nresolution = 0.1\n", pioneer_text());
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.contains("unknown field"), "{msg}");
+    assert!(msg.contains("resolution"), "{msg}");
+    let text = format!("{}\n[mapping]\nrule = \"average\"\n", pioneer_text());
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.contains("mapping.rule"), "{msg}");
+    let text = format!("{}\n[mapping]\nresolution_m = 0.001\n", pioneer_text());
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.contains("mapping.resolution_m"), "{msg}");
+    let text = format!(
+        "{}\n[mapping]\nresolution_m = 0.01\nsize_m = 100.0\n",
+        pioneer_text()
+    );
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.contains("mapping.size_m"), "{msg}");
+}

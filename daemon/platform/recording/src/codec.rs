@@ -11,8 +11,9 @@ use smokenav_shared_types::header::FRAME_ID_LEN;
 use smokenav_shared_types::health::{LAST_ERROR_LEN, MAX_METRICS, METRIC_NAME_LEN, ROLE_LEN};
 use smokenav_shared_types::laser::{BEAM_OK, BEAM_SENSOR_CODE};
 use smokenav_shared_types::{
-    FixedStr, FusedScan, Header, Health, LaserScan, MAX_BEAMS, MAX_SONARS, MapInfo, Metric,
-    Odometry, PoseEstimate, SmokeReading, SonarReading, SonarRing, VelocityCommand,
+    FixedStr, FusedScan, Header, Health, LaserScan, MAX_BEAMS, MAX_SONARS, MAX_VOXELS, MapInfo,
+    Metric, Odometry, PoseEstimate, SmokeReading, SonarReading, SonarRing, VelocityCommand,
+    VoxelCloud,
 };
 
 /// `child_frame_id` of odometry and of the odom → base transform.
@@ -722,6 +723,120 @@ pub fn encode_sonar_points(stamp_ns: u64, points: &[SonarPoint], buf: &mut Vec<u
         w.u8(0);
     }
     w.bool(false); // is_dense: readings without an echo are NaN points
+}
+
+// ---- sensor_msgs/PointCloud2 + smokenav_msgs/VoxelExtras ---------------------
+
+/// Bytes per voxel point: x, y, z (float32).
+pub const VOXEL_POINT_STEP: u32 = 12;
+
+pub fn encode_voxel_cloud(c: &VoxelCloud, buf: &mut Vec<u8>) {
+    let mut w = CdrWriter::new(buf);
+    write_header(&mut w, c.header.stamp_ns, c.header.frame_id.as_str());
+    let points = c.points();
+    w.u32(1); // height
+    w.u32(points.len() as u32); // width
+    const FLOAT32: u8 = 7;
+    w.seq_len(3);
+    for (name, offset) in [("x", 0), ("y", 4), ("z", 8)] {
+        w.string(name);
+        w.u32(offset);
+        w.u8(FLOAT32);
+        w.u32(1);
+    }
+    w.bool(false); // is_bigendian
+    w.u32(VOXEL_POINT_STEP);
+    w.u32(VOXEL_POINT_STEP * points.len() as u32);
+    w.seq_len(points.len() * VOXEL_POINT_STEP as usize);
+    for v in points.iter().flatten() {
+        for b in v.to_le_bytes() {
+            w.u8(b);
+        }
+    }
+    w.bool(true); // is_dense: every point is a voxel centre
+}
+
+/// Reads a cloud this encoder wrote: x, y, z float32 at offsets 0, 4, 8 of
+/// a 12-byte point; any other layout is refused.
+pub fn decode_voxel_cloud(data: &[u8], out: &mut VoxelCloud) -> Result<(), CdrError> {
+    let mut r = CdrReader::new(data)?;
+    out.header = read_header(&mut r)?;
+    let height = r.u32("height")?;
+    let width = r.u32("width")?;
+    let n_fields = r.seq_len("fields", 3, 13)?;
+    if n_fields != 3 {
+        return Err(CdrError::InvalidValue {
+            field: "fields",
+            value: n_fields as u64,
+        });
+    }
+    for (want, offset) in [("x", 0u32), ("y", 4), ("z", 8)] {
+        let name = r.string("fields.name", 8)?;
+        let off = r.u32("fields.offset")?;
+        let datatype = r.u8("fields.datatype")?;
+        let count = r.u32("fields.count")?;
+        if name != want || off != offset || datatype != 7 || count != 1 {
+            return Err(CdrError::InvalidValue {
+                field: "fields",
+                value: off.into(),
+            });
+        }
+    }
+    if r.bool("is_bigendian")? {
+        return Err(CdrError::InvalidValue {
+            field: "is_bigendian",
+            value: 1,
+        });
+    }
+    let step = r.u32("point_step")?;
+    let _row_step = r.u32("row_step")?;
+    if step != VOXEL_POINT_STEP {
+        return Err(CdrError::InvalidValue {
+            field: "point_step",
+            value: step.into(),
+        });
+    }
+    let n = (height as usize).saturating_mul(width as usize);
+    let bytes = r.seq_len("data", MAX_VOXELS * VOXEL_POINT_STEP as usize, 1)?;
+    if n > MAX_VOXELS || bytes != n * VOXEL_POINT_STEP as usize {
+        return Err(CdrError::TooLong {
+            field: "data",
+            len: bytes,
+            max: MAX_VOXELS * VOXEL_POINT_STEP as usize,
+        });
+    }
+    for p in out.points.iter_mut().take(n) {
+        for v in p.iter_mut() {
+            let mut b = [0u8; 4];
+            for x in &mut b {
+                *x = r.u8("data")?;
+            }
+            *v = f32::from_le_bytes(b);
+        }
+    }
+    out.points[n..].fill([0.0; 3]);
+    out.count = n as u32;
+    let _dense = r.bool("is_dense")?;
+    Ok(())
+}
+
+pub fn encode_voxel_extras(c: &VoxelCloud, buf: &mut Vec<u8>) {
+    let mut w = CdrWriter::new(buf);
+    w.u64(c.header.stamp_ns);
+    w.u64(c.header.seq);
+    w.f32(c.resolution);
+    w.u32(c.truncated);
+}
+
+pub fn apply_voxel_extras(data: &[u8], c: &mut VoxelCloud) -> Result<(), CdrError> {
+    let mut r = CdrReader::new(data)?;
+    let (stamp_ns, seq) = read_stamp_seq(&mut r)?;
+    c.header.stamp_ns = stamp_ns;
+    c.header.seq = seq;
+    c.resolution = r.f32("resolution")?;
+    c.truncated = r.u32("truncated")?;
+    c._reserved = 0;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -334,7 +334,10 @@ fn decode_step(
             message,
         })
     };
-    if name == schema::TF_MESSAGE.name || name == schema::POINT_CLOUD2.name {
+    // The sonar ring's PointCloud2 view is derived; the voxel cloud's is the message.
+    let sonar_view =
+        name == schema::POINT_CLOUD2.name && ch.topic.ends_with(crate::encoder::POINTS_SUFFIX);
+    if name == schema::TF_MESSAGE.name || sonar_view {
         stats.views += 1;
         return Ok(None);
     }

@@ -12,7 +12,7 @@ use crate::codec;
 use crate::schema::{self, MsgDef};
 use smokenav_shared_types::{
     AnyMessage, AnyMessageRef, FusedScan, Health, LaserScan, MessageKind, Odometry, PoseEstimate,
-    SmokeReading, SonarRing, VelocityCommand,
+    SmokeReading, SonarRing, VelocityCommand, VoxelCloud,
 };
 use std::borrow::BorrowMut;
 
@@ -110,6 +110,19 @@ impl Ros2Codec for SmokeReading {
     fn decode(standard: &[u8], _: Option<&[u8]>, out: &mut Self) -> Result<(), CdrError> {
         *out = codec::decode_smoke_reading(standard)?;
         Ok(())
+    }
+}
+
+impl Ros2Codec for VoxelCloud {
+    fn encode_standard(&self, out: &mut Vec<u8>) {
+        codec::encode_voxel_cloud(self, out);
+    }
+    fn encode_companion(&self, out: &mut Vec<u8>) {
+        codec::encode_voxel_extras(self, out);
+    }
+    fn decode(standard: &[u8], companion: Option<&[u8]>, out: &mut Self) -> Result<(), CdrError> {
+        codec::decode_voxel_cloud(standard, out)?;
+        companion.map_or(Ok(()), |c| codec::apply_voxel_extras(c, out))
     }
 }
 

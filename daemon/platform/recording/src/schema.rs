@@ -400,6 +400,18 @@ pub static HEALTH: MsgDef = MsgDef {
 };
 
 /// Every top-level type a recording can contain.
+pub static VOXEL_EXTRAS: MsgDef = MsgDef {
+    name: "smokenav_msgs/msg/VoxelExtras",
+    text: "# What sensor_msgs/PointCloud2 cannot carry; completes the cloud on /mapping/voxels.\n\
+           uint64 stamp_ns\n\
+           uint64 seq\n\
+           # Voxel side, m.\n\
+           float32 resolution\n\
+           # Occupied voxels left out because the message was full.\n\
+           uint32 truncated\n",
+    deps: &[],
+};
+
 pub static ALL: &[&MsgDef] = &[
     &LASER_SCAN,
     &POINT_CLOUD2,
@@ -414,6 +426,7 @@ pub static ALL: &[&MsgDef] = &[
     &STAMP_SEQ,
     &POSE_EXTRAS,
     &MAP_EXTRAS,
+    &VOXEL_EXTRAS,
     &SONAR_RING,
     &SMOKE_READING,
     &HEALTH,
@@ -428,6 +441,7 @@ pub static SMOKENAV_MSGS: &[&MsgDef] = &[
     &STAMP_SEQ,
     &POSE_EXTRAS,
     &MAP_EXTRAS,
+    &VOXEL_EXTRAS,
     &SONAR_READING,
     &SONAR_RING,
     &SMOKE_READING,

@@ -177,6 +177,17 @@ fn health(seq: u64) -> Health {
     h
 }
 
+fn voxels(seq: u64) -> Box<smokenav_shared_types::VoxelCloud> {
+    let mut c = Box::<smokenav_shared_types::VoxelCloud>::default();
+    c.header = Header::new(8_000 + seq, seq, "map");
+    c.resolution = 0.05;
+    for i in 0..100 + seq {
+        c.push([i as f32 * 0.05, -0.025, 0.375 + seq as f32]);
+    }
+    c.truncated = 7;
+    c
+}
+
 /// A message of `kind` on its topic.
 fn sample(kind: MessageKind, seq: u64) -> (String, Message) {
     let (topic, message) = match kind {
@@ -192,6 +203,7 @@ fn sample(kind: MessageKind, seq: u64) -> (String, Message) {
             ("slam/map", Message::Map(info, cells))
         }
         MessageKind::Health => ("health/hokuyo", Message::Health(Box::new(health(seq)))),
+        MessageKind::VoxelCloud => ("mapping/voxels", Message::VoxelCloud(voxels(seq))),
     };
     (topic.to_owned(), message)
 }
@@ -266,8 +278,8 @@ fn file_has_ros2_profile_statistics_and_no_schema_id_0() {
     let (bytes, _) = record_to_vec(2, SinkOptions::default());
     let summary = mcap::Summary::read(&bytes).unwrap().expect("summary");
     let stats = summary.stats.expect("statistics");
-    // 9 message kinds × 2 rounds, 6 of them with a companion, + tf_static + tf + points.
-    assert_eq!(stats.message_count, 2 * (9 + 6) + 1 + 2 * 3);
+    // 10 message kinds × 2 rounds, 7 of them with a companion, + tf_static + tf + points.
+    assert_eq!(stats.message_count, 2 * (10 + 7) + 1 + 2 * 3);
     assert!(summary.schemas.keys().all(|&id| id != 0));
     for c in summary.channels.values() {
         assert_eq!(c.message_encoding, "cdr", "{}", c.topic);
@@ -544,6 +556,7 @@ fn recorded_bytes_do_not_change() {
     // The shared `Pose2` moved it once more: map → odom is now composed as
     // map_base ⊕ odom_base⁻¹ with the heading normalised (the same transform,
     // a few last bits of the translation and the quaternion's sign differ).
+    // The voxel cloud (`mapping/voxels`) added a kind to the sample set.
     let opts = SinkOptions {
         compression: Compression::None,
         ..Default::default()
@@ -551,7 +564,7 @@ fn recorded_bytes_do_not_change() {
     let (bytes, _) = record_to_vec(3, opts);
     assert_eq!(
         (bytes.len(), fnv1a(&bytes)),
-        (87_114, 0x2b96_6bc3_d3ec_953f),
+        (93_317, 0x9324_83ad_7953_e267),
         "the recording's bytes changed"
     );
 }

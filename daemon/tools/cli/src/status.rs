@@ -68,6 +68,7 @@ fn expected_roles(args: &StatusArgs) -> anyhow::Result<Vec<String>> {
             "smoke",
             "fusion",
             "slam",
+            "mapping",
         ]
         .iter()
         .map(|s| s.to_string())

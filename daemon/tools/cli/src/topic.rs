@@ -449,6 +449,24 @@ fn summary(r: &TopicRecord) -> String {
             p.scans_skipped,
             p.processing_us
         ),
+        Message::VoxelCloud(v) => {
+            let n = v.xyz.len() / 3;
+            let (lo, hi) = v
+                .xyz
+                .iter()
+                .skip(2)
+                .step_by(3)
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &z| {
+                    (a.min(z), b.max(z))
+                });
+            format!(
+                "{head} VoxelCloud {n} voxels @ {:.3} m ({} truncated) z {:.2}..{:.2} m",
+                v.resolution,
+                v.truncated,
+                if n == 0 { 0.0 } else { lo },
+                if n == 0 { 0.0 } else { hi }
+            )
+        }
         Message::MapInfo(m) => format!(
             "{head} Map {}×{} @ {:.3} m origin ({:.2}, {:.2})",
             m.width, m.height, m.resolution, m.origin_x, m.origin_y

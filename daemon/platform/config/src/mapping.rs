@@ -1,0 +1,91 @@
+//! `[mapping]`: the 2D/3D occupancy mapping process (`smokenav-mapping`).
+//!
+//! The fusion rule of the published fused grid and projected map, the voxel
+//! and cell side, and the publishing rate. Bayes (log-odds with OctoMap's
+//! clamping) is the default because it is the rule that leaves a cell seen by
+//! one sensor at that sensor's value (Tran et al. 2021); the other rules keep
+//! per-sensor maps as well and cost about three times the memory.
+
+use crate::validate::{Validate, Validator};
+use serde::{Deserialize, Serialize};
+
+/// How the laser's and the sonar's opinions of a cell are pooled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum MappingRule {
+    /// Linear Opinion Pool: weighted mean of the probabilities.
+    #[serde(rename = "lop")]
+    Lop,
+    /// Logarithmic Independent Opinion Pool: weighted geometric mean.
+    #[serde(rename = "liop")]
+    Liop,
+    /// Independent Opinion Pool: renormalised product.
+    #[serde(rename = "iop")]
+    Iop,
+    /// Bayes filter in log-odds with clamping (OctoMap's update).
+    #[default]
+    #[serde(rename = "bayes")]
+    Bayes,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MappingSection {
+    /// Fusion rule of `mapping/grid` and `mapping/projected`.
+    #[serde(default)]
+    pub rule: MappingRule,
+    /// Voxel and cell side, m.
+    #[serde(default = "default_resolution")]
+    pub resolution_m: f64,
+    /// Rate of `mapping/grid`, `mapping/projected` and `mapping/voxels`, Hz.
+    #[serde(default = "default_rate")]
+    pub publish_rate_hz: f64,
+    /// Side of the square the maps cover, centred on the map origin, m.
+    #[serde(default = "default_size")]
+    pub size_m: f64,
+}
+
+fn default_resolution() -> f64 {
+    0.05
+}
+
+fn default_rate() -> f64 {
+    2.0
+}
+
+fn default_size() -> f64 {
+    40.0
+}
+
+impl Default for MappingSection {
+    fn default() -> Self {
+        Self {
+            rule: MappingRule::default(),
+            resolution_m: default_resolution(),
+            publish_rate_hz: default_rate(),
+            size_m: default_size(),
+        }
+    }
+}
+
+impl Validate for MappingSection {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        let k = |name: &str| format!("{key}.{name}");
+        v.within(&k("resolution_m"), self.resolution_m, 0.01, 1.0);
+        v.within(&k("publish_rate_hz"), self.publish_rate_hz, 0.1, 20.0);
+        v.within(&k("size_m"), self.size_m, 1.0, 200.0);
+        // The published grids are one bus sample each: keep them under 16 M cells.
+        if self.resolution_m.is_finite()
+            && self.size_m.is_finite()
+            && self.resolution_m > 0.0
+            && (self.size_m / self.resolution_m).powi(2) > 16e6
+        {
+            v.fail(
+                k("size_m"),
+                format!(
+                    "{} m at {} m is more than 4000 × 4000 cells",
+                    self.size_m, self.resolution_m
+                ),
+            );
+        }
+    }
+}
