@@ -365,3 +365,31 @@ fn prepare_venv() -> Result<PathBuf, String> {
         .map_err(|e| format!("cannot write {}: {e}", stamp.display()))?;
     Ok(interpreter)
 }
+
+fn have_bt2vrml() -> bool {
+    std::process::Command::new("sh")
+        .args(["-c", "command -v bt2vrml"])
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+/// OctoMap's `bt2vrml` is on the PATH, installed from Debian's
+/// `octomap-tools` when missing and running as root (`./test` installs it).
+pub fn ensure_octomap_tools() -> bool {
+    if have_bt2vrml() {
+        return true;
+    }
+    if !nix::unistd::Uid::effective().is_root() {
+        return false;
+    }
+    let setup = workspace_root().join("tests/setup/machine.sh");
+    let st = std::process::Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            ". '{}' && install_debian_packages octomap-tools",
+            setup.display()
+        ))
+        .status()
+        .expect("bash runs");
+    st.success() && have_bt2vrml()
+}

@@ -19,7 +19,7 @@ use smokenav_platform_map::OCCUPIED;
 use smokenav_shared_types::{Header, LaserScan, MapInfo, PoseEstimate, SonarRing, VoxelCloud};
 use smokenav_sim_link::{DirectDrivers, DirectMessage};
 use smokenav_sim_world::{Pose2, Position, Scenario, StepOutput, World};
-use smokenav_tests::{Child, bin, open_bus, unique_instance, workspace_root};
+use smokenav_tests::{Child, bin, open_bus, unique_instance};
 use std::collections::VecDeque;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -31,32 +31,6 @@ const T0_NS: u64 = 1_000_000_000;
 /// Heights the mapper assumes (its defaults; the scenario's are the same).
 const LASER_M: f64 = 0.40;
 const ROBOT_M: f64 = 0.60;
-
-fn have_bt2vrml() -> bool {
-    Command::new("sh")
-        .args(["-c", "command -v bt2vrml"])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-fn ensure_octomap_tools() -> bool {
-    if have_bt2vrml() {
-        return true;
-    }
-    if !nix::unistd::Uid::effective().is_root() {
-        return false;
-    }
-    let setup = workspace_root().join("tests/setup/machine.sh");
-    let st = Command::new("bash")
-        .arg("-c")
-        .arg(format!(
-            ". '{}' && install_debian_packages octomap-tools",
-            setup.display()
-        ))
-        .status()
-        .expect("bash runs");
-    st.success() && have_bt2vrml()
-}
 
 /// A received occupancy grid.
 struct Grid {
@@ -325,7 +299,7 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
     let mut occupied = 0usize;
     tree.for_each_leaf(|l| occupied += usize::from(l.logodds > 0.0));
     assert!(occupied > 1000, "{occupied} occupied leaves");
-    if ensure_octomap_tools() {
+    if smokenav_tests::ensure_octomap_tools() {
         let run = Command::new("bt2vrml").arg(&bt).output()?;
         assert!(
             run.status.success(),

@@ -10,34 +10,8 @@
 //! own figures.
 
 use serde_json::Value;
-use smokenav_tests::{bin, workspace_root};
+use smokenav_tests::bin;
 use std::process::Command;
-
-fn have_bt2vrml() -> bool {
-    Command::new("sh")
-        .args(["-c", "command -v bt2vrml"])
-        .output()
-        .is_ok_and(|o| o.status.success())
-}
-
-fn ensure_octomap_tools() -> bool {
-    if have_bt2vrml() {
-        return true;
-    }
-    if !nix::unistd::Uid::effective().is_root() {
-        return false;
-    }
-    let setup = workspace_root().join("tests/setup/machine.sh");
-    let st = Command::new("bash")
-        .arg("-c")
-        .arg(format!(
-            ". '{}' && install_debian_packages octomap-tools",
-            setup.display()
-        ))
-        .status()
-        .expect("bash runs");
-    st.success() && have_bt2vrml()
-}
 
 #[test]
 fn map3d_meets_its_figures_and_its_octree_opens_in_octomap() {
@@ -76,7 +50,7 @@ fn map3d_meets_its_figures_and_its_octree_opens_in_octomap() {
         "{bounds:?}"
     );
 
-    if !ensure_octomap_tools() {
+    if !smokenav_tests::ensure_octomap_tools() {
         eprintln!(
             "bt2vrml (octomap-tools) missing and not root: checked the export's own figures only"
         );
