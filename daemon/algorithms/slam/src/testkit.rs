@@ -20,9 +20,15 @@ pub const WALLS: [(f64, f64, f64, f64); 10] = [
 
 /// Ray-cast range from `(x, y)` along `a` to the nearest wall.
 pub fn cast(x: f64, y: f64, a: f64) -> Option<f64> {
+    cast_in(&WALLS, x, y, a)
+}
+
+/// Ray-cast range from `(x, y)` along `a` to the nearest of `walls`
+/// (segments `(x1, y1, x2, y2)`).
+pub fn cast_in(walls: &[(f64, f64, f64, f64)], x: f64, y: f64, a: f64) -> Option<f64> {
     let (dx, dy) = (a.cos(), a.sin());
     let mut best: Option<f64> = None;
-    for (x1, y1, x2, y2) in WALLS {
+    for &(x1, y1, x2, y2) in walls {
         let (ex, ey) = (x2 - x1, y2 - y1);
         let den = dx * ey - dy * ex;
         if den.abs() < 1e-12 {

@@ -621,23 +621,7 @@ mod tests {
         cast_in(&WALLS, x, y, a)
     }
 
-    fn cast_in(walls: &[(f64, f64, f64, f64)], x: f64, y: f64, a: f64) -> Option<f64> {
-        let (dx, dy) = (a.cos(), a.sin());
-        let mut best: Option<f64> = None;
-        for &(x1, y1, x2, y2) in walls {
-            let (ex, ey) = (x2 - x1, y2 - y1);
-            let den = dx * ey - dy * ex;
-            if den.abs() < 1e-12 {
-                continue;
-            }
-            let t = ((x1 - x) * ey - (y1 - y) * ex) / den;
-            let u = ((x1 - x) * dy - (y1 - y) * dx) / den;
-            if t > 0.0 && (0.0..=1.0).contains(&u) && best.is_none_or(|b| t < b) {
-                best = Some(t);
-            }
-        }
-        best
-    }
+    use crate::testkit::cast_in;
 
     fn scan_at(truth: &Pose2, stamp_ns: u64) -> RangeScan {
         let mut s = RangeScan {
