@@ -368,6 +368,10 @@ pub enum MapCommand {
         /// Give up if no map arrives within this many seconds.
         #[arg(long, default_value_t = 5.0)]
         timeout_s: f64,
+        /// Where smokenav-mapping saves its octree, to copy octree.bt from
+        /// [default: the profile's `[mapping] map_dir`, else /var/lib/smokenav/octree].
+        #[arg(long, value_name = "DIR")]
+        octree_dir: Option<PathBuf>,
         #[command(flatten)]
         bus: crate::topic::BusArgs,
     },
@@ -434,8 +438,10 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         dir,
         mode,
         timeout_s,
+        octree_dir,
         bus,
     } = cmd;
+    let octree_dir = crate::mapsave::octree_dir(octree_dir, bus.config.as_deref())?;
     let dir = dir.unwrap_or_else(|| PathBuf::from("maps"));
     // Scale and raw keep the probabilities; the thresholded map would lose them.
     let topic = match mode {
@@ -481,5 +487,15 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         grid.resolution,
         dir.display()
     );
+    let wait = std::time::Duration::from_secs_f64(timeout_s);
+    match crate::mapsave::save_octree(&bus, &octree_dir, &dir, wait)? {
+        Some(s) => println!(
+            "saved the 3D map ({} occupied leaves, {} bytes) to {}",
+            s.occupied_leaves,
+            s.bytes,
+            s.path.display()
+        ),
+        None => println!("no 3D map: smokenav-mapping is not running"),
+    }
     Ok(())
 }
