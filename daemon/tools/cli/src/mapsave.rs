@@ -1,5 +1,6 @@
 //! The parts of `smokenav map save` beyond SLAM's occupancy map: the 3D
-//! octree of `smokenav-mapping` and the fuzzy back-end's combined map.
+//! octree of `smokenav-mapping` and the fuzzy back-end's combined map
+//! (`slam/map_fuzzy`, saved as fuzzy.pgm + fuzzy.yaml in raw mode and fuzzy.png).
 //!
 //! The octree is not on the bus (a `.bt` is tens of kilobytes to megabytes
 //! and changes shape; every bus sample is fixed-size), so the process saves
@@ -132,6 +133,38 @@ pub fn save_octree(
         occupied_leaves,
         bytes: bytes.len() as u64,
     }))
+}
+
+/// The newest `slam/map_fuzzy`, when a SLAM process with the fuzzy back-end publishes it.
+pub fn fuzzy_map(
+    bus: &Bus,
+    timeout: Duration,
+) -> anyhow::Result<Option<smokenav_platform_map::OccupancyGrid>> {
+    let topic = topics::SLAM_MAP_FUZZY;
+    if bus.live_map_publishers(topic.clone())?.is_empty() {
+        return Ok(None);
+    }
+    let sub = bus.map_subscriber(topic.clone())?;
+    let waiter = Waiter::new()?;
+    let _guard = waiter.attach(&sub)?;
+    let deadline = Instant::now() + timeout;
+    loop {
+        let mut newest = None;
+        while let Some(s) = sub.receive()? {
+            newest = Some(crate::slam::grid_from_wire(s.user_header(), s.payload())?);
+        }
+        if newest.is_some() {
+            return Ok(newest);
+        }
+        let now = Instant::now();
+        ensure!(
+            now < deadline,
+            "no map on {} within {:.0} s",
+            topic.name(),
+            timeout.as_secs_f64()
+        );
+        waiter.wait(Some(deadline - now))?;
+    }
 }
 
 /// The mapping process's save folder: `--octree-dir`, else the profile's

@@ -396,7 +396,7 @@ impl From<SaveMode> for smokenav_platform_map::MapMode {
 }
 
 /// A map received from the bus as a grid, after checking its header against its payload.
-fn grid_from_wire(
+pub(crate) fn grid_from_wire(
     info: &smokenav_shared_types::MapInfo,
     cells: &[i8],
 ) -> anyhow::Result<smokenav_platform_map::OccupancyGrid> {
@@ -488,6 +488,15 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         dir.display()
     );
     let wait = std::time::Duration::from_secs_f64(timeout_s);
+    if let Some(f) = crate::mapsave::fuzzy_map(&bus, wait)? {
+        smokenav_platform_map::save_fuzzy(&f, &dir)?;
+        println!(
+            "saved the fuzzy confidence map ({}×{}) to {} (fuzzy.pgm, fuzzy.yaml, fuzzy.png)",
+            f.width,
+            f.height,
+            dir.display()
+        );
+    }
     match crate::mapsave::save_octree(&bus, &octree_dir, &dir, wait)? {
         Some(s) => println!(
             "saved the 3D map ({} occupied leaves, {} bytes) to {}",

@@ -78,10 +78,6 @@ pub fn json_value(main: &Comparison, clean: Option<&Comparison>) -> Value {
     v
 }
 
-pub fn json(main: &Comparison, clean: Option<&Comparison>) -> String {
-    json_value(main, clean).to_string()
-}
-
 fn cell(v: Option<f64>, unit: &str) -> String {
     match v {
         Some(x) if x.is_finite() => format!("{x:.3} {unit}"),
