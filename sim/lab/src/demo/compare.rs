@@ -30,6 +30,8 @@ pub struct SeriesPoint {
 pub struct MethodResult {
     pub method: FusionMethod,
     pub map: Option<OccupancyGrid>,
+    /// The fuzzy back-end's combined confidence map (eq. 7, 0–100) of the run shown.
+    pub confidence_map: Option<OccupancyGrid>,
     /// The best particle's (smoothed) trajectory, of the median run.
     pub trajectory: Vec<StampedPose>,
     pub series: Vec<SeriesPoint>,
@@ -97,6 +99,7 @@ pub fn fuse(
 #[derive(Clone)]
 struct SlamOutcome {
     map: Option<OccupancyGrid>,
+    confidence_map: Option<OccupancyGrid>,
     trajectory: Vec<StampedPose>,
     map_report: Result<MapReport, String>,
     trajectory_report: Result<TrajectoryReport, String>,
@@ -148,6 +151,7 @@ fn slam_and_score(
     // One pose per stamp (a trajectory file's stamps must increase).
     trajectory.dedup_by_key(|p| p.stamp_ns);
     let map = slam.map();
+    let confidence_map = slam.confidence_map();
     let map_report = match &map {
         Some(m) => smokenav_algorithms_eval::evaluate_maps(truth_map, m, &MapOptions::default())
             .map_err(|e| e.to_string()),
@@ -170,6 +174,7 @@ fn slam_and_score(
     .map_err(|e| e.to_string());
     SlamOutcome {
         map,
+        confidence_map,
         trajectory,
         map_report,
         trajectory_report,
@@ -284,6 +289,7 @@ pub fn run_all(
         results.push(MethodResult {
             method: m,
             map: o.map,
+            confidence_map: o.confidence_map,
             trajectory: o.trajectory,
             series: f
                 .iter()

@@ -202,6 +202,16 @@ pub fn write_files(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
             smokenav_platform_map::save_map_server(m, &maps, name)
                 .with_context(|| format!("cannot write the {name} map to {}", maps.display()))?;
         }
+        if let Some(f) = &r.confidence_map {
+            let stem = format!("{name}-fuzzy");
+            smokenav_platform_map::save_map_server_mode(
+                f,
+                &maps,
+                &stem,
+                smokenav_platform_map::MapMode::Raw,
+            )
+            .with_context(|| format!("cannot write the {stem} map to {}", maps.display()))?;
+        }
         write(
             &trajectories.join(format!("{name}.txt")),
             &format!(
@@ -223,6 +233,9 @@ pub fn write_files(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
 /// `maps.png` and `smoke.png` of one comparison into `dir`.
 pub fn write_pictures(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
     super::pictures::maps_png(c, &dir.join("maps.png"))?;
+    if c.results.iter().any(|r| r.confidence_map.is_some()) {
+        super::pictures::fuzzy_png(c, &dir.join("fuzzy.png"))?;
+    }
     super::pictures::smoke_png(c, &dir.join("smoke.png"))
 }
 
