@@ -442,11 +442,15 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         a.duration = args.duration;
         Some(crate::map3d::evaluate(&a)?)
     };
+    let mut v = report::json_value(&main, clean.as_ref());
+    if let (Some(r), Some(obj)) = (&map3d, v.as_object_mut()) {
+        obj.insert("occupancy_rules".into(), serde_json::to_value(r)?);
+        // comparison.json is what --json prints: with the rules too.
+        let path = args.out.join("comparison.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&v)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     if args.json {
-        let mut v = report::json_value(&main, clean.as_ref());
-        if let (Some(r), Some(obj)) = (&map3d, v.as_object_mut()) {
-            obj.insert("occupancy_rules".into(), serde_json::to_value(r)?);
-        }
         println!("{v}");
     } else {
         print!("{}", report::table(&main, clean.as_ref()));
