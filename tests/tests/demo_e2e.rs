@@ -63,6 +63,19 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
 
     assert_eq!(v["scenario"], "r32-dense-crossing");
     assert_eq!(v["duration_s"], 30.0);
+    // The occupancy comparison per rule on `heights` (its first 30 s, as --duration says).
+    let occ = &v["occupancy_rules"];
+    assert_eq!(occ["scenario"], "heights", "{occ}");
+    let rules: Vec<&str> = occ["rules"]
+        .as_array()
+        .expect("rules")
+        .iter()
+        .map(|r| r["rule"].as_str().unwrap())
+        .collect();
+    assert_eq!(rules, ["LOP", "LIOP", "IOP", "Bayes"]);
+    assert!(occ["laser_only_out_of_plane_recall"].as_f64().unwrap() <= 0.1);
+    assert!(occ["rules"][3]["out_of_plane_recall"].as_f64().unwrap() > 0.3);
+    assert!(out.join("map3d").join("octree.bt").exists());
     let scans = v["scans"].as_u64().unwrap();
     assert!((295..=300).contains(&scans), "10 Hz for 30 s: {scans}");
     for section in [&v["methods"], &v["clean_reference"]["methods"]] {
@@ -145,6 +158,7 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
         "1",
         "--scenario",
         "mrl-clean",
+        "--no-map3d",
         "--duration",
         "12",
         "--particles",
@@ -154,6 +168,7 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
         &out,
     ]);
     assert_eq!(v["scenario"], "mrl-clean");
+    assert!(v.get("occupancy_rules").is_none(), "--no-map3d");
     assert!(v.get("clean_reference").is_none(), "{v}");
     assert!(v["methods"]["v2"]["map_error_m"].is_f64());
 }

@@ -8,7 +8,9 @@
 //! `smokenav-mapping` binary maps them; `mapping/projected` must mark the
 //! out-of-plane obstacles' cells and arrive at ≥ 1 Hz, `mapping/voxels` must
 //! carry the 3D voxels (some under the laser plane), and SIGUSR1 must write
-//! an `octree.bt` that OctoMap's `bt2vrml` reads.
+//! an `octree.bt` that OctoMap's `bt2vrml` reads, into the profile's
+//! `[mapping] map_dir`; and `smokenav map save --config` must write that
+//! octree beside the 2D map (`bt2vrml` reads the copy too).
 //!
 //! `./test` installs `octomap-tools`; run alone as someone other than root
 //! without it, the `.bt` is checked by our own reader only (and says so).
@@ -81,19 +83,16 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
     cfg.mapping.size_m = 24.0;
     cfg.mapping.publish_rate_hz = 2.0;
     let dir = tempfile::tempdir()?;
+    let bt_dir = dir.path().join("octree");
+    // The save folder from the profile (no --map-dir), so `map save --config` finds it.
+    cfg.mapping.map_dir = Some(bt_dir.to_str().unwrap().into());
     let profile = dir.path().join("robot.toml");
     std::fs::write(&profile, cfg.to_toml())?;
-    let bt_dir = dir.path().join("octree");
 
     let instance = unique_instance("mapping_e2e");
     let mut mapping = Child::spawn(
         &bin("smokenav-mapping"),
-        &[
-            "--config",
-            profile.to_str().unwrap(),
-            "--map-dir",
-            bt_dir.to_str().unwrap(),
-        ],
+        &["--config", profile.to_str().unwrap()],
         &instance,
     )?;
     mapping.wait_for_line("Bayes maps at 0.05 m", Duration::from_secs(30))?;
@@ -314,6 +313,65 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
         eprintln!(
             "bt2vrml (octomap-tools) missing and not root: the .bt was read back by our reader only"
         );
+    }
+
+    // `smokenav map save`: SLAM's 2D map (a stand-in here, latched on
+    // slam/map) and the mapping process's octree, fresh, beside it.
+    let mut slam_map = bus.map_publisher(topics::SLAM_MAP)?;
+    let info = MapInfo {
+        header: Header::new(last_scan_stamp, 0, "map"),
+        resolution: 0.05,
+        width: 4,
+        height: 2,
+        ..Default::default()
+    };
+    let out_dir = dir.path().join("saved");
+    let mut child = Command::new(bin("smokenav"))
+        .args([
+            "map",
+            "save",
+            out_dir.to_str().unwrap(),
+            "--timeout-s",
+            "30",
+        ])
+        .args(["--config", profile.to_str().unwrap()])
+        .env("SMOKENAV_INSTANCE", &instance)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()?;
+    // Republished as SLAM does (iceoryx2 hands a late joiner the history on the next send).
+    while child.try_wait()?.is_none() {
+        slam_map.publish(&info, &[0, 100, -1, 0, 0, 0, 100, -1])?;
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let run = child.wait_with_output()?;
+    let said = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "map save: {said}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    eprintln!("mapping_e2e: map save said: {said}");
+    assert!(said.contains("saved the 3D map"), "{said}");
+    assert!(out_dir.join("map.yaml").exists());
+    let saved = out_dir.join("octree.bt");
+    let copy = Octree::read_bt(
+        &mut std::io::BufReader::new(std::fs::File::open(&saved)?),
+        clamp,
+    )?;
+    let mut copy_occupied = 0usize;
+    copy.for_each_leaf(|l| copy_occupied += usize::from(l.logodds > 0.0));
+    // Saved after the SIGUSR1 one, with no new scans: the same tree.
+    assert_eq!(copy_occupied, occupied);
+    assert!(
+        said.contains(&format!("({occupied} occupied leaves")),
+        "{said}"
+    );
+    if smokenav_tests::ensure_octomap_tools() {
+        let run = Command::new("bt2vrml").arg(&saved).output()?;
+        assert!(run.status.success(), "bt2vrml of the saved copy");
+        let wrl = std::fs::read_to_string(out_dir.join("octree.bt.wrl"))?;
+        assert_eq!(wrl.matches("Transform { translation ").count(), occupied);
     }
 
     let status = mapping.terminate(Duration::from_secs(10))?;

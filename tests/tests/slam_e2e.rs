@@ -335,3 +335,93 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
     assert!(!slam.output().contains('\x1b'), "ANSI codes in a piped log");
     Ok(())
 }
+
+/// With `backend = "fuzzy"` the process publishes the combined fuzzy map on
+/// `slam/map_fuzzy` (confidence 0–100, 30 = unknown) beside `slam/map`, and
+/// `smokenav map save` writes it as fuzzy.pgm + fuzzy.yaml (raw) and
+/// fuzzy.png. The nav2 map's walls are the fuzzy map's obstacle evidence,
+/// not its confidence thresholded at 0.65 (which left walls seen from more
+/// than ~1.5 m out: the "faint walls" of saved fuzzy maps).
+#[test]
+fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> anyhow::Result<()> {
+    let instance = unique_instance("slam_e2e_fuzzy");
+    let dir = tempfile::tempdir()?;
+    let cfg = profile(dir.path(), "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Laser;
+        c.slam.backend = smokenav_platform_config::SlamBackendKind::Fuzzy;
+        c.slam.map_rate_hz = 2.0;
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
+    let mut slam = Child::spawn(
+        &bin("smokenav-slam"),
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--map-dir",
+            dir.path().join("sig").to_str().unwrap(),
+        ],
+        &instance,
+    )?;
+    slam.wait_for_line("fuzzy with", Duration::from_secs(30))?;
+    let bus = open_bus(&instance);
+    let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
+    let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
+    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
+    let waiter = Waiter::new()?;
+    let _g = waiter.attach(&poses)?;
+    let records = log_records();
+    let base_ns = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    for rec in records.iter().take(40) {
+        let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
+        publish(&mut odom, &mut scans, rec, stamp)?;
+        pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
+    }
+    let live_fuzzy = newest_map(&bus, topics::SLAM_MAP_FUZZY)?;
+    let live_nav = newest_map(&bus, topics::SLAM_MAP)?;
+    assert_eq!(live_fuzzy.len(), live_nav.len());
+    // Eq. 7's floor: every cell a reading reached is ≥ 30 or free-ish below it.
+    assert!(live_fuzzy.contains(&30), "no unknown-level cells");
+    let confident = live_fuzzy.iter().filter(|&&c| c >= 65).count();
+    let nav_occupied = live_nav.iter().filter(|&&c| c == 100).count();
+    eprintln!(
+        "slam_e2e fuzzy: {confident} cells ≥ 0.65 confidence, {nav_occupied} occupied in slam/map"
+    );
+    assert!(confident > 0);
+    // The walls seen only from afar are in the nav2 map too.
+    assert!(
+        nav_occupied > 2 * confident,
+        "{nav_occupied} vs {confident}"
+    );
+
+    let saved = dir.path().join("saved");
+    let out = std::process::Command::new(bin("smokenav"))
+        .args([
+            "map",
+            "save",
+            saved.to_str().unwrap(),
+            "--instance",
+            &instance,
+        ])
+        .args(["--timeout-s", "10"])
+        .output()?;
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{said}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(said.contains("saved the fuzzy confidence map"), "{said}");
+    let fuzzy = smokenav_platform_map::load_map_server(&saved.join("fuzzy.yaml"))?;
+    // Raw mode: the saved pixels are the published confidences, cell for cell.
+    assert_eq!(fuzzy.cells, newest_map(&bus, topics::SLAM_MAP_FUZZY)?);
+    assert!(saved.join("fuzzy.pgm").exists() && saved.join("fuzzy.png").exists());
+    assert!(saved.join("map.yaml").exists());
+    let status = slam.terminate(Duration::from_secs(10))?;
+    assert!(status.success(), "{status:?}");
+    Ok(())
+}

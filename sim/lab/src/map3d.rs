@@ -51,20 +51,37 @@ pub struct Map3dArgs {
     pub duration: Option<f64>,
 }
 
-#[derive(Debug, Serialize)]
-struct RuleRow {
-    rule: String,
-    plane_error: f64,
-    plane_classified_cells: usize,
-    out_of_plane_recall: f64,
-    /// The projected map's error against every obstacle below the robot's top.
-    projected_error: f64,
+impl Map3dArgs {
+    /// The comparison `./demo` adds: the bundled `heights` scenario at 5 cm.
+    pub fn demo(out: Option<PathBuf>) -> Self {
+        Self {
+            scenario: "heights".into(),
+            resolution: 0.05,
+            robot_height: 0.60,
+            out,
+            duration: None,
+        }
+    }
 }
 
 #[derive(Debug, Serialize)]
-struct Report {
+pub struct RuleRow {
+    pub rule: String,
+    pub plane_error: f64,
+    pub plane_classified_cells: usize,
+    pub out_of_plane_recall: f64,
+    /// The projected map's error against every obstacle below the robot's top.
+    pub projected_error: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Report {
     scenario: String,
     resolution_m: f64,
+    laser_height_m: f64,
+    sonar_height_m: f64,
+    robot_height_m: f64,
+    ceiling_m: f64,
     laser_only_plane_error: f64,
     laser_only_out_of_plane_recall: f64,
     out_of_plane_truth_cells: usize,
@@ -76,10 +93,20 @@ struct Report {
     bt_occupied_leaves: usize,
     /// Lowest and highest corner of the occupied leaves, m.
     occupied_bounds_m: Option<[[f64; 3]; 2]>,
-    checks: Vec<(String, bool)>,
+    pub checks: Vec<(String, bool)>,
 }
 
 pub fn run(args: Map3dArgs) -> anyhow::Result<()> {
+    let report = evaluate(&args)?;
+    print!("{}", table(&report));
+    if report.checks.iter().any(|(_, ok)| !ok) {
+        bail!("a must-be-true figure failed (see FAIL above)");
+    }
+    Ok(())
+}
+
+/// Maps the scenario, scores every rule and (with `out`) writes the maps and report.json.
+pub fn evaluate(args: &Map3dArgs) -> anyhow::Result<Report> {
     let scenario = Scenario::builtin_or_file(&args.scenario)?;
     let name = scenario.name.clone();
     let heights = Heights {
@@ -203,41 +230,6 @@ pub fn run(args: Map3dArgs) -> anyhow::Result<()> {
         bt_bytes = Some(std::fs::metadata(&path)?.len());
     }
 
-    println!(
-        "{name}: laser plane {:.2} m, sonar {:.2} m, robot top {:.2} m, {res} m cells",
-        heights.laser_m, heights.sonar_m, heights.robot_m
-    );
-    println!(
-        "{:<12} {:>18} {:>22} {:>18}",
-        "map", "2D error (plane)", "out-of-plane recall", "projected error"
-    );
-    println!(
-        "{:<12} {:>17.2}% {:>21.1}% {:>18}",
-        "laser only",
-        laser_err.0 * 100.0,
-        laser_recall * 100.0,
-        "-"
-    );
-    for r in &rows {
-        println!(
-            "{:<12} {:>17.2}% {:>21.1}% {:>17.2}%",
-            r.rule,
-            r.plane_error * 100.0,
-            r.out_of_plane_recall * 100.0,
-            r.projected_error * 100.0
-        );
-    }
-    println!(
-        "octree: {} nodes, {:.1} KiB; dense 3D grid of the arena (f32, floor to {:.1} m): {:.1} KiB; {:.1}× smaller",
-        tree.node_count(),
-        tree.memory_bytes() as f64 / 1024.0,
-        mapper.params().ceiling_m,
-        dense as f64 / 1024.0,
-        dense as f64 / tree.memory_bytes().max(1) as f64
-    );
-    if let Some(b) = bt_bytes {
-        println!("octree.bt: {b} bytes, {bt_occupied} occupied leaves");
-    }
     let bayes = rows
         .iter()
         .find(|r| r.rule == "Bayes")
@@ -270,12 +262,13 @@ pub fn run(args: Map3dArgs) -> anyhow::Result<()> {
             tree.memory_bytes() < dense,
         ),
     ];
-    for (what, ok) in &checks {
-        println!("{} {what}", if *ok { "PASS" } else { "FAIL" });
-    }
     let report = Report {
         scenario: name,
         resolution_m: res,
+        laser_height_m: heights.laser_m,
+        sonar_height_m: heights.sonar_m,
+        robot_height_m: heights.robot_m,
+        ceiling_m: mapper.params().ceiling_m,
         laser_only_plane_error: laser_err.0,
         laser_only_out_of_plane_recall: laser_recall,
         out_of_plane_truth_cells: oop_cells.len(),
@@ -286,7 +279,7 @@ pub fn run(args: Map3dArgs) -> anyhow::Result<()> {
         bt_bytes,
         bt_occupied_leaves: bt_occupied,
         occupied_bounds_m: occupied_bounds(tree),
-        checks: checks.clone(),
+        checks,
     };
     if let Some(dir) = &args.out {
         std::fs::write(
@@ -294,10 +287,61 @@ pub fn run(args: Map3dArgs) -> anyhow::Result<()> {
             serde_json::to_string_pretty(&report)?,
         )?;
     }
-    if checks.iter().any(|(_, ok)| !ok) {
-        bail!("a must-be-true figure failed (see FAIL above)");
+    Ok(report)
+}
+
+/// The comparison as text: per rule, then the octree, then PASS/FAIL per figure.
+pub fn table(r: &Report) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{}: laser plane {:.2} m, sonar {:.2} m, robot top {:.2} m, {} m cells",
+        r.scenario, r.laser_height_m, r.sonar_height_m, r.robot_height_m, r.resolution_m
+    );
+    let _ = writeln!(
+        s,
+        "{:<12} {:>18} {:>22} {:>18}",
+        "map", "2D error (plane)", "out-of-plane recall", "projected error"
+    );
+    let _ = writeln!(
+        s,
+        "{:<12} {:>17.2}% {:>21.1}% {:>18}",
+        "laser only",
+        r.laser_only_plane_error * 100.0,
+        r.laser_only_out_of_plane_recall * 100.0,
+        "-"
+    );
+    for row in &r.rules {
+        let _ = writeln!(
+            s,
+            "{:<12} {:>17.2}% {:>21.1}% {:>17.2}%",
+            row.rule,
+            row.plane_error * 100.0,
+            row.out_of_plane_recall * 100.0,
+            row.projected_error * 100.0
+        );
     }
-    Ok(())
+    let _ = writeln!(
+        s,
+        "octree: {} nodes, {:.1} KiB; dense 3D grid of the arena (f32, floor to {:.1} m): {:.1} KiB; {:.1}× smaller",
+        r.octree_nodes,
+        r.octree_bytes as f64 / 1024.0,
+        r.ceiling_m,
+        r.dense_grid_bytes as f64 / 1024.0,
+        r.dense_grid_bytes as f64 / r.octree_bytes.max(1) as f64
+    );
+    if let Some(b) = r.bt_bytes {
+        let _ = writeln!(
+            s,
+            "octree.bt: {b} bytes, {} occupied leaves",
+            r.bt_occupied_leaves
+        );
+    }
+    for (what, ok) in &r.checks {
+        let _ = writeln!(s, "{} {what}", if *ok { "PASS" } else { "FAIL" });
+    }
+    s
 }
 
 /// Share of the cells `map` classifies, within the truth's known cells, that

@@ -80,6 +80,11 @@ pub trait SlamBackend: Send {
     fn map_revision(&self) -> u64;
     /// The current best map, once a scan was processed (an export: costs a copy).
     fn map(&self) -> Option<OccupancyGrid>;
+    /// The fuzzy back-end's combined confidence map, min(max(u, Mo), 1 − Ms)
+    /// scaled 0–100 (-1 where no reading reached); `None` for the others.
+    fn confidence_map(&self) -> Option<OccupancyGrid> {
+        None
+    }
     /// The best estimate of the whole trajectory so far (smoothed where the
     /// back-end can; empty if it keeps no history).
     fn trajectory(&self) -> Vec<StampedPose>;

@@ -311,6 +311,11 @@ impl SlamPipeline {
         self.backend.map()
     }
 
+    /// [`SlamBackend::confidence_map`]: the combined fuzzy map, fuzzy back-end only.
+    pub fn confidence_map(&self) -> Option<OccupancyGrid> {
+        self.backend.confidence_map()
+    }
+
     pub fn trajectory(&self) -> Vec<StampedPose> {
         self.backend.trajectory()
     }

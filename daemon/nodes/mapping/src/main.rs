@@ -9,7 +9,11 @@
 //! octree projected to 2D (everything under the robot's height) on
 //! `mapping/projected`, both under `[mapping] rule`, and the occupied voxels
 //! on `mapping/voxels` (at most `MAX_VOXELS`, the rest counted). SIGUSR1
-//! writes the octree as `octree.bt` (OctoMap's format) to `--map-dir`.
+//! writes the octree as `octree.bt` (OctoMap's format) to `--map-dir` (else
+//! `[mapping] map_dir`) and counts it in health's `octree_saves`: that is
+//! how `smokenav map save` gets the 3D map (it signals the pid of
+//! `health/mapping`, waits for the count to move and copies the file).
+//! The sensors' and the robot's heights are `[mapping]` keys.
 //!
 //! A process of its own rather than a part of the SLAM process: the octree
 //! update and the projection take milliseconds the pose estimate should not
@@ -47,9 +51,10 @@ use std::time::{Duration, Instant};
 struct Args {
     #[command(flatten)]
     common: CommonArgs,
-    /// Folder SIGUSR1 writes the octree to (as octree.bt).
-    #[arg(long, value_name = "DIR", default_value = ".")]
-    map_dir: PathBuf,
+    /// Folder SIGUSR1 (and `smokenav map save`) writes the octree to, as
+    /// octree.bt [default: the profile's `[mapping] map_dir`, else .].
+    #[arg(long, value_name = "DIR")]
+    map_dir: Option<PathBuf>,
 }
 
 /// Longest wait on the bus, so signals and the publishing timer are served promptly.
@@ -75,16 +80,33 @@ fn fusion_rule(r: MappingRule) -> FusionRule {
     }
 }
 
+/// The sensors' and the robot's heights `[mapping]` gives.
+fn heights(cfg: &MappingSection) -> Heights {
+    Heights {
+        laser_m: cfg.laser_height_m,
+        sonar_m: cfg.sonar_height_m,
+        robot_m: cfg.robot_height_m,
+    }
+}
+
 /// The mapper's parameters for `[mapping]`: a square of `size_m` centred on
 /// the map origin (where SLAM starts the robot).
 fn map_params(cfg: &MappingSection) -> MapParams {
     let half = cfg.size_m / 2.0;
     MapParams {
         resolution: cfg.resolution_m,
+        heights: heights(cfg),
         grid_origin: [-half, -half],
         grid_size_m: [cfg.size_m, cfg.size_m],
         ..MapParams::default()
     }
+}
+
+/// Where the octree is saved: `--map-dir`, else `[mapping] map_dir`, else here.
+fn save_dir(arg: Option<&Path>, cfg: &MappingSection) -> PathBuf {
+    arg.map(Path::to_path_buf)
+        .or_else(|| cfg.map_dir.as_ref().map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("."))
 }
 
 /// Messages waiting for a pose: `N` slots allocated once, reused.
@@ -300,8 +322,9 @@ impl Outputs {
 fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let cfg = p.config.mapping.clone();
     let rule = fusion_rule(cfg.rule);
-    let heights = Heights::default();
+    let heights = heights(&cfg);
     let rig = Rig::from_config(&p.config, &heights);
+    let map_dir = save_dir(args.map_dir.as_deref(), &cfg);
     // Only Bayes lives in the joint maps; the other rules pool per-sensor maps.
     let set = if rule == FusionRule::Bayes {
         MapSet::Bayes
@@ -341,12 +364,13 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         .health
         .add_rate("maps_hz", Some(cfg.publish_rate_hz.max(1.0)));
     p.ready(&format!(
-        "{rule} maps at {} m from {} + {} + {}, published every {:.1} s",
+        "{rule} maps at {} m from {} + {} + {}, published every {:.1} s, octree saved to {}",
         cfg.resolution_m,
         topics::SLAM_POSE.name(),
         topics::LASER_SCAN.name(),
         topics::BASE_SONAR.name(),
-        period.as_secs_f64()
+        period.as_secs_f64(),
+        map_dir.display()
     ));
 
     while !p.shutdown_requested() {
@@ -403,7 +427,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             }
         }
         if save_requested.swap(false, Ordering::Relaxed) {
-            match save_bt(mapper.octree(), &args.map_dir) {
+            match save_bt(mapper.octree(), &map_dir) {
                 Ok(path) => {
                     counters.saves += 1;
                     tracing::info!("octree saved to {}", path.display());

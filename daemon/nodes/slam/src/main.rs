@@ -159,9 +159,12 @@ fn unwritable(dir: &Path) -> Option<String> {
     }
 }
 
-fn save_map(grid: &OccupancyGrid, dir: &Path) -> anyhow::Result<()> {
+fn save_map(grid: &OccupancyGrid, fuzzy: Option<&OccupancyGrid>, dir: &Path) -> anyhow::Result<()> {
     smokenav_platform_map::save_map_server(grid, dir, "map")?;
     grid.save_png(&dir.join("map.png"))?;
+    if let Some(f) = fuzzy {
+        smokenav_platform_map::save_fuzzy(f, dir)?;
+    }
     Ok(())
 }
 
@@ -200,6 +203,12 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let mut poses: Publisher<PoseEstimate> = p.bus.publisher(topics::SLAM_POSE)?;
     let mut maps = p.bus.map_publisher(topics::SLAM_MAP)?;
     let mut probability_maps = p.bus.map_publisher(topics::SLAM_MAP_PROBABILITY)?;
+    // Only a back-end with a confidence map (fuzzy) offers slam/map_fuzzy.
+    let mut fuzzy_maps = match cfg.backend {
+        SlamBackendKind::Fuzzy => Some(p.bus.map_publisher(topics::SLAM_MAP_FUZZY)?),
+        _ => None,
+    };
+    let mut fuzzy: Option<OccupancyGrid> = None;
     // The thresholded cells, reused from map to map.
     let mut trinary: Vec<i8> = Vec::new();
     let waiter = Waiter::new()?;
@@ -269,6 +278,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             let revision = pipeline.map_revision();
             if last_map_revision != Some(revision) {
                 map = pipeline.map();
+                if fuzzy_maps.is_some() {
+                    fuzzy = pipeline.confidence_map();
+                }
                 last_map_revision = Some(revision);
             }
             if let (Some(grid), Some(u)) = (&map, last_update) {
@@ -287,9 +299,16 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                         p.health
                             .error(&format!("cannot publish slam/map_probability: {e}"));
                     }
+                    if let (Some(publisher), Some(f)) = (&mut fuzzy_maps, &fuzzy)
+                        && let Err(e) = publisher.publish(&map_info(f, u.stamp_ns), &f.cells)
+                    {
+                        counters.publish_errors += 1;
+                        p.health
+                            .error(&format!("cannot publish slam/map_fuzzy: {e}"));
+                    }
                 }
                 if save {
-                    match save_map(grid, &map_dir) {
+                    match save_map(grid, fuzzy.as_ref(), &map_dir) {
                         Ok(()) => {
                             counters.maps_saved += 1;
                             tracing::info!("map saved to {}", map_dir.display());

@@ -42,6 +42,33 @@ pub struct MappingSection {
     /// Side of the square the maps cover, centred on the map origin, m.
     #[serde(default = "default_size")]
     pub size_m: f64,
+    /// Height of the laser's scan plane above the floor, m.
+    #[serde(default = "default_laser_height")]
+    pub laser_height_m: f64,
+    /// Height of the sonar ring's axes above the floor, m.
+    #[serde(default = "default_sonar_height")]
+    pub sonar_height_m: f64,
+    /// The robot's top, m: the projected map marks everything between the
+    /// floor and this height as an obstacle.
+    #[serde(default = "default_robot_height")]
+    pub robot_height_m: f64,
+    /// Folder the process writes `octree.bt` to, on SIGUSR1 or for
+    /// `smokenav map save` (its `--map-dir` overrides it; unset: the
+    /// current folder). `smokenav map save --config` copies the file from here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub map_dir: Option<String>,
+}
+
+fn default_laser_height() -> f64 {
+    0.40
+}
+
+fn default_sonar_height() -> f64 {
+    0.30
+}
+
+fn default_robot_height() -> f64 {
+    0.60
 }
 
 fn default_resolution() -> f64 {
@@ -63,6 +90,10 @@ impl Default for MappingSection {
             resolution_m: default_resolution(),
             publish_rate_hz: default_rate(),
             size_m: default_size(),
+            laser_height_m: default_laser_height(),
+            sonar_height_m: default_sonar_height(),
+            robot_height_m: default_robot_height(),
+            map_dir: None,
         }
     }
 }
@@ -73,6 +104,12 @@ impl Validate for MappingSection {
         v.within(&k("resolution_m"), self.resolution_m, 0.01, 1.0);
         v.within(&k("publish_rate_hz"), self.publish_rate_hz, 0.1, 20.0);
         v.within(&k("size_m"), self.size_m, 1.0, 200.0);
+        v.within(&k("laser_height_m"), self.laser_height_m, 0.0, 3.0);
+        v.within(&k("sonar_height_m"), self.sonar_height_m, 0.0, 3.0);
+        v.within(&k("robot_height_m"), self.robot_height_m, 0.05, 3.0);
+        if let Some(d) = &self.map_dir {
+            v.non_empty(&k("map_dir"), d);
+        }
         // The published grids are one bus sample each: keep them under 16 M cells.
         if self.resolution_m.is_finite()
             && self.size_m.is_finite()

@@ -405,3 +405,30 @@ fn mapping_keys_are_strict() {
     let msg = parse(&text).unwrap_err().to_string();
     assert!(msg.contains("mapping.size_m"), "{msg}");
 }
+
+#[test]
+fn mapping_heights_and_save_folder_are_keys() {
+    let cfg = parse(&pioneer_text()).unwrap();
+    let m = &cfg.mapping;
+    assert_eq!(
+        (m.laser_height_m, m.sonar_height_m, m.robot_height_m),
+        (0.40, 0.30, 0.60)
+    );
+    assert_eq!(m.map_dir, None);
+    let cfg = parse(&format!(
+        "{}\n[mapping]\nrobot_height_m = 1.2\nlaser_height_m = 0.25\nmap_dir = \"/tmp/oct\"\n",
+        pioneer_text()
+    ))
+    .unwrap();
+    assert_eq!(cfg.mapping.robot_height_m, 1.2);
+    assert_eq!(cfg.mapping.laser_height_m, 0.25);
+    assert_eq!(cfg.mapping.map_dir.as_deref(), Some("/tmp/oct"));
+    // Written back and read again: the same section.
+    assert_eq!(parse(&cfg.to_toml()).unwrap().mapping, cfg.mapping);
+    let text = format!("{}\n[mapping]\nrobot_height_m = 0.0\n", pioneer_text());
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.contains("mapping.robot_height_m"), "{msg}");
+    let text = format!("{}\n[mapping]\nmap_dir = \"\"\n", pioneer_text());
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.contains("mapping.map_dir"), "{msg}");
+}

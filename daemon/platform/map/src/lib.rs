@@ -271,6 +271,18 @@ pub fn save_map_server(grid: &OccupancyGrid, dir: &Path, name: &str) -> Result<P
     save_map_server_mode(grid, dir, name, MapMode::Trinary)
 }
 
+/// File stem of a saved fuzzy confidence map (`fuzzy.pgm`, `fuzzy.yaml`, `fuzzy.png`).
+pub const FUZZY_NAME: &str = "fuzzy";
+
+/// Writes a fuzzy back-end's combined confidence map (0–100, -1 unknown) as
+/// `fuzzy.pgm` + `fuzzy.yaml` in raw mode — the pixel is the confidence, so
+/// nothing is thresholded away — and `fuzzy.png` to look at; returns the YAML path.
+pub fn save_fuzzy(grid: &OccupancyGrid, dir: &Path) -> Result<PathBuf, MapError> {
+    let yaml = save_map_server_mode(grid, dir, FUZZY_NAME, MapMode::Raw)?;
+    grid.save_png(&dir.join(format!("{FUZZY_NAME}.png")))?;
+    Ok(yaml)
+}
+
 /// Writes `<dir>/<name>.{pgm|png}` and `<dir>/<name>.yaml` in `mode` the way nav2's
 /// `map_saver` does (`negate: 0`, thresholds [`OCCUPIED_THRESH`]/[`FREE_THRESH`]) and
 /// returns the YAML path. Scale mode needs transparency for unknown cells, so it

@@ -11,6 +11,7 @@ mod eval;
 mod fuse;
 mod graph;
 mod info;
+mod mapsave;
 mod play;
 mod record;
 mod scip;
@@ -46,7 +47,7 @@ enum Command {
     Status(status::StatusArgs),
     /// Run SLAM offline over a CARMEN log; write trajectory (`--format tum` for evo), map and timing.
     Slam(slam::SlamArgs),
-    /// Maps published by the SLAM process: `map save [DIR] [--mode trinary|scale|raw]` writes them as nav2's map_saver does.
+    /// Maps published by the SLAM process: `map save [DIR] [--mode trinary|scale|raw]` writes them as nav2's map_saver does (and the 3D octree of smokenav-mapping).
     #[command(subcommand)]
     Map(slam::MapCommand),
     /// Run SmokeNav fusion offline: `topic echo --json` lines in, `fusion/scan` lines out.

@@ -368,6 +368,10 @@ pub enum MapCommand {
         /// Give up if no map arrives within this many seconds.
         #[arg(long, default_value_t = 5.0)]
         timeout_s: f64,
+        /// Where smokenav-mapping saves its octree, to copy octree.bt from
+        /// [default: the profile's `[mapping] map_dir`, else /var/lib/smokenav/octree].
+        #[arg(long, value_name = "DIR")]
+        octree_dir: Option<PathBuf>,
         #[command(flatten)]
         bus: crate::topic::BusArgs,
     },
@@ -392,7 +396,7 @@ impl From<SaveMode> for smokenav_platform_map::MapMode {
 }
 
 /// A map received from the bus as a grid, after checking its header against its payload.
-fn grid_from_wire(
+pub(crate) fn grid_from_wire(
     info: &smokenav_shared_types::MapInfo,
     cells: &[i8],
 ) -> anyhow::Result<smokenav_platform_map::OccupancyGrid> {
@@ -434,8 +438,10 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         dir,
         mode,
         timeout_s,
+        octree_dir,
         bus,
     } = cmd;
+    let octree_dir = crate::mapsave::octree_dir(octree_dir, bus.config.as_deref())?;
     let dir = dir.unwrap_or_else(|| PathBuf::from("maps"));
     // Scale and raw keep the probabilities; the thresholded map would lose them.
     let topic = match mode {
@@ -481,5 +487,24 @@ pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
         grid.resolution,
         dir.display()
     );
+    let wait = std::time::Duration::from_secs_f64(timeout_s);
+    if let Some(f) = crate::mapsave::fuzzy_map(&bus, wait)? {
+        smokenav_platform_map::save_fuzzy(&f, &dir)?;
+        println!(
+            "saved the fuzzy confidence map ({}×{}) to {} (fuzzy.pgm, fuzzy.yaml, fuzzy.png)",
+            f.width,
+            f.height,
+            dir.display()
+        );
+    }
+    match crate::mapsave::save_octree(&bus, &octree_dir, &dir, wait)? {
+        Some(s) => println!(
+            "saved the 3D map ({} occupied leaves, {} bytes) to {}",
+            s.occupied_leaves,
+            s.bytes,
+            s.path.display()
+        ),
+        None => println!("no 3D map: smokenav-mapping is not running"),
+    }
     Ok(())
 }

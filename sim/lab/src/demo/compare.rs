@@ -30,6 +30,10 @@ pub struct SeriesPoint {
 pub struct MethodResult {
     pub method: FusionMethod,
     pub map: Option<OccupancyGrid>,
+    /// The fuzzy back-end's combined confidence map (eq. 7, 0–100) of the run shown.
+    pub confidence_map: Option<OccupancyGrid>,
+    /// What that map says of the true walls, by who painted them.
+    pub fuzzy_walls: Option<FuzzyWalls>,
     /// The best particle's (smoothed) trajectory, of the median run.
     pub trajectory: Vec<StampedPose>,
     pub series: Vec<SeriesPoint>,
@@ -43,6 +47,102 @@ pub struct MethodResult {
     pub trajectory_report: Result<TrajectoryReport, String>,
     /// (map error, ATE) of every SLAM run, one per random seed; the median by map error is the one above.
     pub runs: Vec<(Option<f64>, Option<f64>)>,
+}
+
+/// The fuzzy map against the truth: the mean eq. 7 confidence on true wall
+/// cells that only sonar-painted beams ended at, beside those a laser beam
+/// ended at, and the confident cells (≥ 0.65) nowhere near a true wall.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct FuzzyWalls {
+    pub laser_wall_confidence: f64,
+    pub laser_wall_cells: usize,
+    pub sonar_only_wall_confidence: f64,
+    pub sonar_only_wall_cells: usize,
+    /// Cells at ≥ 0.65 confidence more than 0.3 m from every true wall.
+    pub confident_phantom_cells: usize,
+}
+
+/// [`FuzzyWalls`] of one run: its beams' end points at its own poses, in its
+/// map; the truth reached through the k-NN alignment.
+pub fn fuzzy_walls(
+    fused: &[Emitted],
+    trajectory: &[StampedPose],
+    conf: &OccupancyGrid,
+    align: &smokenav_algorithms_eval::Alignment,
+    truth_map: &OccupancyGrid,
+    mount: Pose2,
+) -> FuzzyWalls {
+    use smokenav_shared_types::{BeamReading, SectionSource};
+    let poses: std::collections::HashMap<u64, Pose2> =
+        trajectory.iter().map(|p| (p.stamp_ns, p.pose)).collect();
+    // Per map cell: bit 0 a laser beam ended here, bit 1 a sonar-painted one.
+    let mut painted = vec![0u8; conf.cells.len()];
+    for (_, f) in fused {
+        let Some(p) = poses.get(&f.scan.header.stamp_ns) else {
+            continue;
+        };
+        let l = p.compose(&mount);
+        for i in 0..f.scan.len() {
+            let BeamReading::Range(r) = f.scan.beam(i) else {
+                continue;
+            };
+            let bit = match f.beam_source(i) {
+                SectionSource::Laser => 1,
+                SectionSource::Sonar => 2,
+                _ => continue,
+            };
+            let a = l.theta + f64::from(f.scan.angle(i));
+            let (x, y) = (l.x + f64::from(r) * a.cos(), l.y + f64::from(r) * a.sin());
+            if let Some((cx, cy)) = conf.world_to_cell(x, y) {
+                painted[cy * conf.width + cx] |= bit;
+            }
+        }
+    }
+    let (s, c) = align.dtheta_deg.to_radians().sin_cos();
+    let to_truth = |x: f64, y: f64| (c * x - s * y + align.dx_m, s * x + c * y + align.dy_m);
+    // A truth cell within `k` cells of (x, y) (truth frame) is occupied.
+    let wall_within = |x: f64, y: f64, k: i64| -> bool {
+        let Some((cx, cy)) = truth_map.world_to_cell(x, y) else {
+            return false;
+        };
+        (-k..=k).any(|dy| {
+            (-k..=k).any(|dx| {
+                let (gx, gy) = (cx as i64 + dx, cy as i64 + dy);
+                gx >= 0
+                    && gy >= 0
+                    && truth_map.get(gx as usize, gy as usize)
+                        == Some(smokenav_platform_map::OCCUPIED)
+            })
+        })
+    };
+    let far = (0.3 / truth_map.resolution).round() as i64;
+    let (mut lsum, mut ln, mut ssum, mut sn, mut phantom) = (0.0, 0, 0.0, 0, 0);
+    for (i, &v) in conf.cells.iter().enumerate() {
+        let (x, y) = (
+            conf.origin[0] + ((i % conf.width) as f64 + 0.5) * conf.resolution,
+            conf.origin[1] + ((i / conf.width) as f64 + 0.5) * conf.resolution,
+        );
+        let (tx, ty) = to_truth(x, y);
+        if v >= 65 && !wall_within(tx, ty, far) {
+            phantom += 1;
+        }
+        if painted[i] == 0 || !wall_within(tx, ty, 1) {
+            continue;
+        }
+        let v = f64::from(v.max(0)) / 100.0;
+        if painted[i] & 1 != 0 {
+            (lsum, ln) = (lsum + v, ln + 1);
+        } else {
+            (ssum, sn) = (ssum + v, sn + 1);
+        }
+    }
+    FuzzyWalls {
+        laser_wall_confidence: lsum / f64::from(ln.max(1)),
+        laser_wall_cells: ln as usize,
+        sonar_only_wall_confidence: ssum / f64::from(sn.max(1)),
+        sonar_only_wall_cells: sn as usize,
+        confident_phantom_cells: phantom,
+    }
 }
 
 fn mean(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
@@ -97,6 +197,7 @@ pub fn fuse(
 #[derive(Clone)]
 struct SlamOutcome {
     map: Option<OccupancyGrid>,
+    confidence_map: Option<OccupancyGrid>,
     trajectory: Vec<StampedPose>,
     map_report: Result<MapReport, String>,
     trajectory_report: Result<TrajectoryReport, String>,
@@ -148,6 +249,7 @@ fn slam_and_score(
     // One pose per stamp (a trajectory file's stamps must increase).
     trajectory.dedup_by_key(|p| p.stamp_ns);
     let map = slam.map();
+    let confidence_map = slam.confidence_map();
     let map_report = match &map {
         Some(m) => smokenav_algorithms_eval::evaluate_maps(truth_map, m, &MapOptions::default())
             .map_err(|e| e.to_string()),
@@ -170,6 +272,7 @@ fn slam_and_score(
     .map_err(|e| e.to_string());
     SlamOutcome {
         map,
+        confidence_map,
         trajectory,
         map_report,
         trajectory_report,
@@ -283,7 +386,22 @@ pub fn run_all(
         let (f, usage) = &fused[i];
         results.push(MethodResult {
             method: m,
+            fuzzy_walls: match (&o.confidence_map, &o.map_report) {
+                (Some(conf), Ok(rep)) => {
+                    let mt = profile.laser.mount;
+                    Some(fuzzy_walls(
+                        &fused[i].0,
+                        &o.trajectory,
+                        conf,
+                        &rep.alignment,
+                        truth_map,
+                        Pose2::new(mt.x, mt.y, mt.yaw_rad()),
+                    ))
+                }
+                _ => None,
+            },
             map: o.map,
+            confidence_map: o.confidence_map,
             trajectory: o.trajectory,
             series: f
                 .iter()

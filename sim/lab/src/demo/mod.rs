@@ -100,6 +100,10 @@ pub struct DemoArgs {
     /// truth.tum and trajectories/*.tum, `t x y z qx qy qz qw`, for `evo_ape tum`).
     #[arg(long, value_enum, default_value_t = TrajectoryFiles::Plain)]
     pub format: TrajectoryFiles,
+    /// Skip the 2D/3D occupancy comparison per fusion rule (LOP, LIOP, IOP,
+    /// Bayes) on the `heights` scenario (`smokenav-lab map3d`, into OUT/map3d).
+    #[arg(long)]
+    pub no_map3d: bool,
 }
 
 /// Where progress messages go: stderr with `--json` (stdout is for the JSON), else stdout.
@@ -428,10 +432,31 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             write_tum_copies(&args.out.join("clean-reference"))?;
         }
     }
+    // Mapping, not localisation: true poses on the scenario with obstacles
+    // out of the laser's plane (the demo's `--duration` shortens it too).
+    let map3d = if args.no_map3d {
+        None
+    } else {
+        say.line("occupancy fusion per rule (heights scenario, true poses):");
+        let mut a = crate::map3d::Map3dArgs::demo(Some(args.out.join("map3d")));
+        a.duration = args.duration;
+        Some(crate::map3d::evaluate(&a)?)
+    };
+    let mut v = report::json_value(&main, clean.as_ref());
+    if let (Some(r), Some(obj)) = (&map3d, v.as_object_mut()) {
+        obj.insert("occupancy_rules".into(), serde_json::to_value(r)?);
+        // comparison.json is what --json prints: with the rules too.
+        let path = args.out.join("comparison.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&v)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     if args.json {
-        println!("{}", report::json(&main, clean.as_ref()));
+        println!("{v}");
     } else {
         print!("{}", report::table(&main, clean.as_ref()));
+        if let Some(r) = &map3d {
+            print!("\n{}", crate::map3d::table(r));
+        }
         println!(
             "\nwrote {} (maps.png, smoke.png, maps/, trajectories/, recording.mcap, comparison.json) in {:.0} s",
             args.out.display(),

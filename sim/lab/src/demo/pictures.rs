@@ -109,6 +109,62 @@ fn draw_path(
 }
 
 /// Ground truth and the three maps side by side, in the truth's frame.
+/// With the fuzzy back-end: per method, its occupancy map (Mo / (Mo + Ms),
+/// what `slam/map` carries) above its combined confidence map (eq. 7, what
+/// `slam/map_fuzzy` carries: darker = more confident obstacle, light grey =
+/// unknown 0.3, white = sure free), both aligned to the truth like maps.png.
+pub fn fuzzy_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
+    let t = &cmp.truth_map;
+    let margin = 0.5;
+    let ww = t.width as f64 * t.resolution + 2.0 * margin;
+    let wh = t.height as f64 * t.resolution + 2.0 * margin;
+    let px_per_m = (560.0 / ww).min(440.0 / wh).max(5.0);
+    let view = View {
+        x0: t.origin[0] - margin,
+        y1: t.origin[1] - margin + wh,
+        px_per_m,
+        w: (ww * px_per_m).ceil() as u32,
+        h: (wh * px_per_m).ceil() as u32,
+    };
+    let (scale, gap) = (2, 16i64);
+    let l = i64::from(line_height(scale));
+    let head = l + 8;
+    let panels = cmp.results.len() as i64;
+    let width = gap + panels * (i64::from(view.w) + gap);
+    let height = 2 * (head + i64::from(view.h)) + 2 * gap;
+    let mut c = Canvas::new(width as u32, height as u32, WHITE);
+    let mut x = gap;
+    for r in &cmp.results {
+        let align = r.map_report.as_ref().ok().map(|m| m.alignment);
+        let rows = [
+            (r.map.as_ref(), format!("{}: occupancy", title(r.method))),
+            (
+                r.confidence_map.as_ref(),
+                "fuzzy confidence (eq. 7)".to_string(),
+            ),
+        ];
+        for (k, (map, label)) in rows.iter().enumerate() {
+            let y = k as i64 * (head + i64::from(view.h) + gap);
+            match map {
+                Some(m) => c.paste(&render_map(&view, m, align.as_ref()), x, y + head),
+                None => c.fill_rect(x, y + head, i64::from(view.w), i64::from(view.h), LIGHT),
+            }
+            c.text(x, y + 4, label, BLACK, scale);
+            c.rect(
+                x - 1,
+                y + head - 1,
+                i64::from(view.w) + 2,
+                i64::from(view.h) + 2,
+                GREY,
+            );
+        }
+        x += i64::from(view.w) + gap;
+    }
+    c.img
+        .save(path)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
 pub fn maps_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
     let t = &cmp.truth_map;
     let margin = 0.5;

@@ -42,6 +42,9 @@ fn methods_json(c: &Comparison) -> Value {
             o.insert("trajectory_error".into(), json!(e));
         }
         o.insert("scans".into(), json!(r.scans));
+        if let Some(w) = &r.fuzzy_walls {
+            o.insert("fuzzy_walls".into(), json!(w));
+        }
         if let Some(m) = r.same_slam_input_as {
             o.insert("same_slam_input_as".into(), json!(m.as_str()));
         }
@@ -76,10 +79,6 @@ pub fn json_value(main: &Comparison, clean: Option<&Comparison>) -> Value {
         );
     }
     v
-}
-
-pub fn json(main: &Comparison, clean: Option<&Comparison>) -> String {
-    json_value(main, clean).to_string()
 }
 
 fn cell(v: Option<f64>, unit: &str) -> String {
@@ -165,6 +164,24 @@ fn table_rows(s: &mut String, c: &Comparison) {
     }
 }
 
+/// With the fuzzy back-end: its confidence on true walls by who painted them.
+fn fuzzy_rows(s: &mut String, c: &Comparison) {
+    for r in &c.results {
+        if let Some(w) = &r.fuzzy_walls {
+            let _ = writeln!(
+                s,
+                "  {:<11} fuzzy map on true walls: laser-seen {:.2} ({} cells), sonar-only {:.2} ({} cells); confident cells ≥ 0.3 m from any wall: {}",
+                method_label(r),
+                w.laser_wall_confidence,
+                w.laser_wall_cells,
+                w.sonar_only_wall_confidence,
+                w.sonar_only_wall_cells,
+                w.confident_phantom_cells
+            );
+        }
+    }
+}
+
 /// The paper's comparison for people.
 pub fn table(main: &Comparison, clean: Option<&Comparison>) -> String {
     let mut s = String::new();
@@ -178,6 +195,7 @@ pub fn table(main: &Comparison, clean: Option<&Comparison>) -> String {
         "map error: the SmokeNav paper's k-NN error, mean of both directions (truth walls → nearest mapped wall, mapped walls → nearest true wall) after best-fit alignment"
     );
     table_rows(&mut s, main);
+    fuzzy_rows(&mut s, main);
     if let Some(c) = clean {
         let _ = writeln!(
             s,
@@ -206,6 +224,16 @@ pub fn write_files(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
             smokenav_platform_map::save_map_server(m, &maps, name)
                 .with_context(|| format!("cannot write the {name} map to {}", maps.display()))?;
         }
+        if let Some(f) = &r.confidence_map {
+            let stem = format!("{name}-fuzzy");
+            smokenav_platform_map::save_map_server_mode(
+                f,
+                &maps,
+                &stem,
+                smokenav_platform_map::MapMode::Raw,
+            )
+            .with_context(|| format!("cannot write the {stem} map to {}", maps.display()))?;
+        }
         write(
             &trajectories.join(format!("{name}.txt")),
             &format!(
@@ -227,6 +255,9 @@ pub fn write_files(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
 /// `maps.png` and `smoke.png` of one comparison into `dir`.
 pub fn write_pictures(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
     super::pictures::maps_png(c, &dir.join("maps.png"))?;
+    if c.results.iter().any(|r| r.confidence_map.is_some()) {
+        super::pictures::fuzzy_png(c, &dir.join("fuzzy.png"))?;
+    }
     super::pictures::smoke_png(c, &dir.join("smoke.png"))
 }
 

@@ -125,6 +125,10 @@ pub struct FuzzyGrid {
     pub ms: Vec<f32>,
 }
 
+/// Least `Mo + Ms` a cell needs to be known in [`FuzzyGrid::to_evidence_grid`]:
+/// the edge of a parabola's support, where a cell was only grazed.
+pub const MIN_EVIDENCE: f32 = 0.05;
+
 /// Cells the global map grows by at a time (each way), so growth is rare.
 const GROW_CELLS: usize = 256;
 
@@ -320,6 +324,36 @@ impl FuzzyGrid {
         }
     }
 
+    /// The map for navigation (`slam/map`, saved maps, map error): the share
+    /// of a cell's evidence that says "obstacle", Mo / (Mo + Ms), scaled
+    /// 0–100; unknown (-1) with less than [`MIN_EVIDENCE`] of either.
+    ///
+    /// Not eq. 7 thresholded: `Mo` is a reading's *confidence*, which the
+    /// URG-04LX fit lowers with range (0.5 at 2 m, 0.2 past 3.65 m), and a
+    /// fuzzy union keeps the best reading instead of accumulating them, so a
+    /// wall seen a hundred times from 3 m stays at 0.2 — at or under eq. 7's
+    /// "unknown" 0.3, and far under an occupancy threshold such as nav2's
+    /// 0.65. That is why saved fuzzy maps had faint walls. The ratio keeps
+    /// what the fuzzy map knows (obstacle evidence against free-space
+    /// evidence) without reading a confidence as a probability.
+    pub fn to_evidence_grid(&self) -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(
+            self.width,
+            self.height,
+            self.resolution,
+            [self.origin.0, self.origin.1, 0.0],
+        );
+        for (cell, (&mo, &ms)) in g.cells.iter_mut().zip(self.mo.iter().zip(&self.ms)) {
+            let sum = mo + ms;
+            *cell = if sum < MIN_EVIDENCE {
+                UNKNOWN
+            } else {
+                (mo / sum * 100.0).round().clamp(0.0, 100.0) as i8
+            };
+        }
+        g
+    }
+
     /// The combined map (eq. 7) as an occupancy grid, confidence scaled
     /// 0–100; cells no reading touched are unknown (-1).
     pub fn to_occupancy_grid(&self, unknown: f64) -> OccupancyGrid {
@@ -345,6 +379,27 @@ impl FuzzyGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_wall_seen_only_from_afar_is_occupied_in_the_evidence_map() {
+        let mut g = FuzzyGrid::square(0.05, 0.1);
+        // A wall cell seen from 4 m (peak confidence 0.2 × 0.75 off the
+        // parabola's centre), free space, a grazed wall cell, a barely touched one.
+        let cells = [(0.15f32, 0.0f32), (0.0, 0.9), (0.6, 0.2), (0.02, 0.0)];
+        for (i, (mo, ms)) in cells.into_iter().enumerate() {
+            (g.mo[i], g.ms[i]) = (mo, ms);
+        }
+        let eq7 = g.to_occupancy_grid(0.3);
+        let nav = g.to_evidence_grid();
+        // Eq. 7 puts the far wall at "unknown" (30), under any occupied threshold…
+        assert_eq!(eq7.cells[0], 30);
+        // …the evidence ratio keeps it an obstacle.
+        assert_eq!(nav.cells[0], 100);
+        assert_eq!(nav.cells[1], 0);
+        assert_eq!(nav.cells[2], 75);
+        assert_eq!(nav.cells[3], UNKNOWN);
+        assert_eq!(nav.cells[4], UNKNOWN);
+    }
     use crate::scan::Beam;
 
     fn scan(beams: &[(f32, f32, BeamKind)]) -> RangeScan {

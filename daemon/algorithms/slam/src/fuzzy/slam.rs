@@ -335,7 +335,14 @@ impl SlamBackend for FuzzySlam {
         self.revision
     }
 
+    /// Mo / (Mo + Ms): see [`FuzzyGrid::to_evidence_grid`] for why not eq. 7.
     fn map(&self) -> Option<OccupancyGrid> {
+        self.anchor
+            .is_some()
+            .then(|| self.global.to_evidence_grid())
+    }
+
+    fn confidence_map(&self) -> Option<OccupancyGrid> {
         self.anchor
             .is_some()
             .then(|| self.global.to_occupancy_grid(self.p.unknown_level))
