@@ -85,13 +85,25 @@ pub fn save_octree(
         "{} reports pid {pid}",
         topic.name()
     );
+    // SIGUSR1 terminates a process that does not handle it: only signal the
+    // pid if it really is smokenav-mapping (a stale or wrong health sample
+    // must not kill a stranger).
+    ensure_is_mapping_process(pid)?;
     let src = process_dir.join(OCTREE_FILE);
     let old = identity(&src);
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(pid as i32),
         nix::sys::signal::Signal::SIGUSR1,
     )
-    .with_context(|| format!("cannot signal smokenav-mapping (pid {pid}) to save its octree"))?;
+    .map_err(|e| {
+        let hint = if e == nix::errno::Errno::EPERM {
+            " (it runs as another user: run this as root, or ask systemd with \
+             `systemctl kill -s USR1 smokenav-mapping` and copy the octree yourself)"
+        } else {
+            ""
+        };
+        anyhow::anyhow!("cannot signal smokenav-mapping (pid {pid}) to save its octree: {e}{hint}")
+    })?;
     loop {
         let h = next("after asking it to save its octree")?;
         if h.pid != pid {
@@ -181,4 +193,38 @@ pub fn octree_dir(arg: Option<PathBuf>, profile: Option<&Path>) -> anyhow::Resul
         }
     }
     Ok(PathBuf::from(UNIT_OCTREE_DIR))
+}
+
+/// The kernel's name of a process (`/proc/PID/comm`, cut at 15 bytes).
+fn process_name(pid: u32) -> std::io::Result<String> {
+    Ok(std::fs::read_to_string(format!("/proc/{pid}/comm"))?
+        .trim_end()
+        .to_owned())
+}
+
+fn ensure_is_mapping_process(pid: u32) -> anyhow::Result<()> {
+    const NAME: &str = "smokenav-mapping";
+    let name = process_name(pid).with_context(|| {
+        format!("smokenav-mapping's health names pid {pid}, which is not running")
+    })?;
+    // comm holds at most 15 bytes of the executable's name.
+    ensure!(
+        !name.is_empty() && NAME.starts_with(&name),
+        "smokenav-mapping's health names pid {pid}, but that process is `{name}`: not signalling it"
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_mapping_process_is_signalled() {
+        // This test process is not smokenav-mapping: it must be refused, not killed.
+        let err = ensure_is_mapping_process(std::process::id()).unwrap_err();
+        assert!(err.to_string().contains("not signalling it"), "{err}");
+        let err = ensure_is_mapping_process(u32::MAX - 1).unwrap_err();
+        assert!(err.to_string().contains("not running"), "{err}");
+    }
 }
