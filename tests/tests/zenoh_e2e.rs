@@ -447,3 +447,62 @@ fn two_robots_over_zenoh_one_bridge_killed_shows_unreachable_within_2s() {
     b1.terminate(Duration::from_secs(10)).unwrap();
     let _ = b2.wait_exit(Duration::from_secs(5));
 }
+
+/// Every type the bridge publishes hashes as `rosbags` hashes it: the
+/// standard ones against its Jazzy type store, smokenav_msgs registered
+/// there from the same definitions the recordings carry.
+#[test]
+fn every_type_hash_is_the_one_rosbags_computes() {
+    use smokenav_nodes_zenoh::rihs;
+    use smokenav_platform_recording::schema;
+    // The catalog's types, and the Twist `cmd_vel` takes.
+    let all: Vec<&schema::MsgDef> = schema::ALL
+        .iter()
+        .copied()
+        .chain([&schema::TWIST])
+        .collect();
+    let defs: Vec<Value> = all
+        .iter()
+        .map(|d| {
+            serde_json::json!({
+                "name": d.name,
+                "text": d.schema_text(),
+                "ours": rihs::type_hash(d).unwrap(),
+            })
+        })
+        .collect();
+    let script = r#"
+import json, sys
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+store = get_typestore(Stores.ROS2_JAZZY)
+defs = json.load(sys.stdin)
+for d in defs:
+    if d["name"] not in store.types:
+        store.register(get_types_from_msg(d["text"], d["name"]))
+bad = [(d["name"], d["ours"], store.hash_rihs01(d["name"])) for d in defs if store.hash_rihs01(d["name"]) != d["ours"]]
+print(json.dumps({"checked": len(defs), "mismatches": bad}))
+"#;
+    let mut child = Command::new(python())
+        .args(["-c", script])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write;
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(serde_json::to_string(&defs).unwrap().as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["checked"].as_u64(), Some(all.len() as u64));
+    assert_eq!(v["mismatches"], serde_json::json!([]), "{v}");
+}
