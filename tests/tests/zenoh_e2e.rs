@@ -98,7 +98,7 @@ fn robot(instance: String, x: f64, stop: Arc<AtomicBool>) -> std::thread::JoinHa
         while !stop.load(Ordering::Relaxed) {
             let now = smokenav_shared_types::clock::monotonic_now_ns();
             scans.publish(&scan(now)).unwrap();
-            if i % 2 == 0 {
+            if i.is_multiple_of(2) {
                 poses
                     .publish(&PoseEstimate {
                         header: Header::new(now, 0, "map"),

@@ -44,7 +44,7 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    smokenav_platform_runtime::main(ROLE, &args.common, |p| run(p))
+    smokenav_platform_runtime::main(ROLE, &args.common, run)
 }
 
 #[derive(Default)]
