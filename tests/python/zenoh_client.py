@@ -71,7 +71,7 @@ def main():
 
     # rmw_zenoh's graph: every token of the domain, as a new node queries it.
     tokens = []
-    deadline = time.monotonic() + a.timeout
+    deadline = time.monotonic() + (a.timeout if a.scans > 0 else 0)
     while time.monotonic() < deadline:
         tokens = [str(r.ok.key_expr) for r in session.liveliness().get(f"@ros2_lv/{a.domain}/**") if r.ok]
         if any("/MP/" in t and "%laser%scan/" in t for t in tokens):

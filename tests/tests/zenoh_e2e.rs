@@ -10,6 +10,10 @@
 //!   there; `cmd_vel` from Python reaches `base/cmd_vel` (a stale sample
 //!   never does, and nothing is forwarded once Python stops); every
 //!   socket of the bridge is bound to loopback.
+//! - a remote controller killed: the Pioneer emulator, the real driver and
+//!   the bridge; the base is commanded to stop by the driver's own command
+//!   timeout, as when `smokenav drive` dies.
+//! - every type hash equals the one `rosbags` computes.
 //! - two robots (two bus instances, namespaces `/robot1`, `/robot2`):
 //!   `smokenav status --zenoh` shows both robots' health and pose; killing
 //!   robot 2's bridge shows it unreachable within 2 s while robot 1 goes on.
@@ -505,4 +509,68 @@ print(json.dumps({"checked": len(defs), "mismatches": bad}))
     let v: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["checked"].as_u64(), Some(all.len() as u64));
     assert_eq!(v["mismatches"], serde_json::json!([]), "{v}");
+}
+
+/// A remote controller on Zenoh that dies stops the robot exactly as a dead
+/// local one does (`pioneer_e2e`'s crashed-controller test, with the
+/// command arriving through `smokenav-zenoh` instead of `smokenav drive`):
+/// the Pioneer emulator on a PTY, the real driver, the bridge with
+/// `cmd_vel = true`, and a Python controller killed without a word.
+#[test]
+fn a_remote_controller_killed_stops_the_robot_through_the_drivers_timeout() {
+    use smokenav_pioneer_emulator::{Emulator, RobotConfig as EmuRobot};
+    let dir = tempfile::tempdir().unwrap();
+    let emu = Emulator::pty(&dir.path().join("pioneer"), EmuRobot::default()).unwrap();
+    let instance = unique_instance("zenoh_ctl");
+    let port = free_port();
+    let config = zenoh_profile(dir.path(), "robot", port, "", true);
+    let mut cfg = RobotConfig::load(&config).unwrap();
+    cfg.base.port = emu.port_arg();
+    cfg.base.cmd_timeout_s = 0.5;
+    std::fs::write(&config, cfg.to_toml()).unwrap();
+    let cpath = config.to_str().unwrap();
+    let driver = Child::spawn(&bin("smokenav-pioneer"), &["--config", cpath], &instance).unwrap();
+    let bus = open_bus(&instance);
+    smokenav_tests::wait_for(&bus, topics::BASE_ODOM, Duration::from_secs(15), |_| true)
+        .unwrap_or_else(|e| panic!("{e}\n{}", driver.output()));
+    let _b = bridge(&config, &instance);
+    let h = emu.handle();
+    let mut ctl = Command::new(python())
+        .arg(workspace_root().join("tests/python/zenoh_client.py"))
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .args(["--scans", "0", "--cmd-vel", "0.3,0,60"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let drove = h.wait_for(Duration::from_secs(20), |s| {
+        s.robot.commanded.trans == 300.0
+    });
+    if drove.is_none() {
+        let _ = ctl.kill();
+        panic!("never drove\n{}", driver.output());
+    }
+    std::thread::sleep(Duration::from_millis(800));
+    // The controller dies without a word (and without closing its session).
+    ctl.kill().unwrap();
+    let killed = Instant::now();
+    let st = h
+        .wait_for(Duration::from_secs(3), |s| s.robot.commanded.trans == 0.0)
+        .expect("the driver stops the robot");
+    let dt = killed.elapsed();
+    let _ = ctl.wait();
+    eprintln!("robot commanded to stop {dt:?} after the remote controller was killed");
+    // Last command ≤ 0.1 s before the kill; timeout 0.5 s; loops ≤ 25 ms each.
+    assert!(
+        dt <= Duration::from_millis(750),
+        "stopped {dt:?} after the crash"
+    );
+    assert!(
+        dt >= Duration::from_millis(300),
+        "stopped {dt:?}: too early for the timeout"
+    );
+    assert_eq!(
+        st.robot.counters.watchdog_trips, 0,
+        "the driver did it, not the firmware"
+    );
 }
