@@ -56,7 +56,7 @@ def main():
     ap.add_argument("--namespace", default="")
     ap.add_argument("--domain", type=int, default=0)
     ap.add_argument("--cmd-vel", default=None)
-    ap.add_argument("--timeout", type=float, default=30.0)
+    ap.add_argument("--timeout", type=float, default=60.0)
     a = ap.parse_args()
 
     conf = zenoh.Config()

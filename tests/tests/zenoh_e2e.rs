@@ -68,7 +68,8 @@ fn bridge(config: &std::path::Path, instance: &str) -> Child {
         instance,
     )
     .unwrap();
-    c.wait_for_line("on Zenoh as", Duration::from_secs(30))
+    // Generous: a loaded 2-core machine may take long to start a process.
+    c.wait_for_line("on Zenoh as", Duration::from_secs(60))
         .unwrap();
     c
 }
@@ -543,7 +544,7 @@ fn a_remote_controller_killed_stops_the_robot_through_the_drivers_timeout() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let drove = h.wait_for(Duration::from_secs(20), |s| {
+    let drove = h.wait_for(Duration::from_secs(60), |s| {
         s.robot.commanded.trans == 300.0
     });
     if drove.is_none() {
