@@ -21,6 +21,7 @@ pub mod slam_fuzzy;
 pub mod smoke;
 pub mod sonar;
 pub mod validate;
+pub mod zenoh;
 
 pub use base::{BaseSection, PioneerOptions, ScoutOptions, WheelOrder};
 pub use common::MountPose;
@@ -33,6 +34,7 @@ pub use slam_fuzzy::{FuzzyReference, FuzzySearch, FuzzySection};
 pub use smoke::{AdcBackend, SmokeSection};
 pub use sonar::{SonarSection, Transducer};
 pub use validate::{Issue, Validate, Validator, key_line};
+pub use zenoh::{ZenohMode, ZenohSection};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -72,6 +74,8 @@ pub struct RobotConfig {
     pub slam: SlamSection,
     #[serde(default)]
     pub mapping: MappingSection,
+    #[serde(default)]
+    pub zenoh: ZenohSection,
 }
 
 impl Validate for RobotConfig {
@@ -85,6 +89,7 @@ impl Validate for RobotConfig {
         self.fusion.validate("fusion", v);
         self.slam.validate("slam", v);
         self.mapping.validate("mapping", v);
+        self.zenoh.validate("zenoh", v);
         match self.robot.platform {
             Platform::Scout if self.base.scout.is_none() => v.fail(
                 "base.scout",

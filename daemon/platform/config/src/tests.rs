@@ -432,3 +432,42 @@ fn mapping_heights_and_save_folder_are_keys() {
     let msg = parse(&text).unwrap_err().to_string();
     assert!(msg.contains("mapping.map_dir"), "{msg}");
 }
+
+#[test]
+fn zenoh_defaults_are_loopback_without_multicast() {
+    let cfg = parse(&pioneer_text()).unwrap();
+    let z = &cfg.zenoh;
+    assert_eq!(z.mode, crate::ZenohMode::Peer);
+    assert!(!z.multicast_scouting);
+    assert!(!z.cmd_vel);
+    assert_eq!(z.listen, ["tcp/127.0.0.1:0"]);
+    assert_eq!(z.connect, ["tcp/127.0.0.1:7447"]);
+    let cfg = parse(&format!(
+        "{}\n[zenoh]\nmode = \"client\"\nconnect = [\"tcp/10.0.0.2:7447\"]\nnamespace = \"/robot1\"\ntopics = [\"laser/scan\", \"health/slam\"]\n",
+        pioneer_text()
+    ))
+    .unwrap();
+    assert_eq!(cfg.zenoh.mode, crate::ZenohMode::Client);
+    assert_eq!(cfg.zenoh.namespace, "/robot1");
+}
+
+#[test]
+fn zenoh_keys_are_strict_and_name_the_problem() {
+    let bad = |section: &str, key: &str| {
+        let text = format!("{}\n[zenoh]\n{section}\n", pioneer_text());
+        let msg = parse(&text).unwrap_err().to_string();
+        assert!(msg.contains(key), "{section}: {msg}");
+        msg
+    };
+    assert!(bad("multicast = true", "multicast").contains("unknown field"));
+    assert!(
+        bad("listen = [\"udp/127.0.0.1:7447\"]", "zenoh.listen").contains("only tcp/HOST:PORT")
+    );
+    bad("connect = [\"tcp/127.0.0.1\"]", "zenoh.connect");
+    bad("namespace = \"robot1\"", "zenoh.namespace");
+    bad("namespace = \"/1robot\"", "zenoh.namespace");
+    bad("domain_id = 300", "zenoh.domain_id");
+    assert!(bad("topics = [\"laser/scans\"]", "zenoh.topics").contains("laser/scans"));
+    bad("mode = \"client\"\nconnect = []", "zenoh.connect");
+    bad("mode = \"router\"", "zenoh.mode");
+}

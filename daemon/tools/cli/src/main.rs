@@ -8,6 +8,7 @@ mod access;
 mod arcos;
 mod drive;
 mod eval;
+mod fleet;
 mod fuse;
 mod graph;
 mod info;

@@ -14,16 +14,26 @@ use std::time::{Duration, Instant};
 pub struct StatusArgs {
     /// Print JSON (one object with a `processes` array) instead of a table.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
     /// Refresh every N seconds until Ctrl-C.
     #[arg(long, value_name = "SECONDS", num_args = 0..=1, default_missing_value = "1")]
-    watch: Option<f64>,
+    pub watch: Option<f64>,
     /// Roles to expect (default: from the profile's platform, else every role).
     #[arg(long, value_delimiter = ',')]
     roles: Vec<String>,
     /// A heartbeat older than this many seconds means the process is down.
     #[arg(long, default_value_t = 3.0)]
-    stale_after: f64,
+    pub stale_after: f64,
+    /// Watch robots over Zenoh instead of the local bus: a router's or a
+    /// robot bridge's endpoint (`tcp/HOST:PORT`; repeat for several).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh: Vec<String>,
+    /// The ROS domain id on Zenoh.
+    #[arg(long, default_value_t = 0, requires = "zenoh")]
+    pub domain: u32,
+    /// Robots (ROS namespaces) to expect over Zenoh: `/robot1,/robot2`.
+    #[arg(long, value_delimiter = ',', requires = "zenoh")]
+    pub robots: Vec<String>,
     #[command(flatten)]
     bus: BusArgs,
 }
@@ -227,6 +237,9 @@ fn fmt_num(v: f64) -> String {
 
 /// Exit status 0 when every expected process is up, 1 otherwise.
 pub fn run(args: StatusArgs) -> anyhow::Result<std::process::ExitCode> {
+    if !args.zenoh.is_empty() {
+        return crate::fleet::run(&args);
+    }
     let bus = args.bus.open("status")?;
     let roles = expected_roles(&args)?;
     let subs: Vec<(String, Subscriber<Health>)> = roles

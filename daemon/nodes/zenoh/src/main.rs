@@ -1,0 +1,228 @@
+//! `smokenav-zenoh`: the robot's topics on Zenoh, as rmw_zenoh publishes
+//! them (`<domain>/<namespace>/<topic>/<dds type>/<type hash>`, CDR, with
+//! its liveliness tokens and attachments), so `ros2 topic echo` on a machine
+//! running rmw_zenoh sees them, and `smokenav status --zenoh` shows several
+//! robots at once. With `[zenoh] cmd_vel = true` it also takes
+//! `<namespace>/cmd_vel` (geometry_msgs/Twist) onto `base/cmd_vel`.
+//! Health on `health/zenoh`.
+//!
+//! ```text
+//! smokenav-zenoh --config robot.toml
+//! ```
+
+use anyhow::Context;
+use clap::Parser;
+use smokenav_nodes_zenoh::bridge::{self, unix_now_ns};
+use smokenav_nodes_zenoh::{Bridge, command, keys, rihs};
+use smokenav_platform_bus::tap::{self, Tap};
+use smokenav_platform_bus::{Attachment, Bus, BusOptions, WaitOutcome, Waiter, topics};
+use smokenav_platform_config::RobotConfig;
+use smokenav_platform_recording::RobotGeometry;
+use smokenav_platform_recording::schema;
+use smokenav_platform_runtime::{CommonArgs, Process, Shutdown};
+use smokenav_shared_types::clock::monotonic_now_ns;
+use smokenav_shared_types::{Header, VelocityCommand};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+use zenoh::Wait;
+use zenoh::handlers::RingChannel;
+
+/// Its role: node name and health topic.
+const ROLE: &str = "zenoh";
+
+#[derive(Parser)]
+#[command(
+    version,
+    about = "smokenav's topics on Zenoh, as rmw_zenoh carries them"
+)]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    smokenav_platform_runtime::main(ROLE, &args.common, run)
+}
+
+#[derive(Default)]
+struct CmdCounters {
+    forwarded: AtomicU64,
+    stale: AtomicU64,
+    invalid: AtomicU64,
+}
+
+fn run(p: &mut Process) -> anyhow::Result<()> {
+    let zc = p.config.zenoh.clone();
+    let mut topics = if zc.topics.is_empty() {
+        tap::default_topics()
+    } else {
+        zc.topics.clone()
+    };
+    let own = format!("{}{ROLE}", topics::HEALTH_PREFIX);
+    if !topics.contains(&own) {
+        topics.push(own);
+    }
+    let mut bridge = Bridge::open(&zc, Some(RobotGeometry::from_config(&p.config)))?;
+    let taps: Vec<Box<dyn Tap>> = topics
+        .iter()
+        .map(|t| tap::open(&p.bus, t))
+        .collect::<Result<_, _>>()?;
+    bridge.static_transforms(monotonic_now_ns())?;
+
+    let counters = Arc::new(CmdCounters::default());
+    let _commands = if zc.cmd_vel {
+        Some(spawn_commands(
+            &p.config,
+            &bridge,
+            p.shutdown(),
+            counters.clone(),
+        )?)
+    } else {
+        None
+    };
+
+    let waiter = Waiter::new()?;
+    let _attached: Vec<Attachment> = taps
+        .iter()
+        .map(|t| t.attach(&waiter))
+        .collect::<Result<_, _>>()
+        .context("cannot wait on the bus")?;
+    let rate = p.health.add_rate("messages_hz", None);
+    p.ready(&format!(
+        "on Zenoh as {} (domain {}, namespace `{}`), {} topics{}",
+        bridge.zid(),
+        zc.domain_id,
+        zc.namespace,
+        taps.len(),
+        if zc.cmd_vel { ", cmd_vel in" } else { "" }
+    ));
+    while !p.shutdown_requested() {
+        if waiter.wait(Some(Duration::from_millis(200)))? == WaitOutcome::Shutdown {
+            break;
+        }
+        for t in &taps {
+            t.drain(&mut |topic, msg| {
+                bridge.push(topic, msg, monotonic_now_ns())?;
+                p.health.mark(rate);
+                Ok(())
+            })?;
+        }
+        let h = &mut p.health;
+        let s = bridge.stats;
+        h.set_metric("sent_total", s.sent as f64);
+        h.set_metric("bytes_total", s.bytes as f64);
+        h.set_metric("put_errors", s.put_errors as f64);
+        h.set_metric("publishers", s.publishers as f64);
+        h.set_metric(
+            "bus_lost",
+            taps.iter().map(|t| t.stats().lost).sum::<u64>() as f64,
+        );
+        h.set_metric(
+            "cmd_forwarded",
+            counters.forwarded.load(Ordering::Relaxed) as f64,
+        );
+        h.set_metric("cmd_stale", counters.stale.load(Ordering::Relaxed) as f64);
+        h.set_metric(
+            "cmd_invalid",
+            counters.invalid.load(Ordering::Relaxed) as f64,
+        );
+        p.tick()?;
+    }
+    Ok(())
+}
+
+/// The `cmd_vel` subscriber: its own thread and bus publisher (bus ports
+/// stay on the thread that made them), woken by Zenoh, keeping only the
+/// newest sample (a backlog of old commands is never replayed).
+fn spawn_commands(
+    cfg: &RobotConfig,
+    bridge: &Bridge,
+    stop: Shutdown,
+    counters: Arc<CmdCounters>,
+) -> anyhow::Result<std::thread::JoinHandle<()>> {
+    let zc = &cfg.zenoh;
+    let topic = keys::qualified(&zc.namespace, "/cmd_vel");
+    let dds = rihs::dds_type_name(schema::TWIST.name);
+    let hash = rihs::type_hash(&schema::TWIST)?;
+    let key = keys::topic_key(zc.domain_id, &topic, &dds, &hash);
+    let session = bridge.session().clone();
+    let sub = session
+        .declare_subscriber(key.clone())
+        .with(RingChannel::new(1))
+        .wait()
+        .map_err(|e| anyhow::anyhow!("cannot subscribe to `{key}`: {e}"))?;
+    let token = bridge::declare_token(
+        &session,
+        &keys::entity_token(
+            zc.domain_id,
+            bridge.zid(),
+            0x7fff_0000,
+            keys::EntityKind::Subscription,
+            &zc.namespace,
+            &topic,
+            &dds,
+            &hash,
+            keys::Qos {
+                transient_local: false,
+                depth: 1,
+            },
+        ),
+    )?;
+    let opts =
+        BusOptions::new(&cfg.robot.instance, "zenoh-cmd").with_root_path(cfg.bus.root_path.clone());
+    let timeout_ns = (cfg.base.cmd_timeout_s * 1e9) as i64;
+    tracing::info!(%key, "taking cmd_vel from Zenoh onto base/cmd_vel");
+    let bus = Bus::open(&opts).context("cannot join the bus for cmd_vel")?;
+    drop(bus); // checked here; the thread opens its own
+    Ok(std::thread::spawn(move || {
+        let _token = token;
+        let bus = match Bus::open(&opts) {
+            Ok(b) => b,
+            Err(e) => return tracing::error!("cmd_vel: cannot join the bus: {e}"),
+        };
+        let mut publisher = match bus.publisher(topics::BASE_CMD_VEL) {
+            Ok(p) => p,
+            Err(e) => return tracing::error!("cmd_vel: cannot publish base/cmd_vel: {e}"),
+        };
+        while !stop.requested() {
+            let sample = match sub.recv_timeout(Duration::from_millis(200)) {
+                Ok(Some(s)) => s,
+                Ok(None) => continue,
+                Err(e) => return tracing::error!("cmd_vel subscriber closed: {e}"),
+            };
+            let payload = sample.payload().to_bytes();
+            let attachment = sample.attachment().map(|a| a.to_bytes());
+            let checked = command::decode_twist(&payload).and_then(|t| {
+                command::check_age(attachment.as_deref(), unix_now_ns(), timeout_ns)?;
+                Ok(t)
+            });
+            match checked {
+                Ok(t) => {
+                    let cmd = VelocityCommand {
+                        header: Header::new(monotonic_now_ns(), 0, "base_link"),
+                        linear: t.linear,
+                        angular: t.angular,
+                    };
+                    match publisher.publish(&cmd) {
+                        Ok(_) => counters.forwarded.fetch_add(1, Ordering::Relaxed),
+                        Err(e) => {
+                            tracing::warn!("cmd_vel: {e}");
+                            counters.invalid.fetch_add(1, Ordering::Relaxed)
+                        }
+                    };
+                }
+                Err(e @ command::CommandError::Stale { .. }) => {
+                    tracing::debug!("cmd_vel dropped: {e}");
+                    counters.stale.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(e) => {
+                    tracing::debug!("cmd_vel dropped: {e}");
+                    counters.invalid.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }))
+}
