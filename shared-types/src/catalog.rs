@@ -182,13 +182,16 @@ macro_rules! for_each_message {
             map {
                 Map {
                     name: MapInfo,
-                    doc: "The occupancy grid: a `MapInfo` header and its cells. `slam/map` carries 0 (free), 100 (occupied) and -1 (unknown) only, as nav2's static layer expects; `slam/map_probability` the occupancy probability 0..100.",
+                    doc: "The occupancy grid: a `MapInfo` header and its cells. `slam/map` carries 0 (free), 100 (occupied) and -1 (unknown) only, as nav2's static layer expects; `slam/map_probability` the occupancy probability 0..100; with `[slam] backend = \"vote\"`, `slam/vote/<member>` each member's own map (its values as it exports them).",
                     info: $crate::slam::MapInfo,
                     cell: i8,
                     json: $crate::record::MapInfoRecord,
                     topics: [
                         SLAM_MAP = "slam/map",
                         SLAM_MAP_PROBABILITY = "slam/map_probability",
+                        SLAM_VOTE_RBPF = "slam/vote/rbpf",
+                        SLAM_VOTE_GRAPH = "slam/vote/graph",
+                        SLAM_VOTE_FUZZY = "slam/vote/fuzzy",
                         MAPPING_GRID = "mapping/grid",
                         MAPPING_PROJECTED = "mapping/projected"
                     ],

@@ -63,7 +63,7 @@ pub enum MemberHealth {
     In,
     /// Its thread panicked (message).
     Panicked(String),
-    /// Busy with one scan for this long (beyond the stall timeout), s.
+    /// Busy with one job for longer than the stall timeout (that timeout), s.
     Stalled(f64),
     /// Its alignment residual is above `max_residual_m`, m.
     Misaligned(f64),
@@ -82,7 +82,7 @@ impl std::fmt::Display for MemberHealth {
         match self {
             MemberHealth::In => write!(f, "in"),
             MemberHealth::Panicked(m) => write!(f, "out (panicked: {m})"),
-            MemberHealth::Stalled(s) => write!(f, "out (stalled {s:.1} s)"),
+            MemberHealth::Stalled(s) => write!(f, "out (stalled: one job over {s:.1} s)"),
             MemberHealth::Misaligned(r) => write!(f, "out (alignment residual {r:.3} m)"),
             MemberHealth::NoMap => write!(f, "no map yet"),
         }
@@ -404,6 +404,52 @@ impl Fuser {
     }
 }
 
+/// The alignment and vote alone, over maps given by the caller (benches,
+/// tools): what one fused update of [`VoteSlam`] does.
+pub struct MapVote {
+    fuser: Fuser,
+    sonar: SonarShare,
+}
+
+impl MapVote {
+    pub fn new(section: &VoteSection, members: usize) -> Self {
+        Self {
+            fuser: Fuser::new(
+                VoteParams {
+                    section: section.clone(),
+                    fault: None,
+                },
+                members,
+            ),
+            sonar: SonarShare::default(),
+        }
+    }
+
+    /// One fused update over `(map, revision)` per member, the first the
+    /// reference; a member whose revision changed is re-aligned.
+    pub fn update(&mut self, maps: &[(Arc<OccupancyGrid>, u64)]) -> Option<Arc<OccupancyGrid>> {
+        let inputs: Vec<FuseInput> = maps
+            .iter()
+            .map(|m| FuseInput {
+                map: Some(m.clone()),
+                out: false,
+                weight: 1.0,
+            })
+            .collect();
+        self.fuser.fuse(&inputs, &self.sonar, true);
+        self.fuser.out.map.clone()
+    }
+
+    pub fn alignments(&self) -> &[Option<Alignment>] {
+        &self.fuser.out.alignments
+    }
+
+    /// Time of the last update (alignment + vote), ms.
+    pub fn last_ms(&self) -> f64 {
+        self.fuser.out.fuse_ms
+    }
+}
+
 /// Everything the vote needs beyond the members' own `[slam]` keys.
 #[derive(Debug, Clone)]
 pub struct VoteParams {
@@ -553,7 +599,7 @@ impl VoteSlam {
         if let Some(d) = m.shared.busy_for()
             && d > self.stall_timeout()
         {
-            return MemberHealth::Stalled(d.as_secs_f64());
+            return MemberHealth::Stalled(self.p.section.stall_timeout_s);
         }
         if m.given_up() {
             return MemberHealth::Stalled(self.p.section.stall_timeout_s);
