@@ -182,7 +182,7 @@ macro_rules! for_each_message {
             map {
                 Map {
                     name: MapInfo,
-                    doc: "The occupancy grid: a `MapInfo` header and its cells. `slam/map` carries 0 (free), 100 (occupied) and -1 (unknown) only, as nav2's static layer expects; `slam/map_probability` the occupancy probability 0..100; `slam/map_fuzzy` (fuzzy back-end only) the combined fuzzy map's confidence 0..100 (30 = unknown).",
+                    doc: "The occupancy grid: a `MapInfo` header and its cells. `slam/map` carries 0 (free), 100 (occupied) and -1 (unknown) only, as nav2's static layer expects; `slam/map_probability` the occupancy probability 0..100; `slam/map_fuzzy` (fuzzy back-end only) the combined fuzzy map's confidence 0..100 (30 = unknown); with `[slam] backend = \"vote\"`, `slam/vote/<member>` each member's own map (its values as it exports them).",
                     info: $crate::slam::MapInfo,
                     cell: i8,
                     json: $crate::record::MapInfoRecord,
@@ -190,6 +190,9 @@ macro_rules! for_each_message {
                         SLAM_MAP = "slam/map",
                         SLAM_MAP_PROBABILITY = "slam/map_probability",
                         SLAM_MAP_FUZZY = "slam/map_fuzzy",
+                        SLAM_VOTE_RBPF = "slam/vote/rbpf",
+                        SLAM_VOTE_GRAPH = "slam/vote/graph",
+                        SLAM_VOTE_FUZZY = "slam/vote/fuzzy",
                         MAPPING_GRID = "mapping/grid",
                         MAPPING_PROJECTED = "mapping/projected"
                     ],

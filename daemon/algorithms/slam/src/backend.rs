@@ -16,6 +16,7 @@ use crate::fuzzy::FuzzySlam;
 use crate::graph::{GraphParams, GraphSlam};
 use crate::rbpf::{Rbpf, RbpfParams};
 use crate::scan::RangeScan;
+use crate::vote::VoteSlam;
 use nalgebra::Matrix3;
 use smokenav_platform_config::{SlamBackendKind, SlamSection};
 use smokenav_platform_map::OccupancyGrid;
@@ -112,5 +113,10 @@ pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Box<dyn SlamBacke
         )),
         SlamBackendKind::Graph => Box::new(GraphSlam::new(cfg, GraphParams::default())),
         SlamBackendKind::Fuzzy => Box::new(FuzzySlam::new(cfg, opts.keep_trajectory)),
+        // A thread that cannot be spawned is the machine's failure, not the
+        // input's (as `std::thread::spawn` itself treats it).
+        SlamBackendKind::Vote => Box::new(
+            VoteSlam::new(cfg, opts, None).expect("cannot start the vote's member threads"),
+        ),
     }
 }

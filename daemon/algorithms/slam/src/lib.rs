@@ -11,7 +11,8 @@
 //!
 //! Back-ends, one folder each: [`rbpf`], the Rao-Blackwellised particle filter
 //! of the GMapping class (Grisetti et al.); [`fuzzy`], fuzzy confidence maps
-//! registered by Cuckoo search (Hou et al. 2014).
+//! registered by Cuckoo search (Hou et al. 2014); [`vote`], a per-cell vote
+//! over the maps of several back-ends on their own threads (SLAMfusion).
 //!
 //! Shared pieces: [`grid`] (tiled copy-on-write occupancy grid), [`carmen`]
 //! (reader for CARMEN logs: `FLASER`, `ROBOTLASER1`, `ODOM`), [`offline`]
@@ -39,6 +40,7 @@ pub mod rbpf;
 pub mod scan;
 #[cfg(test)]
 mod testkit;
+pub mod vote;
 
 pub use backend::{BackendOptions, SlamBackend, SlamUpdate, StampedPose};
 pub use pipeline::SlamPipeline;

@@ -17,17 +17,27 @@
 //! the folder defaults to `$SMOKENAV_MAP_DIR`, else systemd's
 //! `$STATE_DIRECTORY/maps` (the unit's `StateDirectory=`), else `./maps`.
 //!
+//! With `[slam] backend = "vote"` the map on `slam/map` is the members'
+//! vote, each member's own map goes on `slam/vote/<member>` at the same
+//! rate, and health turns degraded naming any member that is out (panicked,
+//! stalled, or aligned with a residual above `[slam.vote] max_residual_m`).
+//! For tests only, `SMOKENAV_TEST_VOTE_FAULT=member:stall|panic:after_scans`
+//! makes one member hang or panic after that many scans.
+//!
 //! ```text
 //! smokenav-slam --config robot.toml [--input fused|laser] [--backend rbpf] [--map-dir DIR]
 //! ```
 
 use anyhow::Context;
 use clap::Parser;
+use smokenav_algorithms_slam::vote::VoteSlam;
+use smokenav_algorithms_slam::vote::member::MemberFault;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
 use smokenav_platform_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
 use smokenav_platform_config::{SlamBackendKind, SlamInput};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_runtime::{CommonArgs, Process};
+use smokenav_shared_types::HealthState;
 use smokenav_shared_types::{
     Clock, FusedScan, Header, LaserScan, MapInfo, MonotonicClock, Odometry, PoseEstimate,
 };
@@ -217,8 +227,39 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         Scans::Laser(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],
     };
 
-    let mut pipeline =
-        SlamPipeline::from_config(&cfg, BackendOptions::default()).with_sensor_pose(mount);
+    let mut pipeline = if cfg.backend == SlamBackendKind::Vote {
+        // Online the members run free: a slow one drops scans, none waits for another.
+        cfg.vote.lockstep = false;
+        let fault = match std::env::var("SMOKENAV_TEST_VOTE_FAULT") {
+            Ok(v) if !v.is_empty() => Some(
+                v.parse::<MemberFault>()
+                    .map_err(|e| anyhow::anyhow!("SMOKENAV_TEST_VOTE_FAULT: {e}"))?,
+            ),
+            _ => None,
+        };
+        if let Some(f) = fault {
+            tracing::warn!("test fault injected: {f:?}");
+        }
+        let vote = VoteSlam::new(&cfg, BackendOptions::default(), fault)
+            .context("cannot start the vote's member threads")?;
+        SlamPipeline::new(&cfg, Box::new(vote))
+    } else {
+        SlamPipeline::from_config(&cfg, BackendOptions::default())
+    }
+    .with_sensor_pose(mount);
+    let mut member_maps = Vec::new();
+    if cfg.backend == SlamBackendKind::Vote {
+        for m in &cfg.vote.members {
+            let topic = match m {
+                SlamBackendKind::Rbpf => topics::SLAM_VOTE_RBPF,
+                SlamBackendKind::Graph => topics::SLAM_VOTE_GRAPH,
+                SlamBackendKind::Fuzzy => topics::SLAM_VOTE_FUZZY,
+                SlamBackendKind::Vote => continue,
+            };
+            member_maps.push((m.as_str(), p.bus.map_publisher(topic)?));
+        }
+    }
+    let mut vote_flagged = false;
     let mut last_update: Option<SlamUpdate> = None;
     let mut map: Option<OccupancyGrid> = None;
     let mut last_map_revision = None;
@@ -322,12 +363,67 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             }
             if now >= next_map {
                 next_map = now + map_period;
+                publish_members(p, &pipeline, &mut member_maps, &mut counters);
             }
+        }
+        if let Some(vote) = pipeline.backend().as_any().downcast_ref::<VoteSlam>() {
+            vote_flagged = flag_members(p, vote, vote_flagged);
         }
         report(p, &pipeline, &counters, &scans);
         p.tick()?;
     }
     Ok(())
+}
+
+/// Each member's last exported map on its own topic.
+fn publish_members(
+    p: &mut Process,
+    pipeline: &SlamPipeline,
+    publishers: &mut [(&'static str, smokenav_platform_bus::MapPublisher)],
+    counters: &mut Counters,
+) {
+    let Some(vote) = pipeline.backend().as_any().downcast_ref::<VoteSlam>() else {
+        return;
+    };
+    let stamp = pipeline.last_update().map(|u| u.stamp_ns).unwrap_or(0);
+    for m in vote.status().members {
+        let Some((grid, _)) = &m.map else { continue };
+        let Some((_, publisher)) = publishers.iter_mut().find(|(n, _)| *n == m.name) else {
+            continue;
+        };
+        if let Err(e) = publisher.publish(&map_info(grid, stamp), &grid.cells) {
+            counters.publish_errors += 1;
+            p.health
+                .error(&format!("cannot publish slam/vote/{}: {e}", m.name));
+        }
+    }
+}
+
+/// Degraded, naming them, while members are out; back to Ok when all are in.
+fn flag_members(p: &mut Process, vote: &VoteSlam, flagged: bool) -> bool {
+    let st = vote.status();
+    let out: Vec<String> = st
+        .members
+        .iter()
+        .filter(|m| m.health.is_out())
+        .map(|m| format!("{} {}", m.name, m.health))
+        .collect();
+    if !out.is_empty() {
+        p.health
+            .error(&format!("vote: member {}", out.join("; member ")));
+        if p.health.state() == HealthState::Ok {
+            p.health.set_state(HealthState::Degraded);
+        }
+        true
+    } else {
+        if flagged {
+            p.health.clear_error();
+            if p.health.state() == HealthState::Degraded {
+                p.health.set_state(HealthState::Ok);
+            }
+        }
+        false
+    }
 }
 
 fn report(p: &mut Process, pipeline: &SlamPipeline, c: &Counters, scans: &Scans) {

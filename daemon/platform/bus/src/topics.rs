@@ -235,6 +235,9 @@ pub fn qos(topic: &str) -> Qos {
         t if t == SLAM_MAP.name()
             || t == SLAM_MAP_PROBABILITY.name()
             || t == SLAM_MAP_FUZZY.name()
+            || t == SLAM_VOTE_RBPF.name()
+            || t == SLAM_VOTE_GRAPH.name()
+            || t == SLAM_VOTE_FUZZY.name()
             || t == MAPPING_GRID.name()
             || t == MAPPING_PROJECTED.name() =>
         {

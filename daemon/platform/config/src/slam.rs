@@ -30,6 +30,7 @@
 //! scans into the maps every 0.5 m or 0.5 rad instead of every scan.
 
 use crate::slam_fuzzy::FuzzySection;
+use crate::slam_vote::VoteSection;
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
 
@@ -61,8 +62,8 @@ pub enum SlamInput {
 
 /// The SLAM algorithm behind the pipeline (`[slam] backend`, and `--backend`
 /// of `smokenav-slam` and `smokenav slam` with the `clap` feature): the
-/// particle filter, the pose graph with loop closure or the fuzzy-map
-/// registration; `vote` (a vote over several back-ends) is the next one.
+/// particle filter, the pose graph with loop closure, the fuzzy-map
+/// registration, or a vote over several of them (`[slam.vote]`).
 /// Unknown names are rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
@@ -77,6 +78,9 @@ pub enum SlamBackendKind {
     /// Fuzzy confidence maps registered scan to scan (`[slam.fuzzy]`).
     #[serde(rename = "fuzzy")]
     Fuzzy,
+    /// A per-cell vote over the maps of several back-ends (`[slam.vote]`).
+    #[serde(rename = "vote")]
+    Vote,
 }
 
 impl SlamBackendKind {
@@ -85,6 +89,7 @@ impl SlamBackendKind {
             SlamBackendKind::Rbpf => "rbpf",
             SlamBackendKind::Graph => "graph",
             SlamBackendKind::Fuzzy => "fuzzy",
+            SlamBackendKind::Vote => "vote",
         }
     }
 }
@@ -141,7 +146,7 @@ slam_section! {
     map_rate_hz: f64 = (1.0, 1.0),
     /// Scan topic the SLAM process consumes.
     input: SlamInput = (SlamInput::Fused, SlamInput::Fused),
-    /// The SLAM algorithm (`rbpf`, `graph` or `fuzzy`).
+    /// The SLAM algorithm (`rbpf`, `graph`, `fuzzy` or `vote`).
     backend: SlamBackendKind = (SlamBackendKind::Rbpf, SlamBackendKind::Rbpf),
     /// Seed of the filter's random numbers: the same input and seed give the same output.
     seed: u64 = (42, 42),
@@ -241,6 +246,8 @@ slam_section! {
     frontend_window_rad: f64 = (0.4, 0.4),
     /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
     fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),
+    /// `[slam.vote]`: the members of `backend = "vote"`, the rule and the alignment.
+    vote: VoteSection = (VoteSection::default(), VoteSection::default()),
 }
 
 impl Default for SlamSection {
@@ -348,6 +355,7 @@ impl Validate for SlamSection {
             1.6,
         );
         self.fuzzy.validate(&k("fuzzy"), v);
+        self.vote.validate(&k("vote"), v);
     }
 }
 
@@ -445,6 +453,50 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("backend") && err.contains("karto"), "{err}");
+    }
+
+    #[test]
+    fn vote_keys_are_strict_and_validated() {
+        let s = section(
+            "backend = \"vote\"\n[vote]\nmembers = [\"graph\", \"rbpf\"]\nrule = \"weighted\"\n",
+        );
+        assert_eq!(s.backend, SlamBackendKind::Vote);
+        assert_eq!(
+            s.vote.members,
+            [SlamBackendKind::Graph, SlamBackendKind::Rbpf]
+        );
+        assert_eq!(s.vote.rule, crate::slam_vote::VoteRule::Weighted);
+        assert_eq!(s.vote.max_residual_m, 0.15, "unset keys keep their default");
+        let err = parse_toml::<SlamSection>("[vote]\nmax_residual = 0.2\n", Path::new("slam.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("max_residual"), "{err}");
+        let err =
+            parse_toml::<SlamSection>("[vote]\nmembers = [\"karto\"]\n", Path::new("slam.toml"))
+                .unwrap_err()
+                .to_string();
+        assert!(err.contains("karto"), "{err}");
+        let bad = section("[vote]\nmembers = [\"vote\", \"rbpf\", \"rbpf\"]\nqueue = 0\n");
+        let mut v = Validator::default();
+        bad.validate("slam", &mut v);
+        let msgs: Vec<String> = v.issues.iter().map(|i| i.to_string()).collect();
+        assert!(
+            msgs.iter()
+                .any(|m| m.contains("slam.vote.members") && m.contains("itself")),
+            "{msgs:?}"
+        );
+        assert!(
+            msgs.iter().any(|m| m.contains("rbpf is named twice")),
+            "{msgs:?}"
+        );
+        assert!(
+            msgs.iter().any(|m| m.contains("slam.vote.queue")),
+            "{msgs:?}"
+        );
+        let one = section("[vote]\nmembers = [\"rbpf\"]\n");
+        let mut v = Validator::default();
+        one.validate("slam", &mut v);
+        assert!(!v.issues.is_empty(), "one member is no vote");
     }
 
     #[test]

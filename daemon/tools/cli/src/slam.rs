@@ -8,9 +8,14 @@ use smokenav_algorithms_eval::{
     load_trajectory,
 };
 use smokenav_algorithms_slam::graph::{GraphSlam, g2o};
+use smokenav_algorithms_slam::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use smokenav_algorithms_slam::offline::LogScans;
+use smokenav_algorithms_slam::scan::{EndpointLimits, RangeScan};
+use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, StampedPose};
 use smokenav_platform_config::{RobotConfig, SlamBackendKind, SlamSection, parse_toml};
+use smokenav_platform_map::OccupancyGrid;
+use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::{BufReader, IsTerminal};
 use std::path::{Path, PathBuf};
@@ -53,6 +58,11 @@ pub struct SlamArgs {
     /// Write the pose graph (2D g2o) here at the end (graph back-end only).
     #[arg(long, value_name = "FILE.g2o")]
     save_graph: Option<PathBuf>,
+    /// Ground-truth map (map_server YAML) to score the map with (with
+    /// `--backend vote`: the vote's and every member's). Without it but with
+    /// `--reference`, the log's scans drawn at the reference poses are the truth.
+    #[arg(long, value_name = "GT.yaml")]
+    truth_map: Option<PathBuf>,
 }
 
 /// `--format` of the trajectory writers.
@@ -126,6 +136,8 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     if let Some(b) = args.backend {
         cfg.backend = b;
     }
+    // Offline the vote waits for every member at every scan: nothing dropped, reproducible.
+    cfg.vote.lockstep = true;
     let mut v = smokenav_platform_config::Validator::default();
     smokenav_platform_config::Validate::validate(&cfg, "slam", &mut v);
     if let Some(issue) = v.issues.first() {
@@ -183,6 +195,17 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         },
     );
     let mut online: Vec<StampedPose> = Vec::new();
+    let truth_map = match &args.truth_map {
+        Some(p) => Some(
+            smokenav_platform_map::load_map_server(p)
+                .with_context(|| format!("bad ground-truth map {}", p.display()))?,
+        ),
+        None => None,
+    };
+    let mut reference_map = reference
+        .as_ref()
+        .filter(|_| truth_map.is_none())
+        .map(|r| ReferenceMap::new(r, &cfg));
     let mut cpu_per_scan: Vec<u64> = Vec::new();
     let mut wall_per_scan: Vec<u64> = Vec::new();
     let mut processed = 0usize;
@@ -191,6 +214,9 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID),
             Instant::now(),
         );
+        if let Some(rm) = &mut reference_map {
+            rm.add(scan);
+        }
         let update = slam.process(scan, &odom);
         let wall = w0.elapsed().as_nanos() as u64;
         let cpu = cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).saturating_sub(c0);
@@ -345,11 +371,141 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             }
         }
     }
+    let truth = truth_map.or_else(|| reference_map.map(|r| r.grid.to_occupancy_grid()));
+    if let Some(vote) = slam.backend().as_any().downcast_ref::<VoteSlam>() {
+        vote_report(
+            vote,
+            truth.as_ref(),
+            slam.map().as_ref(),
+            &args.out,
+            &mut report,
+        )?;
+    } else if let (Some(t), Some(m)) = (&truth, slam.map()) {
+        let _ = writeln!(report, "map error          {}", map_error(t, &m));
+    }
     for e in &scans.errors {
         let _ = writeln!(report, "bad line           {e}");
     }
     write(&args.out.join("stats.txt"), &report)?;
     print!("{report}");
+    Ok(())
+}
+
+/// The log's scans drawn at the reference poses (where the reference has a
+/// pose at the scan's stamp): the map a reference trajectory implies, the
+/// truth a map is scored against when the log has no ground-truth map.
+struct ReferenceMap {
+    poses: HashMap<u64, smokenav_shared_types::Pose2>,
+    limits: EndpointLimits,
+    model: LogOddsModel,
+    grid: TiledGrid,
+    ends: Vec<BeamEnd>,
+    endpoints: Vec<smokenav_algorithms_slam::scan::Endpoint>,
+}
+
+impl ReferenceMap {
+    fn new(reference: &[smokenav_algorithms_eval::StampedPose], cfg: &SlamSection) -> Self {
+        Self {
+            poses: reference
+                .iter()
+                .map(|p| {
+                    (
+                        (p.t * 1e6).round() as u64,
+                        smokenav_shared_types::Pose2::new(p.x, p.y, p.theta),
+                    )
+                })
+                .collect(),
+            limits: EndpointLimits::from_config(cfg),
+            model: LogOddsModel::new(cfg.hit_logodds, cfg.miss_logodds, cfg.max_logodds),
+            grid: TiledGrid::new(cfg.resolution_m),
+            ends: Vec::new(),
+            endpoints: Vec::new(),
+        }
+    }
+
+    fn add(&mut self, scan: &RangeScan) {
+        // Stamps are matched to the microsecond (the reference file's precision).
+        let key = (scan.stamp_ns as f64 / 1e3).round() as u64;
+        let Some(pose) = self.poses.get(&key) else {
+            return;
+        };
+        scan.endpoints(&self.limits, &mut self.endpoints);
+        let (s, c) = pose.theta.sin_cos();
+        self.ends.clear();
+        self.ends.extend(self.endpoints.iter().map(|e| BeamEnd {
+            ex: pose.x + c * e.x - s * e.y,
+            ey: pose.y + s * e.x + c * e.y,
+            hit: e.range <= self.limits.max_urange,
+        }));
+        let sensor = pose.compose(&scan.sensor_pose);
+        self.grid.integrate(&sensor, &self.ends, &self.model);
+    }
+}
+
+fn map_error(truth: &OccupancyGrid, map: &OccupancyGrid) -> String {
+    match smokenav_algorithms_eval::evaluate_maps(
+        truth,
+        map,
+        &smokenav_algorithms_eval::MapOptions::default(),
+    ) {
+        Ok(r) => format!("k-NN {:.3} m, pixel RMS {:.3}", r.knn_error_m, r.pixel_rms),
+        Err(e) => format!("not comparable: {e}"),
+    }
+}
+
+/// The members beside the vote: health, drops, alignment, agreement, each
+/// member's map (saved as `map_<member>`) and, given a truth, every map's error.
+fn vote_report(
+    vote: &VoteSlam,
+    truth: Option<&OccupancyGrid>,
+    fused: Option<&OccupancyGrid>,
+    out: &Path,
+    report: &mut String,
+) -> anyhow::Result<()> {
+    let st = vote.status();
+    let _ = writeln!(
+        report,
+        "vote               {} rule, {} fused updates, last {:.1} ms; pose from {}",
+        vote.params().section.rule.as_str(),
+        st.fuses,
+        st.last_fuse_ms,
+        st.pose_member.unwrap_or("-")
+    );
+    for m in &st.members {
+        let a = m
+            .alignment
+            .map(|a| {
+                format!(
+                    "aligned ({:+.3}, {:+.3}) m {:+.2}°, residual {:.3} m",
+                    a.transform.x,
+                    a.transform.y,
+                    a.transform.theta.to_degrees(),
+                    a.residual_m
+                )
+            })
+            .unwrap_or_else(|| "not aligned".into());
+        let mut line = format!(
+            "  member {:<6}    {}, {} dropped, {a}, agreement {}",
+            m.name,
+            m.health,
+            m.drops,
+            m.agreement
+                .map(|g| format!("{:.1} %", 100.0 * g))
+                .unwrap_or_else(|| "-".into())
+        );
+        if let Some((map, _)) = &m.map {
+            let name = format!("map_{}", m.name);
+            smokenav_platform_map::save_map_server(map, out, &name)?;
+            if let Some(t) = truth {
+                let _ = write!(line, "; map error {}", map_error(t, map));
+            }
+        }
+        let _ = writeln!(report, "{line}");
+    }
+    if let (Some(t), Some(f)) = (truth, fused) {
+        let _ = writeln!(report, "  vote map error    {}", map_error(t, f));
+        smokenav_platform_map::save_map_server(t, out, "truth")?;
+    }
     Ok(())
 }
 

@@ -1,0 +1,331 @@
+//! Aligning a member's map to the reference member's (SLAMfusion, Sec. III-B:
+//! "the best match (translation and rotation)", found on the GPU by a coarse
+//! search with a jumping step, then a narrower one with a smaller step).
+//!
+//! Here on a CPU and around the shared odometry frame: every member starts at
+//! the same pose and is fed the same corrected odometry, so their maps differ
+//! by a small rigid motion (drift, a loop closure one made and another did
+//! not). The search is over (x, y, θ) of the member → reference transform,
+//! scored by the mean squared distance (truncated) of the member's wall cells
+//! to the reference's walls, read from a distance field of the reference.
+//! Coarse to fine: a 9 × 9 × 9 grid over the window, then ±1 step around the
+//! best while halving the steps until they are below a quarter cell. The
+//! residual is the root of the best score (m): how far, on average, the
+//! member's walls lie from the reference's after the alignment.
+
+use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Pose2;
+
+/// Cells at or above this occupancy are walls (map_server's 0.65).
+pub const WALL: i8 = 65;
+
+/// Distance (m, truncated) of every cell of a grid to its nearest wall cell.
+#[derive(Debug, Clone, Default)]
+pub struct DistanceField {
+    origin: (f64, f64),
+    resolution: f64,
+    width: usize,
+    height: usize,
+    truncation: f32,
+    /// Squared distance, m², row-major.
+    d2: Vec<f32>,
+}
+
+impl DistanceField {
+    /// The field of `grid`'s wall cells, truncated at `truncation_m`.
+    pub fn new(grid: &OccupancyGrid, truncation_m: f64) -> Self {
+        let mut f = Self::default();
+        f.rebuild(grid, truncation_m);
+        f
+    }
+
+    /// Recomputes the field for `grid`, reusing the buffer.
+    pub fn rebuild(&mut self, grid: &OccupancyGrid, truncation_m: f64) {
+        let (w, h) = (grid.width, grid.height);
+        self.origin = (grid.origin[0], grid.origin[1]);
+        self.resolution = grid.resolution;
+        self.width = w;
+        self.height = h;
+        self.truncation = truncation_m as f32;
+        // Two-pass chamfer (1, √2) in cells; ample for a truncated score.
+        let big = f32::MAX / 4.0;
+        let mut d: Vec<f32> = grid
+            .cells
+            .iter()
+            .map(|&c| if c >= WALL { 0.0 } else { big })
+            .collect();
+        let diag = std::f32::consts::SQRT_2;
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let mut v = d[i];
+                if x > 0 {
+                    v = v.min(d[i - 1] + 1.0);
+                }
+                if y > 0 {
+                    v = v.min(d[i - w] + 1.0);
+                    if x > 0 {
+                        v = v.min(d[i - w - 1] + diag);
+                    }
+                    if x + 1 < w {
+                        v = v.min(d[i - w + 1] + diag);
+                    }
+                }
+                d[i] = v;
+            }
+        }
+        for y in (0..h).rev() {
+            for x in (0..w).rev() {
+                let i = y * w + x;
+                let mut v = d[i];
+                if x + 1 < w {
+                    v = v.min(d[i + 1] + 1.0);
+                }
+                if y + 1 < h {
+                    v = v.min(d[i + w] + 1.0);
+                    if x + 1 < w {
+                        v = v.min(d[i + w + 1] + diag);
+                    }
+                    if x > 0 {
+                        v = v.min(d[i + w - 1] + diag);
+                    }
+                }
+                d[i] = v;
+            }
+        }
+        let res = grid.resolution as f32;
+        let t = self.truncation;
+        self.d2.clear();
+        self.d2.extend(d.iter().map(|&c| (c * res).min(t).powi(2)));
+    }
+
+    /// Squared distance (m², truncated) at a point of the reference frame.
+    #[inline]
+    pub fn d2_at(&self, x: f64, y: f64) -> f32 {
+        let cx = ((x - self.origin.0) / self.resolution).floor();
+        let cy = ((y - self.origin.1) / self.resolution).floor();
+        if cx < 0.0 || cy < 0.0 || cx >= self.width as f64 || cy >= self.height as f64 {
+            return self.truncation * self.truncation;
+        }
+        self.d2[cy as usize * self.width + cx as usize]
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.resolution
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.d2.is_empty()
+    }
+}
+
+/// Centres of `grid`'s wall cells, evenly thinned to at most `max_points`.
+pub fn wall_points(grid: &OccupancyGrid, max_points: usize, out: &mut Vec<(f64, f64)>) {
+    out.clear();
+    let walls = grid.cells.iter().filter(|&&c| c >= WALL).count();
+    let stride = walls.div_ceil(max_points.max(1)).max(1);
+    let mut n = 0usize;
+    for y in 0..grid.height {
+        for x in 0..grid.width {
+            if grid.cells[y * grid.width + x] >= WALL {
+                if n.is_multiple_of(stride) {
+                    out.push(grid.cell_center(x, y));
+                }
+                n += 1;
+            }
+        }
+    }
+}
+
+/// A member → reference transform and how well it fits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Alignment {
+    /// Takes member-map coordinates into reference-map coordinates.
+    pub transform: Pose2,
+    /// RMS distance of the member's walls to the reference's walls (truncated), m.
+    pub residual_m: f64,
+    /// Wall points matched.
+    pub points: usize,
+    /// Candidate transforms scored.
+    pub evaluations: u32,
+}
+
+/// Where and how wide to search.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchWindow {
+    pub center: Pose2,
+    /// ± m.
+    pub window_m: f64,
+    /// ± rad.
+    pub window_rad: f64,
+}
+
+fn score(field: &DistanceField, points: &[(f64, f64)], t: &Pose2) -> f64 {
+    let (s, c) = t.theta.sin_cos();
+    let mut sum = 0.0f64;
+    for &(x, y) in points {
+        sum += f64::from(field.d2_at(c * x - s * y + t.x, s * x + c * y + t.y));
+    }
+    sum / points.len().max(1) as f64
+}
+
+/// Coarse-to-fine search for the transform taking `points` (member walls)
+/// onto `field` (reference walls) within `win`. Ties keep the candidate met
+/// first, which is the centre: a map that already fits is not moved.
+pub fn align(field: &DistanceField, points: &[(f64, f64)], win: &SearchWindow) -> Alignment {
+    const HALF: i32 = 4;
+    let mut best = win.center;
+    let mut best_score = score(field, points, &best);
+    let mut evaluations = 1u32;
+    let res = field.resolution().max(1e-3);
+    let mut step_t = (win.window_m / f64::from(HALF)).max(0.0);
+    let mut step_r = (win.window_rad / f64::from(HALF)).max(0.0);
+    let mut half = HALF;
+    loop {
+        let center = best;
+        for i in -half..=half {
+            for j in -half..=half {
+                for k in -half..=half {
+                    if i == 0 && j == 0 && k == 0 {
+                        continue;
+                    }
+                    let cand = Pose2::new(
+                        center.x + f64::from(i) * step_t,
+                        center.y + f64::from(j) * step_t,
+                        center.theta + f64::from(k) * step_r,
+                    );
+                    let s = score(field, points, &cand);
+                    evaluations += 1;
+                    if s < best_score {
+                        best_score = s;
+                        best = cand;
+                    }
+                }
+            }
+        }
+        // A quarter cell in translation, and the rotation that moves a wall
+        // 10 m away by as much: finer says nothing on this grid.
+        if step_t < res / 4.0 && step_r < res / 40.0 {
+            break;
+        }
+        step_t /= 2.0;
+        step_r /= 2.0;
+        half = 1;
+        if step_t == 0.0 && step_r == 0.0 {
+            break;
+        }
+    }
+    Alignment {
+        transform: Pose2::new(
+            best.x,
+            best.y,
+            smokenav_shared_types::normalize_angle(best.theta),
+        ),
+        residual_m: best_score.sqrt(),
+        points: points.len(),
+        evaluations,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An L-shaped room with an inner pillar: no symmetry a search could confuse.
+    fn room(shift: Pose2) -> OccupancyGrid {
+        let res = 0.05;
+        let mut g = OccupancyGrid::new(200, 200, res, [-5.0, -5.0, 0.0]);
+        let mut wall = |x0: f64, y0: f64, x1: f64, y1: f64| {
+            let n = (((x1 - x0).hypot(y1 - y0)) / (res / 2.0)).ceil() as usize;
+            for i in 0..=n {
+                let t = i as f64 / n as f64;
+                let (x, y) = (x0 + t * (x1 - x0), y0 + t * (y1 - y0));
+                let (s, c) = shift.theta.sin_cos();
+                let (wx, wy) = (c * x - s * y + shift.x, s * x + c * y + shift.y);
+                if let Some((cx, cy)) = g.world_to_cell(wx, wy) {
+                    g.set(cx, cy, 100);
+                }
+            }
+        };
+        wall(-3.0, -3.0, 3.0, -3.0);
+        wall(3.0, -3.0, 3.0, 1.0);
+        wall(3.0, 1.0, 0.5, 1.0);
+        wall(0.5, 1.0, 0.5, 3.0);
+        wall(0.5, 3.0, -3.0, 3.0);
+        wall(-3.0, 3.0, -3.0, -3.0);
+        wall(-1.2, -1.0, -0.6, -1.0);
+        wall(-0.6, -1.0, -0.6, -0.2);
+        g
+    }
+
+    #[test]
+    fn recovers_a_known_shift_and_rotation() {
+        let reference = room(Pose2::default());
+        // The member's map is the room moved by (0.23, −0.17) m and 0.06 rad:
+        // the alignment must bring it back, i.e. find the inverse motion.
+        let motion = Pose2::new(0.23, -0.17, 0.06);
+        let member = room(motion);
+        let field = DistanceField::new(&reference, 0.5);
+        let mut pts = Vec::new();
+        wall_points(&member, 3000, &mut pts);
+        let a = align(
+            &field,
+            &pts,
+            &SearchWindow {
+                center: Pose2::default(),
+                window_m: 0.5,
+                window_rad: 0.1,
+            },
+        );
+        let expect = motion.inverse();
+        assert!(
+            (a.transform.x - expect.x).abs() < 0.03
+                && (a.transform.y - expect.y).abs() < 0.03
+                && (a.transform.theta - expect.theta).abs() < 0.01,
+            "found {:?}, expected {expect:?}",
+            a.transform
+        );
+        assert!(a.residual_m < 0.04, "residual {}", a.residual_m);
+        // Unaligned, the same walls lie far off.
+        let before = score(&field, &pts, &Pose2::default()).sqrt();
+        assert!(
+            before > 3.0 * a.residual_m,
+            "before {before}, after {}",
+            a.residual_m
+        );
+    }
+
+    #[test]
+    fn an_aligned_map_stays_put() {
+        let reference = room(Pose2::default());
+        let field = DistanceField::new(&reference, 0.5);
+        let mut pts = Vec::new();
+        wall_points(&reference, 3000, &mut pts);
+        let a = align(
+            &field,
+            &pts,
+            &SearchWindow {
+                center: Pose2::default(),
+                window_m: 0.5,
+                window_rad: 0.1,
+            },
+        );
+        assert_eq!(a.transform, Pose2::default());
+        assert_eq!(a.residual_m, 0.0);
+    }
+
+    #[test]
+    fn distance_field_is_truncated_and_zero_on_walls() {
+        let g = room(Pose2::default());
+        let f = DistanceField::new(&g, 0.3);
+        assert_eq!(f.d2_at(-3.0, 0.0), 0.0);
+        assert!(
+            (f.d2_at(-2.0, 0.0) - 0.09).abs() < 1e-6,
+            "{}",
+            f.d2_at(-2.0, 0.0)
+        );
+        assert!((f.d2_at(-2.85, 0.0).sqrt() - 0.15).abs() < 0.051);
+        // Outside the grid: the truncation.
+        assert!((f.d2_at(50.0, 0.0) - 0.09).abs() < 1e-6);
+    }
+}

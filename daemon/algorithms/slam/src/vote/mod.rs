@@ -1,0 +1,956 @@
+//! SLAM fusion by voting (SLAMfusion, Fernandes & Alexandre): several
+//! back-ends map from the same scans and odometry, their maps are aligned to
+//! one of them and every cell is set by a vote (`[slam] backend = "vote"`,
+//! `[slam.vote]`).
+//!
+//! The paper ran GMapping, Karto and RTAB-Map as separate ROS nodes and fused
+//! their maps offline on a GPU (25 s per batch). On one robot every member
+//! sees the same odometry frame, so here it runs online on a CPU:
+//!
+//! - **Members** ([`member`]): each back-end of `[slam.vote] members` runs on
+//!   its own thread behind a bounded queue. The pipeline's thread hands every
+//!   scan (one shared copy, from a small pool) and every held-back odometry
+//!   to each queue without waiting; a member whose queue is full drops the
+//!   job and counts it. A member that panics is out for good; one busy with a
+//!   scan for longer than `stall_timeout_s` is out while it stays so; the vote
+//!   goes on with the rest, and [`VoteSlam::status`] names who is out.
+//! - **Alignment** ([`align`]): the first member's map is the frame. Each
+//!   other member's map is aligned to it by a coarse-to-fine search over
+//!   (x, y, θ) around the shared odometry frame — and, once aligned, around
+//!   its last alignment with a quarter of the window — only when its
+//!   `map_revision` or the reference's changed. The residual (RMS distance of
+//!   its walls to the reference's) is reported; a member above
+//!   `max_residual_m` is flagged and left out of the vote.
+//! - **Vote** ([`rule`]): per cell of the reference's grid over occupied /
+//!   free / unknown, the paper's majority (no majority → occupied) or the
+//!   weighted variant. Recomputed every `fuse_period_s` on a thread of its own
+//!   (online) or when the map is asked for (lockstep).
+//! - **Fused pose**: the pose of the member whose map agrees best with the
+//!   vote (share of its known cells with the fused state; before the first
+//!   vote, the reference member), taken into the reference frame by its
+//!   alignment and carried forward by the odometry since the scan it last
+//!   used (so a member a few scans behind does not hold the pose back). Its
+//!   covariance is that member's. The trajectory offline is that member's,
+//!   aligned.
+//!
+//! Offline (`lockstep`), each scan is handed to every member and waited for
+//! (members still run in parallel): nothing is dropped and a run is
+//! reproducible.
+
+pub mod align;
+pub mod member;
+pub mod rule;
+
+use crate::backend::{BackendOptions, SlamBackend, SlamUpdate, StampedPose, from_config};
+use crate::scan::{BeamKind, RangeScan};
+use align::{Alignment, DistanceField, SearchWindow, align, wall_points};
+use member::{Job, Member, MemberFault, WorkerConfig};
+use nalgebra::Matrix3;
+use rule::{CellState, WeightedVote, majority, weighted};
+use smokenav_platform_config::{SlamSection, VoteRule, VoteSection};
+use smokenav_platform_map::OccupancyGrid;
+use smokenav_shared_types::Pose2;
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Why a member does not vote.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MemberHealth {
+    /// Voting.
+    In,
+    /// Its thread panicked (message).
+    Panicked(String),
+    /// Busy with one job for longer than the stall timeout (that timeout), s.
+    Stalled(f64),
+    /// Its alignment residual is above `max_residual_m`, m.
+    Misaligned(f64),
+    /// No map yet.
+    NoMap,
+}
+
+impl MemberHealth {
+    pub fn is_out(&self) -> bool {
+        !matches!(self, MemberHealth::In | MemberHealth::NoMap)
+    }
+}
+
+impl std::fmt::Display for MemberHealth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MemberHealth::In => write!(f, "in"),
+            MemberHealth::Panicked(m) => write!(f, "out (panicked: {m})"),
+            MemberHealth::Stalled(s) => write!(f, "out (stalled: one job over {s:.1} s)"),
+            MemberHealth::Misaligned(r) => write!(f, "out (alignment residual {r:.3} m)"),
+            MemberHealth::NoMap => write!(f, "no map yet"),
+        }
+    }
+}
+
+/// One member as the vote sees it.
+#[derive(Debug, Clone)]
+pub struct MemberStatus {
+    pub name: &'static str,
+    pub health: MemberHealth,
+    /// Jobs dropped because its queue was full.
+    pub drops: u64,
+    /// Its last alignment to the reference (the reference: identity, 0).
+    pub alignment: Option<Alignment>,
+    /// Its last exported map and that map's revision.
+    pub map: Option<(Arc<OccupancyGrid>, u64)>,
+    /// Share of its known cells whose state is the vote's, at the last vote.
+    pub agreement: Option<f64>,
+}
+
+/// The vote's state, for health and the member map topics.
+#[derive(Debug, Clone, Default)]
+pub struct VoteStatus {
+    pub members: Vec<MemberStatus>,
+    /// Fused updates done.
+    pub fuses: u64,
+    /// Time of the last fused update (alignment + vote), ms.
+    pub last_fuse_ms: f64,
+    /// The member the fused pose comes from.
+    pub pose_member: Option<&'static str>,
+}
+
+/// What one fused update produced.
+#[derive(Debug, Clone, Default)]
+struct FusedOut {
+    map: Option<Arc<OccupancyGrid>>,
+    revision: u64,
+    fuses: u64,
+    fuse_ms: f64,
+    /// Per member: alignment, agreement.
+    alignments: Vec<Option<Alignment>>,
+    agreement: Vec<Option<f64>>,
+    misaligned: Vec<bool>,
+    pose_member: Option<usize>,
+}
+
+/// Evidence per 1 m block of the fused frame: laser and sonar endpoints.
+#[derive(Debug, Clone, Default)]
+struct SonarShare {
+    blocks: HashMap<(i32, i32), (u32, u32)>,
+}
+
+/// Blocks kept (1 m each): 1 km², beyond which new blocks are not counted.
+const MAX_SONAR_BLOCKS: usize = 1_000_000;
+
+impl SonarShare {
+    fn add(&mut self, scan: &RangeScan, robot: &Pose2) {
+        let sensor = robot.compose(&scan.sensor_pose);
+        let (s, c) = sensor.theta.sin_cos();
+        for b in &scan.beams {
+            let Some(r) = b.range else { continue };
+            let (a, r) = (f64::from(b.angle), f64::from(r));
+            let (lx, ly) = (r * a.cos(), r * a.sin());
+            let (x, y) = (sensor.x + c * lx - s * ly, sensor.y + s * lx + c * ly);
+            if !(x.is_finite() && y.is_finite()) {
+                continue;
+            }
+            let key = (x.floor() as i32, y.floor() as i32);
+            if self.blocks.len() >= MAX_SONAR_BLOCKS && !self.blocks.contains_key(&key) {
+                continue;
+            }
+            let e = self.blocks.entry(key).or_default();
+            match b.kind {
+                BeamKind::Laser => e.0 = e.0.saturating_add(1),
+                BeamKind::Sonar => e.1 = e.1.saturating_add(1),
+            }
+        }
+    }
+
+    fn share(&self, x: f64, y: f64) -> f64 {
+        match self.blocks.get(&(x.floor() as i32, y.floor() as i32)) {
+            Some(&(l, s)) if l + s > 0 => f64::from(s) / f64::from(l + s),
+            _ => 0.0,
+        }
+    }
+}
+
+/// The member inputs of one fused update.
+struct FuseInput {
+    map: Option<(Arc<OccupancyGrid>, u64)>,
+    /// Out for a reason other than its alignment.
+    out: bool,
+    /// Pose weight from its covariance.
+    weight: f64,
+}
+
+/// Alignment and vote state, kept between fused updates.
+struct Fuser {
+    p: VoteParams,
+    field: DistanceField,
+    field_revision: Option<u64>,
+    aligned_at: Vec<Option<(u64, u64)>>,
+    points: Vec<(f64, f64)>,
+    out: FusedOut,
+    votes: Vec<CellState>,
+    wvotes: Vec<WeightedVote>,
+}
+
+impl Fuser {
+    fn new(p: VoteParams, members: usize) -> Self {
+        Self {
+            p,
+            field: DistanceField::default(),
+            field_revision: None,
+            aligned_at: vec![None; members],
+            points: Vec::new(),
+            out: FusedOut {
+                alignments: vec![None; members],
+                agreement: vec![None; members],
+                misaligned: vec![false; members],
+                ..FusedOut::default()
+            },
+            votes: Vec::with_capacity(members),
+            wvotes: Vec::with_capacity(members),
+        }
+    }
+
+    /// One fused update; false when there is nothing to do (no reference map,
+    /// or no map changed since the last update).
+    fn fuse(&mut self, inputs: &[FuseInput], sonar: &SonarShare, force: bool) -> bool {
+        let t0 = Instant::now();
+        let Some((reference, ref_rev)) = inputs[0].map.clone() else {
+            return false;
+        };
+        let unchanged = self.field_revision == Some(ref_rev)
+            && inputs.iter().enumerate().all(|(i, m)| {
+                m.map.is_none()
+                    || m.out
+                    || self.aligned_at[i].is_some_and(|(r, rr)| {
+                        Some(r) == m.map.as_ref().map(|x| x.1) && rr == ref_rev
+                    })
+            });
+        if unchanged && !force && self.out.map.is_some() {
+            return false;
+        }
+        if self.field_revision != Some(ref_rev) {
+            self.field
+                .rebuild(&reference, self.p.section.align_truncation_m);
+            self.field_revision = Some(ref_rev);
+        }
+        self.out.alignments[0] = Some(Alignment {
+            transform: Pose2::default(),
+            residual_m: 0.0,
+            points: 0,
+            evaluations: 0,
+        });
+        self.aligned_at[0] = Some((ref_rev, ref_rev));
+        let s = &self.p.section;
+        for (i, m) in inputs.iter().enumerate().skip(1) {
+            let Some((grid, rev)) = &m.map else { continue };
+            if m.out || self.aligned_at[i] == Some((*rev, ref_rev)) {
+                continue;
+            }
+            wall_points(grid, s.align_max_points as usize, &mut self.points);
+            if self.points.is_empty() {
+                continue;
+            }
+            let full = SearchWindow {
+                center: Pose2::default(),
+                window_m: s.align_window_m,
+                window_rad: s.align_window_rad,
+            };
+            let a = match self.out.alignments[i] {
+                // Incremental: around the last alignment with a quarter of the
+                // window; the whole window again if that does not fit.
+                Some(prev) => {
+                    let near = align(
+                        &self.field,
+                        &self.points,
+                        &SearchWindow {
+                            center: prev.transform,
+                            window_m: s.align_window_m / 4.0,
+                            window_rad: s.align_window_rad / 4.0,
+                        },
+                    );
+                    if near.residual_m <= s.max_residual_m {
+                        near
+                    } else {
+                        let wide = align(&self.field, &self.points, &full);
+                        if wide.residual_m < near.residual_m {
+                            wide
+                        } else {
+                            near
+                        }
+                    }
+                }
+                None => align(&self.field, &self.points, &full),
+            };
+            self.out.alignments[i] = Some(a);
+            self.aligned_at[i] = Some((*rev, ref_rev));
+        }
+        // Who votes: members in, with a map, aligned within the threshold.
+        let mut voters: Vec<(usize, &OccupancyGrid, Pose2, f64)> = Vec::new();
+        for (i, m) in inputs.iter().enumerate() {
+            let Some((grid, _)) = &m.map else { continue };
+            let a = self.out.alignments[i];
+            let misaligned = a.is_some_and(|a| a.residual_m > s.max_residual_m);
+            self.out.misaligned[i] = misaligned;
+            if m.out || misaligned {
+                continue;
+            }
+            let Some(a) = a else { continue };
+            // Reference point → member point: the inverse of member → reference.
+            voters.push((i, grid.as_ref(), a.transform.inverse(), m.weight));
+        }
+        if voters.is_empty() {
+            return false;
+        }
+        let mut fused = match self.out.map.take() {
+            Some(prev) if prev.width == reference.width && prev.height == reference.height => {
+                Arc::try_unwrap(prev).unwrap_or_else(|a| (*a).clone())
+            }
+            _ => OccupancyGrid::new(
+                reference.width,
+                reference.height,
+                reference.resolution,
+                reference.origin,
+            ),
+        };
+        fused.origin = reference.origin;
+        fused.resolution = reference.resolution;
+        let mut agree = vec![(0u64, 0u64); inputs.len()];
+        let (w, h, res) = (reference.width, reference.height, reference.resolution);
+        let (ox, oy) = (reference.origin[0], reference.origin[1]);
+        let rule = s.rule;
+        // Per member: reference cell centre → member cell, as an affine map in cells.
+        let maps: Vec<(usize, &OccupancyGrid, [f64; 6], f64)> = voters
+            .iter()
+            .map(|&(i, g, t, wgt)| {
+                let (sn, cs) = t.theta.sin_cos();
+                // member = R·p + t, p = (ox + (x+.5)res, oy + (y+.5)res); in member cells.
+                let inv = 1.0 / g.resolution;
+                let a = [
+                    cs * res * inv,
+                    -sn * res * inv,
+                    (cs * (ox + 0.5 * res) - sn * (oy + 0.5 * res) + t.x - g.origin[0]) * inv,
+                    sn * res * inv,
+                    cs * res * inv,
+                    (sn * (ox + 0.5 * res) + cs * (oy + 0.5 * res) + t.y - g.origin[1]) * inv,
+                ];
+                (i, g, a, wgt)
+            })
+            .collect();
+        let mut values = vec![-1i8; maps.len()];
+        for y in 0..h {
+            let fy = y as f64;
+            for x in 0..w {
+                let fx = x as f64;
+                for (k, (_, g, a, _)) in maps.iter().enumerate() {
+                    let mx = a[0] * fx + a[1] * fy + a[2];
+                    let my = a[3] * fx + a[4] * fy + a[5];
+                    values[k] = if mx >= 0.0
+                        && my >= 0.0
+                        && (mx as usize) < g.width
+                        && (my as usize) < g.height
+                    {
+                        g.cells[my as usize * g.width + mx as usize]
+                    } else {
+                        -1
+                    };
+                }
+                let state = match rule {
+                    VoteRule::Majority => {
+                        self.votes.clear();
+                        self.votes.extend(values.iter().map(|&v| CellState::of(v)));
+                        majority(&self.votes)
+                    }
+                    VoteRule::Weighted => {
+                        self.wvotes.clear();
+                        self.wvotes
+                            .extend(values.iter().zip(&maps).map(|(&v, m)| WeightedVote {
+                                value: v,
+                                weight: m.3,
+                            }));
+                        let (cx, cy) = (ox + (fx + 0.5) * res, oy + (fy + 0.5) * res);
+                        weighted(&self.wvotes, sonar.share(cx, cy))
+                    }
+                };
+                fused.cells[y * w + x] = state.value();
+                for (k, &v) in values.iter().enumerate() {
+                    let sv = CellState::of(v);
+                    if sv != CellState::Unknown {
+                        let e = &mut agree[maps[k].0];
+                        e.1 += 1;
+                        e.0 += u64::from(sv == state);
+                    }
+                }
+            }
+        }
+        for (i, a) in agree.iter().enumerate() {
+            self.out.agreement[i] = (a.1 > 0).then(|| a.0 as f64 / a.1 as f64);
+        }
+        // The fused pose's member: best agreement, ties to list order.
+        self.out.pose_member = voters.iter().map(|v| v.0).max_by(|&a, &b| {
+            let (x, y) = (
+                self.out.agreement[a].unwrap_or(0.0),
+                self.out.agreement[b].unwrap_or(0.0),
+            );
+            x.partial_cmp(&y)
+                .unwrap_or(std::cmp::Ordering::Equal)
+                .then(b.cmp(&a))
+        });
+        self.out.map = Some(Arc::new(fused));
+        self.out.revision += 1;
+        self.out.fuses += 1;
+        self.out.fuse_ms = t0.elapsed().as_secs_f64() * 1e3;
+        true
+    }
+}
+
+/// The alignment and vote alone, over maps given by the caller (benches,
+/// tools): what one fused update of [`VoteSlam`] does.
+pub struct MapVote {
+    fuser: Fuser,
+    sonar: SonarShare,
+}
+
+impl MapVote {
+    pub fn new(section: &VoteSection, members: usize) -> Self {
+        Self {
+            fuser: Fuser::new(
+                VoteParams {
+                    section: section.clone(),
+                    fault: None,
+                },
+                members,
+            ),
+            sonar: SonarShare::default(),
+        }
+    }
+
+    /// One fused update over `(map, revision)` per member, the first the
+    /// reference; a member whose revision changed is re-aligned.
+    pub fn update(&mut self, maps: &[(Arc<OccupancyGrid>, u64)]) -> Option<Arc<OccupancyGrid>> {
+        let inputs: Vec<FuseInput> = maps
+            .iter()
+            .map(|m| FuseInput {
+                map: Some(m.clone()),
+                out: false,
+                weight: 1.0,
+            })
+            .collect();
+        self.fuser.fuse(&inputs, &self.sonar, true);
+        self.fuser.out.map.clone()
+    }
+
+    pub fn alignments(&self) -> &[Option<Alignment>] {
+        &self.fuser.out.alignments
+    }
+
+    /// Time of the last update (alignment + vote), ms.
+    pub fn last_ms(&self) -> f64 {
+        self.fuser.out.fuse_ms
+    }
+}
+
+/// Everything the vote needs beyond the members' own `[slam]` keys.
+#[derive(Debug, Clone)]
+pub struct VoteParams {
+    pub section: VoteSection,
+    pub fault: Option<MemberFault>,
+}
+
+/// The vote over several back-ends, itself a [`SlamBackend`].
+pub struct VoteSlam {
+    p: VoteParams,
+    members: Vec<Member>,
+    fuser: Arc<Mutex<Fuser>>,
+    /// The last fused update, copied out of `fuser` (which a fuse holds for its whole run).
+    published: Arc<Mutex<FusedOut>>,
+    sonar: Arc<Mutex<SonarShare>>,
+    fuse_thread: Option<JoinHandle<()>>,
+    shutdown: Arc<AtomicBool>,
+    pool: Vec<Arc<RangeScan>>,
+    pool_misses: u64,
+    initial: Pose2,
+    first_odom: Option<Pose2>,
+    pose: Option<Pose2>,
+    last: Option<SlamUpdate>,
+}
+
+/// Scans kept for reuse: each member holds at most its queue's worth.
+const POOL_SLACK: usize = 2;
+
+/// The pose weight of a member from its covariance: 1 for a pose known to a
+/// few cm, falling as its position variance grows (0.5 at σ = 0.1 m).
+fn pose_weight(u: Option<&SlamUpdate>) -> f64 {
+    match u {
+        Some(u) => {
+            let var = (u.covariance[(0, 0)] + u.covariance[(1, 1)]).max(0.0);
+            if var.is_finite() {
+                1.0 / (1.0 + var / 0.02)
+            } else {
+                0.1
+            }
+        }
+        None => 1.0,
+    }
+}
+
+impl VoteSlam {
+    /// The members of `cfg.vote` with `cfg`'s other keys, on their threads.
+    pub fn new(
+        cfg: &SlamSection,
+        opts: BackendOptions,
+        fault: Option<MemberFault>,
+    ) -> std::io::Result<Self> {
+        let p = VoteParams {
+            section: cfg.vote.clone(),
+            fault,
+        };
+        let s = &p.section;
+        let export_period = Duration::from_secs_f64(s.fuse_period_s);
+        let mut members = Vec::new();
+        for &kind in &s.members {
+            let mut member_cfg = cfg.clone();
+            member_cfg.backend = kind;
+            let backend = from_config(&member_cfg, opts);
+            members.push(Member::spawn(
+                backend,
+                WorkerConfig {
+                    queue: s.queue as usize,
+                    // Lockstep exports on request only.
+                    export_period: if s.lockstep {
+                        Duration::from_secs(3600)
+                    } else {
+                        export_period
+                    },
+                    fault,
+                },
+            )?);
+        }
+        let fuser = Arc::new(Mutex::new(Fuser::new(p.clone(), members.len())));
+        let sonar = Arc::new(Mutex::new(SonarShare::default()));
+        let shutdown = Arc::new(AtomicBool::new(false));
+        let published = Arc::new(Mutex::new(FusedOut::default()));
+        let mut v = Self {
+            p,
+            members,
+            fuser,
+            published,
+            sonar,
+            fuse_thread: None,
+            shutdown,
+            pool: Vec::new(),
+            pool_misses: 0,
+            initial: Pose2::default(),
+            first_odom: None,
+            pose: None,
+            last: None,
+        };
+        if !v.p.section.lockstep {
+            v.fuse_thread = Some(v.spawn_fuser(export_period)?);
+        }
+        Ok(v)
+    }
+
+    fn spawn_fuser(&self, period: Duration) -> std::io::Result<JoinHandle<()>> {
+        let shared: Vec<_> = self.members.iter().map(|m| Arc::clone(&m.shared)).collect();
+        let fuser = Arc::clone(&self.fuser);
+        let published = Arc::clone(&self.published);
+        let sonar = Arc::clone(&self.sonar);
+        let shutdown = Arc::clone(&self.shutdown);
+        let stall = Duration::from_secs_f64(self.p.section.stall_timeout_s);
+        std::thread::Builder::new()
+            .name("vote-fuse".into())
+            .spawn(move || {
+                while !shutdown.load(Ordering::Acquire) {
+                    std::thread::sleep(period);
+                    let inputs: Vec<FuseInput> = shared
+                        .iter()
+                        .map(|s| {
+                            let st = s.lock();
+                            FuseInput {
+                                map: st.map.clone(),
+                                out: st.panicked.is_some()
+                                    || s.busy_for().is_some_and(|d| d > stall),
+                                weight: pose_weight(st.update.as_ref().map(|u| &u.0)),
+                            }
+                        })
+                        .collect();
+                    let share = sonar.lock().map(|s| s.clone()).unwrap_or_default();
+                    if let Ok(mut f) = fuser.lock()
+                        && f.fuse(&inputs, &share, false)
+                        && let Ok(mut p) = published.lock()
+                    {
+                        *p = f.out.clone();
+                    }
+                }
+            })
+    }
+
+    fn stall_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.p.section.stall_timeout_s)
+    }
+
+    fn health_of(&self, i: usize, fused: &FusedOut) -> MemberHealth {
+        let m = &self.members[i];
+        let st = m.shared.lock();
+        if let Some(msg) = &st.panicked {
+            return MemberHealth::Panicked(msg.clone());
+        }
+        if let Some(d) = m.shared.busy_for()
+            && d > self.stall_timeout()
+        {
+            return MemberHealth::Stalled(self.p.section.stall_timeout_s);
+        }
+        if m.given_up() {
+            return MemberHealth::Stalled(self.p.section.stall_timeout_s);
+        }
+        if st.map.is_none() {
+            return MemberHealth::NoMap;
+        }
+        if fused.misaligned.get(i).copied().unwrap_or(false) {
+            let r = fused.alignments[i]
+                .map(|a| a.residual_m)
+                .unwrap_or(f64::NAN);
+            return MemberHealth::Misaligned(r);
+        }
+        MemberHealth::In
+    }
+
+    /// Reads the last fused update (a brief lock: the fuse itself holds another).
+    fn with_fused<R>(&self, f: impl FnOnce(&FusedOut) -> R) -> R {
+        match self.published.lock() {
+            Ok(p) => f(&p),
+            Err(e) => f(&e.into_inner()),
+        }
+    }
+
+    /// The members and the last fused update.
+    pub fn status(&self) -> VoteStatus {
+        let fused = self.with_fused(|f| f.clone());
+        VoteStatus {
+            members: (0..self.members.len())
+                .map(|i| {
+                    let map = self.members[i].shared.lock().map.clone();
+                    MemberStatus {
+                        name: self.members[i].name,
+                        health: self.health_of(i, &fused),
+                        drops: self.members[i].drops(),
+                        alignment: fused.alignments.get(i).copied().flatten(),
+                        map,
+                        agreement: fused.agreement.get(i).copied().flatten(),
+                    }
+                })
+                .collect(),
+            fuses: fused.fuses,
+            last_fuse_ms: fused.fuse_ms,
+            pose_member: fused.pose_member.map(|i| self.members[i].name),
+        }
+    }
+
+    pub fn params(&self) -> &VoteParams {
+        &self.p
+    }
+
+    /// One fused update now from the members' last exported maps (benches).
+    pub fn fuse_now(&self) -> Option<f64> {
+        let inputs = self.inputs();
+        let share = self.sonar.lock().map(|s| s.clone()).unwrap_or_default();
+        let mut f = self.fuser.lock().ok()?;
+        if !f.fuse(&inputs, &share, true) {
+            return None;
+        }
+        if let Ok(mut p) = self.published.lock() {
+            *p = f.out.clone();
+        }
+        Some(f.out.fuse_ms)
+    }
+
+    fn inputs(&self) -> Vec<FuseInput> {
+        let stall = self.stall_timeout();
+        self.members
+            .iter()
+            .map(|m| {
+                let st = m.shared.lock();
+                FuseInput {
+                    map: st.map.clone(),
+                    out: st.panicked.is_some()
+                        || m.given_up()
+                        || m.shared.busy_for().is_some_and(|d| d > stall),
+                    weight: pose_weight(st.update.as_ref().map(|u| &u.0)),
+                }
+            })
+            .collect()
+    }
+
+    /// A pooled copy of `scan` the members share.
+    fn shared_scan(&mut self, scan: &RangeScan) -> Arc<RangeScan> {
+        for a in &mut self.pool {
+            if let Some(s) = Arc::get_mut(a) {
+                s.clone_from(scan);
+                return Arc::clone(a);
+            }
+        }
+        let cap = self.members.len() * (self.p.section.queue as usize + 1) + POOL_SLACK;
+        self.pool_misses += 1;
+        let a = Arc::new(scan.clone());
+        if self.pool.len() < cap {
+            self.pool.push(Arc::clone(&a));
+        }
+        a
+    }
+
+    fn dispatch(&self, make: &mut dyn FnMut() -> Job) {
+        let lockstep = self.p.section.lockstep;
+        let timeout = self.stall_timeout();
+        for m in &self.members {
+            if m.given_up() {
+                continue;
+            }
+            if lockstep {
+                // Members run in parallel: hand the job to all, then wait for all.
+                if !m.send_within(make(), timeout) {
+                    self.give_up(m);
+                }
+            } else {
+                m.offer(make());
+            }
+        }
+        if lockstep {
+            for m in &self.members {
+                if !m.given_up() && !m.wait_idle(timeout) {
+                    self.give_up(m);
+                }
+            }
+        }
+    }
+
+    fn give_up(&self, m: &Member) {
+        if m.shared.lock().panicked.is_none() {
+            tracing::warn!(
+                "vote member {} did not finish a job within {:.1} s: fed no more",
+                m.name,
+                self.p.section.stall_timeout_s
+            );
+        }
+        m.give_up();
+    }
+
+    /// Lockstep: every member exports its map, then the vote runs here.
+    fn fuse_lockstep(&self) {
+        let timeout = self.stall_timeout();
+        for m in &self.members {
+            if m.given_up() {
+                continue;
+            }
+            let exported = m.send_within(Job::Export, timeout) && m.wait_idle(timeout);
+            if !exported {
+                self.give_up(m);
+            }
+        }
+        let inputs = self.inputs();
+        let share = self.sonar.lock().map(|s| s.clone()).unwrap_or_default();
+        if let Ok(mut f) = self.fuser.lock()
+            && f.fuse(&inputs, &share, false)
+            && let Ok(mut p) = self.published.lock()
+        {
+            *p = f.out.clone();
+        }
+    }
+
+    /// The fused pose at odometry `odom`.
+    fn fused_pose(&self, odom: &Pose2) -> (Pose2, Option<SlamUpdate>) {
+        let found = self.with_fused(|fused| {
+            let first = fused.pose_member;
+            for i in first.into_iter().chain(0..self.members.len()) {
+                if self.health_of(i, fused).is_out() {
+                    continue;
+                }
+                let Some(t) = fused
+                    .alignments
+                    .get(i)
+                    .copied()
+                    .flatten()
+                    .map(|a| a.transform)
+                    .or((i == 0).then_some(Pose2::default()))
+                else {
+                    continue;
+                };
+                let st = self.members[i].shared.lock();
+                if let Some((u, o)) = st.update {
+                    let pose = t.compose(&u.pose.compose(&o.between(odom)));
+                    return Some((pose, u));
+                }
+            }
+            None
+        });
+        if let Some((pose, u)) = found {
+            return (pose, Some(u));
+        }
+        let first = self.first_odom.unwrap_or(*odom);
+        (self.initial.compose(&first.between(odom)), None)
+    }
+
+    fn update(&mut self, stamp_ns: u64, odom: &Pose2, processed: bool) -> SlamUpdate {
+        self.first_odom.get_or_insert(*odom);
+        let (pose, member) = self.fused_pose(odom);
+        self.pose = Some(pose);
+        let u = SlamUpdate {
+            stamp_ns,
+            pose,
+            covariance: member
+                .map(|u| u.covariance)
+                .unwrap_or_else(|| Matrix3::from_diagonal_element(1e-4)),
+            n_eff: member.map(|u| u.n_eff).unwrap_or(1.0),
+            particles: member.map(|u| u.particles).unwrap_or(1),
+            processed,
+            resampled: false,
+        };
+        self.last = Some(u);
+        u
+    }
+}
+
+impl Drop for VoteSlam {
+    fn drop(&mut self) {
+        self.shutdown.store(true, Ordering::Release);
+        if let Some(t) = self.fuse_thread.take() {
+            let _ = t.join();
+        }
+        // Members join their threads in their own Drop.
+    }
+}
+
+impl SlamBackend for VoteSlam {
+    fn name(&self) -> &'static str {
+        "vote"
+    }
+
+    fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
+        let shared = self.shared_scan(scan);
+        let o = *odom;
+        self.dispatch(&mut || Job::Process(Arc::clone(&shared), o));
+        drop(shared);
+        let u = self.update(scan.stamp_ns, odom, true);
+        if let Ok(mut s) = self.sonar.lock() {
+            s.add(scan, &u.pose);
+        }
+        u
+    }
+
+    fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate {
+        let o = *odom;
+        self.dispatch(&mut || Job::Predict(stamp_ns, o));
+        self.update(stamp_ns, odom, false)
+    }
+
+    fn odometry_reset(&mut self) {
+        // Not queued (a full queue must not lose it): the member applies it before its next job.
+        for m in &self.members {
+            m.request_reset();
+        }
+        self.first_odom = None;
+        if let Some(p) = self.pose {
+            self.initial = p;
+        }
+    }
+
+    fn set_initial_pose(&mut self, pose: Pose2) {
+        if self.last.is_none() && pose.is_finite() {
+            self.initial = pose;
+            // Every member starts there too, so their maps share the frame.
+            let timeout = self.stall_timeout();
+            for m in &self.members {
+                m.send_within(Job::InitialPose(pose), timeout);
+            }
+        }
+    }
+
+    fn pose(&self) -> Option<Pose2> {
+        self.pose
+    }
+
+    fn map_revision(&self) -> u64 {
+        if self.p.section.lockstep {
+            // Any member's map changed → the vote would too.
+            self.members
+                .iter()
+                .map(|m| m.shared.lock().revision)
+                .fold(0u64, |a, r| a.wrapping_mul(1_000_003).wrapping_add(r))
+        } else {
+            self.with_fused(|f| f.revision)
+        }
+    }
+
+    fn map(&self) -> Option<OccupancyGrid> {
+        if self.p.section.lockstep {
+            self.fuse_lockstep();
+        }
+        self.with_fused(|f| f.map.as_deref().cloned())
+    }
+
+    fn trajectory(&self) -> Vec<StampedPose> {
+        if self.p.section.lockstep {
+            self.fuse_lockstep();
+        }
+        let (i, t) = self.with_fused(|f| {
+            let i = f.pose_member.unwrap_or(0);
+            let t = f
+                .alignments
+                .get(i)
+                .copied()
+                .flatten()
+                .map(|a| a.transform)
+                .unwrap_or_default();
+            (i, t)
+        });
+        let (rtx, rrx) = std::sync::mpsc::sync_channel(1);
+        if !self.members[i].send_within(Job::Trajectory(rtx), self.stall_timeout()) {
+            return Vec::new();
+        }
+        rrx.recv_timeout(self.stall_timeout())
+            .unwrap_or_default()
+            .into_iter()
+            .map(|p| StampedPose {
+                stamp_ns: p.stamp_ns,
+                pose: t.compose(&p.pose),
+            })
+            .collect()
+    }
+
+    fn metrics(&self, emit: &mut dyn FnMut(&'static str, f64)) {
+        let st = self.status();
+        emit(
+            "vote_members_out",
+            st.members.iter().filter(|m| m.health.is_out()).count() as f64,
+        );
+        emit(
+            "vote_drops",
+            st.members.iter().map(|m| m.drops).sum::<u64>() as f64,
+        );
+        emit(
+            "vote_residual_max_m",
+            st.members
+                .iter()
+                .filter_map(|m| m.alignment.map(|a| a.residual_m))
+                .fold(0.0, f64::max),
+        );
+        emit("vote_fuse_ms", st.last_fuse_ms);
+        emit("vote_fuses", st.fuses as f64);
+        for m in &st.members {
+            let name = match m.name {
+                "rbpf" => "vote_out_rbpf",
+                "graph" => "vote_out_graph",
+                "fuzzy" => "vote_out_fuzzy",
+                _ => continue,
+            };
+            emit(name, f64::from(u8::from(m.health.is_out())));
+        }
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}
+
+#[cfg(test)]
+mod tests;

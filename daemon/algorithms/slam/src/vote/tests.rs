@@ -1,0 +1,184 @@
+//! The vote with real members on their threads, in the test room.
+
+use super::member::{FaultKind, MemberFault};
+use super::*;
+use crate::testkit::scan_at;
+use smokenav_platform_config::SlamBackendKind as K;
+
+fn cfg(members: &[K], lockstep: bool) -> SlamSection {
+    let mut c = SlamSection {
+        particles: 4,
+        backend: K::Vote,
+        ..SlamSection::default()
+    };
+    c.vote.members = members.to_vec();
+    c.vote.lockstep = lockstep;
+    c.vote.fuse_period_s = 0.05;
+    c.vote.stall_timeout_s = 0.5;
+    c
+}
+
+/// Drives 1.6 m along the room's x axis, feeding exact odometry.
+fn drive(v: &mut VoteSlam, scans: usize) -> Vec<SlamUpdate> {
+    (0..scans)
+        .map(|i| {
+            let truth = Pose2::new(-1.5 + 0.04 * i as f64, -1.5, 0.0);
+            v.process(
+                &scan_at(&truth, 1_000_000_000 + i as u64 * 100_000_000),
+                &truth,
+            )
+        })
+        .collect()
+}
+
+fn wait_for(v: &VoteSlam, what: &str, mut f: impl FnMut() -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !f() {
+        assert!(
+            Instant::now() < deadline,
+            "timed out waiting for {what}: {:?}",
+            v.status()
+                .members
+                .iter()
+                .map(|m| (m.name, m.health.to_string(), m.drops))
+                .collect::<Vec<_>>()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn three_members_vote_in_lockstep_and_align_to_the_reference() {
+    let mut v = VoteSlam::new(
+        &cfg(&[K::Rbpf, K::Graph, K::Fuzzy], true),
+        BackendOptions {
+            keep_trajectory: true,
+        },
+        None,
+    )
+    .unwrap();
+    v.set_initial_pose(Pose2::new(-1.5, -1.5, 0.0));
+    let ups = drive(&mut v, 40);
+    let last = ups.last().unwrap();
+    assert!(
+        (last.pose.x - (-1.5 + 0.04 * 39.0)).abs() < 0.1 && (last.pose.y + 1.5).abs() < 0.1,
+        "fused pose {:?}",
+        last.pose
+    );
+    let map = v.map().expect("a fused map");
+    let st = v.status();
+    assert_eq!(st.fuses, 1);
+    for m in &st.members {
+        assert_eq!(m.health, MemberHealth::In, "{}: {}", m.name, m.health);
+        assert_eq!(m.drops, 0, "lockstep drops nothing");
+        let a = m
+            .alignment
+            .unwrap_or_else(|| panic!("{} not aligned", m.name));
+        assert!(a.residual_m < 0.1, "{}: residual {}", m.name, a.residual_m);
+    }
+    // The south wall (y = −3) is in the fused map, free space in front of it.
+    let (cx, cy) = map.world_to_cell(-1.0, -3.0).unwrap();
+    let near = (cy.saturating_sub(1)..=cy + 1).any(|y| map.get(cx, y) == Some(100));
+    assert!(near, "wall missing from the fused map");
+    let (fx, fy) = map.world_to_cell(-1.0, -2.0).unwrap();
+    assert_eq!(map.get(fx, fy), Some(0));
+    assert_eq!(v.trajectory().len(), 40);
+}
+
+#[test]
+fn a_panicking_member_is_out_and_the_vote_goes_on() {
+    let fault = MemberFault {
+        member: K::Fuzzy,
+        kind: FaultKind::Panic,
+        after_scans: 3,
+    };
+    let mut v = VoteSlam::new(
+        &cfg(&[K::Rbpf, K::Graph, K::Fuzzy], false),
+        BackendOptions::default(),
+        Some(fault),
+    )
+    .unwrap();
+    drive(&mut v, 10);
+    wait_for(&v, "fuzzy to be out", || {
+        v.status()
+            .members
+            .iter()
+            .any(|m| m.name == "fuzzy" && matches!(m.health, MemberHealth::Panicked(_)))
+    });
+    let before = v.status().fuses;
+    drive(&mut v, 10);
+    wait_for(&v, "a vote after the panic", || {
+        v.status().fuses > before && v.map().is_some()
+    });
+    let st = v.status();
+    let names: Vec<_> = st
+        .members
+        .iter()
+        .filter(|m| m.health.is_out())
+        .map(|m| m.name)
+        .collect();
+    assert_eq!(names, ["fuzzy"]);
+    let mut out = Vec::new();
+    v.metrics(&mut |n, x| out.push((n, x)));
+    assert!(out.contains(&("vote_out_fuzzy", 1.0)), "{out:?}");
+    assert!(out.contains(&("vote_out_rbpf", 0.0)), "{out:?}");
+}
+
+#[test]
+fn a_stalled_member_drops_scans_and_never_holds_the_others() {
+    let fault = MemberFault {
+        member: K::Graph,
+        kind: FaultKind::Stall,
+        after_scans: 2,
+    };
+    let mut c = cfg(&[K::Rbpf, K::Graph], false);
+    c.vote.queue = 2;
+    let mut v = VoteSlam::new(&c, BackendOptions::default(), Some(fault)).unwrap();
+    // Scans keep coming while the member hangs in its third: process() keeps returning.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut i = 0u64;
+    loop {
+        let truth = Pose2::new(-1.5 + 0.01 * i as f64, -1.5, 0.0);
+        v.process(&scan_at(&truth, 1_000_000_000 + i * 100_000_000), &truth);
+        i += 1;
+        let st = v.status();
+        let graph = st.members.iter().find(|m| m.name == "graph").unwrap();
+        if matches!(graph.health, MemberHealth::Stalled(_)) && graph.drops > 0 {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "graph never stalled: {}",
+            graph.health
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let st = v.status();
+    let rbpf = st.members.iter().find(|m| m.name == "rbpf").unwrap();
+    assert_eq!(rbpf.health, MemberHealth::In);
+    let mut out = Vec::new();
+    v.metrics(&mut |n, x| out.push((n, x)));
+    assert!(out.contains(&("vote_out_graph", 1.0)), "{out:?}");
+    assert!(out.contains(&("vote_members_out", 1.0)), "{out:?}");
+    // The fused pose follows the member still running.
+    let u = v.predict(1_000_000_000 + i * 100_000_000, &Pose2::new(0.5, -1.5, 0.0));
+    assert!((u.pose.x - 2.0).abs() < 0.3, "{:?}", u.pose);
+}
+
+#[test]
+fn fault_knob_parses_and_names_bad_parts() {
+    let f: MemberFault = "graph:stall:40".parse().unwrap();
+    assert_eq!(
+        f,
+        MemberFault {
+            member: K::Graph,
+            kind: FaultKind::Stall,
+            after_scans: 40
+        }
+    );
+    let e = "karto:stall:4".parse::<MemberFault>().unwrap_err();
+    assert!(e.contains("karto"), "{e}");
+    let e = "graph:hang:4".parse::<MemberFault>().unwrap_err();
+    assert!(e.contains("hang"), "{e}");
+    assert!("graph:stall".parse::<MemberFault>().is_err());
+}

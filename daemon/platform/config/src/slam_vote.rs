@@ -1,0 +1,136 @@
+//! `[slam.vote]`: the vote over several SLAM back-ends (SLAMfusion,
+//! Fernandes & Alexandre): each member maps from the same scans and
+//! odometry on its own thread, the members' maps are aligned to the first
+//! member's and every cell is set by a vote over occupied / free / unknown.
+//!
+//! ```toml
+//! [slam]
+//! backend = "vote"
+//! [slam.vote]
+//! members = ["rbpf", "graph", "fuzzy"]   # the first is the reference frame
+//! rule = "majority"                      # or "weighted"
+//! max_residual_m = 0.15                  # alignment residual above it: flagged, left out
+//! ```
+
+use crate::slam::SlamBackendKind;
+use crate::validate::{Validate, Validator};
+use serde::{Deserialize, Serialize};
+
+/// How the members' cells are combined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum VoteRule {
+    /// The paper's rule: the state most members agree on (more than half);
+    /// no majority → occupied.
+    #[default]
+    #[serde(rename = "majority")]
+    Majority,
+    /// Each member's vote weighted by its certainty for that cell, its pose
+    /// covariance and (for occupied/free) how little of the region was seen
+    /// only by sonar; ties → occupied.
+    #[serde(rename = "weighted")]
+    Weighted,
+}
+
+impl VoteRule {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            VoteRule::Majority => "majority",
+            VoteRule::Weighted => "weighted",
+        }
+    }
+}
+
+/// `[slam.vote]`: every key optional, unknown keys rejected.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VoteSection {
+    /// The back-ends that vote (2–3 distinct, not `vote`); the first one's map
+    /// is the frame the others are aligned to and the fused map's geometry.
+    pub members: Vec<SlamBackendKind>,
+    /// `majority` (the paper) or `weighted`.
+    pub rule: VoteRule,
+    /// A member whose alignment residual (RMS distance of its walls to the
+    /// reference's, truncated at `align_truncation_m`) is above this is
+    /// flagged in health and left out of the vote, m.
+    pub max_residual_m: f64,
+    /// Translational search window of the alignment around the shared
+    /// odometry frame (or the last alignment), ± m.
+    pub align_window_m: f64,
+    /// Rotational search window of the alignment, ± rad.
+    pub align_window_rad: f64,
+    /// Wall distances beyond this count as this much in the alignment score, m.
+    pub align_truncation_m: f64,
+    /// At most this many wall cells of a member are matched (evenly thinned).
+    pub align_max_points: u32,
+    /// Scans (and odometry updates) a member's queue holds; a full queue drops
+    /// the newest and counts it.
+    pub queue: u32,
+    /// A member busy with one scan for longer than this is out (stalled), s.
+    pub stall_timeout_s: f64,
+    /// How often members export their maps and the vote is recomputed, s.
+    pub fuse_period_s: f64,
+    /// Every member finishes each scan before the next one (offline runs:
+    /// reproducible, nothing dropped); `smokenav slam` sets it.
+    pub lockstep: bool,
+}
+
+impl Default for VoteSection {
+    fn default() -> Self {
+        Self {
+            members: vec![
+                SlamBackendKind::Rbpf,
+                SlamBackendKind::Graph,
+                SlamBackendKind::Fuzzy,
+            ],
+            rule: VoteRule::Majority,
+            max_residual_m: 0.15,
+            align_window_m: 0.5,
+            align_window_rad: 0.1,
+            align_truncation_m: 0.5,
+            align_max_points: 3000,
+            queue: 8,
+            stall_timeout_s: 5.0,
+            fuse_period_s: 0.5,
+            lockstep: false,
+        }
+    }
+}
+
+impl Validate for VoteSection {
+    fn validate(&self, key: &str, v: &mut Validator) {
+        let k = |name: &str| format!("{key}.{name}");
+        if !(2..=3).contains(&self.members.len()) {
+            v.fail(
+                k("members"),
+                format!("must name 2–3 back-ends, got {}", self.members.len()),
+            );
+        }
+        for (i, m) in self.members.iter().enumerate() {
+            if *m == SlamBackendKind::Vote {
+                v.fail(k("members"), "a vote cannot be a member of itself");
+            } else if self.members[..i].contains(m) {
+                v.fail(k("members"), format!("{} is named twice", m.as_str()));
+            }
+        }
+        v.within(&k("max_residual_m"), self.max_residual_m, 0.001, 10.0);
+        v.within(&k("align_window_m"), self.align_window_m, 0.0, 10.0);
+        v.within(&k("align_window_rad"), self.align_window_rad, 0.0, 3.2);
+        v.within(
+            &k("align_truncation_m"),
+            self.align_truncation_m,
+            0.01,
+            10.0,
+        );
+        if !(10..=1_000_000).contains(&self.align_max_points) {
+            v.fail(
+                k("align_max_points"),
+                format!("must be 10–1000000, got {}", self.align_max_points),
+            );
+        }
+        if !(1..=1024).contains(&self.queue) {
+            v.fail(k("queue"), format!("must be 1–1024, got {}", self.queue));
+        }
+        v.within(&k("stall_timeout_s"), self.stall_timeout_s, 0.01, 3600.0);
+        v.within(&k("fuse_period_s"), self.fuse_period_s, 0.01, 60.0);
+    }
+}

@@ -1,0 +1,249 @@
+//! The vote back-end in the real `smokenav-slam` process: a prefix of the
+//! MIT CSAIL log replayed over the bus, the three members' maps arrive on
+//! `slam/vote/{rbpf,graph,fuzzy}` and the vote on `slam/map`; with a member
+//! made to panic or hang (the test-only `SMOKENAV_TEST_VOTE_FAULT`), the vote
+//! keeps updating on the others and `health/slam` names the member that is out.
+
+use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_platform_bus::{Bus, Publisher, Topic, Waiter, topics};
+use smokenav_platform_config::{MountPose, SlamBackendKind, SlamInput};
+use smokenav_shared_types::{
+    BeamReading, Clock, Header, Health, HealthState, LaserScan, MapInfo, MonotonicClock, Odometry,
+    PoseEstimate,
+};
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for, workspace_root};
+use std::io::BufReader;
+use std::time::{Duration, Instant};
+
+const RANGE_MAX: f32 = 81.9;
+
+fn log_records(n: usize) -> Vec<LaserRecord> {
+    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
+    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
+        .filter_map(|r| match r {
+            Ok(Record::Laser(l)) => Some(l),
+            _ => None,
+        })
+        .take(n)
+        .collect()
+}
+
+struct Run {
+    slam: Child,
+    bus: Bus,
+    _dir: tempfile::TempDir,
+}
+
+fn start(name: &str, fault: Option<&str>) -> Run {
+    let instance = unique_instance(name);
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = profile(dir.path(), "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Laser;
+        c.slam.backend = SlamBackendKind::Vote;
+        c.slam.particles = 5;
+        c.slam.map_rate_hz = 2.0;
+        c.slam.vote.fuse_period_s = 0.3;
+        c.slam.vote.stall_timeout_s = 1.0;
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
+    let env: Vec<(&str, &str)> = fault
+        .map(|f| vec![("SMOKENAV_TEST_VOTE_FAULT", f)])
+        .unwrap_or_default();
+    let slam = Child::spawn_env(
+        &bin("smokenav-slam"),
+        &["--config", cfg.to_str().unwrap()],
+        &instance,
+        &env,
+    )
+    .unwrap();
+    slam.wait_for_line("vote with", Duration::from_secs(30))
+        .unwrap_or_else(|e| panic!("{e}\n{}", slam.output()));
+    let bus = open_bus(&instance);
+    Run {
+        slam,
+        bus,
+        _dir: dir,
+    }
+}
+
+/// Replays `n` scans, each after the pose of the one before came back.
+fn replay(r: &Run, n: usize) {
+    let mut odom: Publisher<Odometry> = r.bus.publisher(topics::BASE_ODOM).unwrap();
+    let mut scans: Publisher<LaserScan> = r.bus.publisher(topics::LASER_SCAN).unwrap();
+    let poses = r.bus.subscriber::<PoseEstimate>(topics::SLAM_POSE).unwrap();
+    let waiter = Waiter::new().unwrap();
+    let _g = waiter.attach(&poses).unwrap();
+    let records = log_records(n);
+    let base = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    for rec in &records {
+        let stamp = base + (rec.ipc_timestamp_ns - ipc0);
+        odom.publish_with(|o: &mut Odometry| {
+            *o = Odometry {
+                header: Header::new(stamp, 0, "odom"),
+                x: rec.robot_pose.x,
+                y: rec.robot_pose.y,
+                theta: rec.robot_pose.theta,
+                ..Default::default()
+            };
+        })
+        .unwrap();
+        scans
+            .publish_with(|s: &mut LaserScan| {
+                s.header = Header::new(stamp, 0, "laser");
+                s.angle_min = rec.start_angle as f32;
+                s.angle_increment = rec.angular_resolution as f32;
+                s.range_min = 0.02;
+                s.range_max = RANGE_MAX;
+                s.count = rec.ranges.len() as u32;
+                s.has_intensities = 0;
+                for (i, &v) in rec.ranges.iter().enumerate() {
+                    s.set_beam(
+                        i,
+                        if v > 0.0 && v < RANGE_MAX {
+                            BeamReading::Range(v)
+                        } else {
+                            BeamReading::BeyondMax
+                        },
+                    );
+                }
+            })
+            .unwrap();
+        // The vote answers at once (members work behind it): a pose per scan.
+        let end = Instant::now() + Duration::from_secs(30);
+        'wait: loop {
+            while let Some(p) = poses.receive().unwrap() {
+                if p.header.stamp_ns == stamp {
+                    break 'wait;
+                }
+            }
+            assert!(
+                Instant::now() < end,
+                "no pose for a scan\n{}",
+                r.slam.output()
+            );
+            waiter.wait(Some(Duration::from_millis(200))).unwrap();
+        }
+    }
+}
+
+/// The first map on `topic` with at least `walls` occupied cells, within 60 s.
+fn map_with_walls(r: &Run, topic: Topic<MapInfo>, walls: usize) -> (MapInfo, Vec<i8>) {
+    let sub = r.bus.map_subscriber(topic.clone()).unwrap();
+    let waiter = Waiter::new().unwrap();
+    let _g = waiter.attach(&sub).unwrap();
+    let end = Instant::now() + Duration::from_secs(60);
+    loop {
+        while let Some(s) = sub.receive().unwrap() {
+            let cells = s.payload().to_vec();
+            if cells.iter().filter(|&&c| c >= 65).count() >= walls {
+                return (*s.user_header(), cells);
+            }
+        }
+        assert!(
+            Instant::now() < end,
+            "no map with {walls} walls on {}\n{}",
+            topic.name(),
+            r.slam.output()
+        );
+        waiter.wait(Some(Duration::from_millis(200))).unwrap();
+    }
+}
+
+fn health_until(r: &Run, what: &str, done: impl Fn(&Health) -> bool) -> Health {
+    let got = wait_for::<Health>(
+        &r.bus,
+        topics::health("slam"),
+        Duration::from_secs(60),
+        |h| done(h),
+    )
+    .unwrap_or_else(|e| panic!("{what}: {e}\n{}", r.slam.output()));
+    *got.last().unwrap()
+}
+
+#[test]
+fn vote_publishes_every_members_map_and_the_fused_one() {
+    let r = start("slam_vote_e2e", None);
+    replay(&r, 120);
+    for topic in [
+        topics::SLAM_VOTE_RBPF,
+        topics::SLAM_VOTE_GRAPH,
+        topics::SLAM_VOTE_FUZZY,
+    ] {
+        map_with_walls(&r, topic, 50);
+    }
+    let (info, fused) = map_with_walls(&r, topics::SLAM_MAP, 200);
+    assert_eq!(info.cell_count(), fused.len());
+    assert!(
+        fused.iter().all(|&c| c == 0 || c == 100 || c == -1),
+        "the vote publishes free / occupied / unknown only"
+    );
+    let h = health_until(&r, "a vote over three members", |h| {
+        h.metric("vote_fuses").is_some_and(|n| n >= 1.0)
+    });
+    assert_eq!(
+        h.metric("vote_members_out"),
+        Some(0.0),
+        "{}",
+        r.slam.output()
+    );
+    assert!(
+        h.metric("vote_residual_max_m").is_some_and(|m| m <= 0.15),
+        "residual {:?}",
+        h.metric("vote_residual_max_m")
+    );
+    // (The pose rate itself goes low once the replay ends: not the vote's flag.)
+    assert!(
+        !h.last_error.as_str().contains("vote"),
+        "{}",
+        h.last_error.as_str()
+    );
+}
+
+#[test]
+fn a_crashed_member_is_named_and_the_vote_goes_on() {
+    let r = start("slam_vote_crash", Some("fuzzy:panic:10"));
+    replay(&r, 60);
+    let h = health_until(&r, "fuzzy out", |h| {
+        h.metric("vote_out_fuzzy") == Some(1.0) && h.state() == HealthState::Degraded
+    });
+    assert!(
+        h.last_error.as_str().contains("fuzzy") && h.last_error.as_str().contains("panicked"),
+        "{}",
+        h.last_error.as_str()
+    );
+    // The vote keeps updating on rbpf and graph.
+    let fuses = h.metric("vote_fuses").unwrap_or(0.0);
+    replay(&r, 60);
+    let later = health_until(&r, "more votes", |h| {
+        h.metric("vote_fuses").is_some_and(|n| n > fuses)
+    });
+    assert_eq!(later.metric("vote_out_rbpf"), Some(0.0));
+    assert_eq!(later.metric("vote_out_graph"), Some(0.0));
+    map_with_walls(&r, topics::SLAM_MAP, 100);
+}
+
+#[test]
+fn a_stalled_member_is_named_and_the_vote_goes_on() {
+    let r = start("slam_vote_stall", Some("graph:stall:10"));
+    replay(&r, 60);
+    let h = health_until(&r, "graph out", |h| {
+        h.metric("vote_out_graph") == Some(1.0) && h.state() == HealthState::Degraded
+    });
+    assert!(
+        h.last_error.as_str().contains("graph") && h.last_error.as_str().contains("stalled"),
+        "{}",
+        h.last_error.as_str()
+    );
+    let fuses = h.metric("vote_fuses").unwrap_or(0.0);
+    replay(&r, 60);
+    let later = health_until(&r, "more votes", |h| {
+        h.metric("vote_fuses").is_some_and(|n| n > fuses)
+    });
+    assert_eq!(later.metric("vote_out_rbpf"), Some(0.0));
+    assert!(later.metric("vote_drops").is_some_and(|d| d > 0.0));
+}
