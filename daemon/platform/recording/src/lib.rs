@@ -59,6 +59,8 @@
 //! that leaves other values in unused capacity or reserved fields gets the
 //! defaults back. `has_intensities` is replayed as 0 or 1.
 
+pub mod bag;
+pub mod bag_decode;
 pub mod cdr;
 pub mod codec;
 pub mod encoder;
