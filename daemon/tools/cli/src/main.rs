@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 mod access;
 mod arcos;
+mod bag;
 mod drive;
 mod eval;
 mod fuse;
@@ -44,7 +45,7 @@ enum Command {
     Topic(topic::TopicCommand),
     /// One line per process: up/down, heartbeat age, rates, counters. Exit 1 if anything is unhealthy.
     Status(status::StatusArgs),
-    /// Run SLAM offline over a CARMEN log; write trajectory (`--format tum` for evo), map and timing.
+    /// Run SLAM offline over a CARMEN log or a ROS 2 bag; write trajectory (`--format tum` for evo), map and timing.
     Slam(slam::SlamArgs),
     /// Maps published by the SLAM process: `map save [DIR] [--mode trinary|scale|raw]` writes them as nav2's map_saver does.
     #[command(subcommand)]
