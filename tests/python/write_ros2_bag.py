@@ -4,7 +4,8 @@ bags (storage mcap and sqlite3, ROS 2 Humble types).
 
     write_ros2_bag.py RECORDING.mcap OUT_DIR
 
-Writes OUT_DIR/mcap/ and OUT_DIR/sqlite3/ (rosbag2 folders), each holding
+Writes OUT_DIR/mcap/ and OUT_DIR/sqlite3/ (rosbag2 folders; and
+OUT_DIR/tf-only/, /tf_static alone), each holding
 /scan (sensor_msgs/LaserScan), /odom (nav_msgs/Odometry) and /tf_static, on
 the topic names a ROS 2 robot uses, with the receive times of the
 recording (moved back onto its stamps' clock by its unix_offset_ns), and
@@ -117,6 +118,12 @@ def main():
             for topic, t, msg in msgs:
                 w.write(conns[topic], t, ts.serialize_cdr(msg, TOPICS[topic][1]))
         counts[storage] = len(msgs)
+    # A bag holding nothing smokenav plays: only the transforms.
+    with Writer(out / "tf-only", version=8, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/tf_static", TOPICS["/tf_static"][1], typestore=ts)
+        for topic, t, msg in msgs:
+            if topic == "/tf_static":
+                w.write(conn, t, ts.serialize_cdr(msg, TOPICS[topic][1]))
     by_topic = {}
     for topic, _, _ in msgs:
         by_topic[TOPICS[topic][0]] = by_topic.get(TOPICS[topic][0], 0) + 1

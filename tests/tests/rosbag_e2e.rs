@@ -6,14 +6,18 @@
 //! no companions). `smokenav slam --bag` on each must give the trajectory
 //! it gives on smokenav's own recording (which is read exactly).
 
+use smokenav_platform_bus::{Subscriber, Waiter, topics};
+use smokenav_platform_recording::{AnyMessage, Playback};
 use smokenav_platform_recording::{AnyMessageRef, Recorder, RobotGeometry, SinkOptions};
+use smokenav_shared_types::{LaserScan, Odometry};
 use smokenav_sim_link::{DirectDrivers, DirectMessage};
 use smokenav_sim_world::{Scenario, StepOutput, World};
-use smokenav_tests::{bin, python, workspace_root};
+use smokenav_tests::{Child, bin, open_bus, python, unique_instance, workspace_root};
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
+use std::time::Instant;
 
 /// Sim time 0 in the recording, ns (as the demo's fast path).
 const T0_NS: u64 = 1_000_000_000;
@@ -88,15 +92,14 @@ fn poses(text: &str) -> Vec<[f64; 4]> {
         .collect()
 }
 
-#[test]
-fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result<()> {
-    let dir = tempfile::tempdir()?;
-    let native = dir.path().join("native.mcap");
+/// The native recording and, beside it, `bags/{mcap,sqlite3,tf-only}` as rosbags writes them.
+fn native_and_bags(dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
+    let native = dir.join("native.mcap");
     let recorded = record_native(&native)?;
     assert!(recorded >= 400, "{recorded} messages");
 
     let script = workspace_root().join("tests/python/write_ros2_bag.py");
-    let bags = dir.path().join("bags");
+    let bags = dir.join("bags");
     let out = Command::new(python())
         .arg(&script)
         .arg(&native)
@@ -117,6 +120,13 @@ fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result
             .any(|e| e.is_ok_and(|e| e.path().extension().is_some_and(|x| x == "db3"))),
         "no .db3 in the sqlite3 bag"
     );
+    Ok((native, bags))
+}
+
+#[test]
+fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let (native, bags) = native_and_bags(dir.path())?;
 
     let (reference, native_report) = slam(&native, &dir.path().join("out-native"))?;
     let reference = poses(&reference);
@@ -144,5 +154,92 @@ fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result
             );
         }
     }
+    Ok(())
+}
+
+/// `smokenav play` of a foreign bag publishes its LaserScan and Odometry
+/// topics as laser/scan and base/odom, message for message; a bag with
+/// neither is an error (it used to play 0 messages and exit 0).
+#[test]
+fn play_publishes_a_foreign_bags_standard_topics() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let (native, bags) = native_and_bags(dir.path())?;
+    let mut want_scans: Vec<LaserScan> = Vec::new();
+    let mut want_odom: Vec<Odometry> = Vec::new();
+    for p in Playback::open(&native)? {
+        match p?.message {
+            AnyMessage::LaserScan(s) => want_scans.push(*s),
+            AnyMessage::Odometry(o) => want_odom.push(o),
+            _ => {}
+        }
+    }
+
+    let instance = unique_instance("rosbag_play");
+    let bus = open_bus(&instance);
+    let scans: Subscriber<LaserScan> = bus.subscriber(topics::LASER_SCAN)?;
+    let odom: Subscriber<Odometry> = bus.subscriber(topics::BASE_ODOM)?;
+    let waiter = Waiter::new()?;
+    let _g = [waiter.attach(&scans)?, waiter.attach(&odom)?];
+    let bag = bags.join("sqlite3");
+    let bag_s = bag.to_str().unwrap();
+    let mut player = Child::spawn(
+        &bin("smokenav"),
+        &["play", bag_s, "--rate", "5", "--instance", &instance],
+        &instance,
+    )?;
+    let (mut got_scans, mut got_odom) = (Vec::new(), Vec::new());
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while got_scans.len() < want_scans.len() || got_odom.len() < want_odom.len() {
+        assert!(
+            Instant::now() < deadline,
+            "replay incomplete: {} scans, {} odometry\n{}",
+            got_scans.len(),
+            got_odom.len(),
+            player.output()
+        );
+        waiter.wait(Some(Duration::from_millis(200)))?;
+        while let Some(s) = scans.receive()? {
+            got_scans.push(*s);
+        }
+        while let Some(o) = odom.receive()? {
+            got_odom.push(*o);
+        }
+    }
+    let status = player.wait_exit(Duration::from_secs(30))?;
+    assert!(status.success(), "{}", player.output());
+    assert!(player.output().contains("published"), "{}", player.output());
+    assert_eq!(got_scans.len(), want_scans.len());
+    for (i, (g, w)) in got_scans.iter().zip(&want_scans).enumerate() {
+        assert_eq!(g.header.stamp_ns, w.header.stamp_ns, "scan {i}");
+        assert_eq!(g.len(), w.len(), "scan {i}");
+        assert!(
+            (0..w.len()).all(|b| match w.beam(b) {
+                smokenav_shared_types::BeamReading::Range(r) =>
+                    g.beam(b) == smokenav_shared_types::BeamReading::Range(r),
+                _ => !matches!(g.beam(b), smokenav_shared_types::BeamReading::Range(_)),
+            }),
+            "scan {i}: every range as recorded, every beam without one still without"
+        );
+    }
+    assert_eq!(got_odom.len(), want_odom.len());
+    for (i, (g, w)) in got_odom.iter().zip(&want_odom).enumerate() {
+        assert_eq!(g.header.stamp_ns, w.header.stamp_ns, "odometry {i}");
+        assert_eq!((g.x, g.y), (w.x, w.y), "odometry {i}");
+        assert!((g.theta - w.theta).abs() < 1e-9, "odometry {i}");
+    }
+
+    let tf_only = bags.join("tf-only");
+    let run = Command::new(bin("smokenav"))
+        .arg("play")
+        .arg(&tf_only)
+        .args(["--fast", "--instance", &instance])
+        .output()?;
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("no sensor_msgs/msg/LaserScan or nav_msgs/msg/Odometry topic to play")
+            && stderr.contains("/tf_static"),
+        "{stderr}"
+    );
     Ok(())
 }

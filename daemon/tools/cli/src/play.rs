@@ -16,7 +16,8 @@ use crate::topic::BusArgs;
 use anyhow::{Context, bail};
 use clap::Args;
 use smokenav_platform_bus::{Bus, MapPublisher, Publisher, topics};
-use smokenav_platform_recording::{AnyMessage, EndOfData, Playback};
+use smokenav_platform_recording::bag::{Bag, BagMessages};
+use smokenav_platform_recording::{AnyMessage, EndOfData, Playback, Played};
 use smokenav_shared_types::catalog::{self, Cataloged, MessageVisitor};
 use smokenav_shared_types::clock::monotonic_now_ns;
 use std::collections::{BTreeMap, HashMap};
@@ -26,8 +27,12 @@ use std::time::{Duration, Instant};
 
 #[derive(Debug, Args)]
 pub struct PlayArgs {
-    /// The recording (an MCAP file written by `smokenav record`; a file cut short is fine).
+    /// The recording (an MCAP file written by `smokenav record`; a file cut
+    /// short is fine), or a ROS 2 bag (a rosbag2 folder, .mcap or .db3), whose
+    /// LaserScan and Odometry topics are played as laser/scan and base/odom.
     pub file: PathBuf,
+    #[command(flatten)]
+    pub roles: crate::bag::RoleArgs,
     /// Only these bus topics, as laser/scan or /laser/scan (default: every recorded one).
     #[arg(value_parser = crate::topic::bus_topic)]
     pub topics: Vec<String>,
@@ -190,6 +195,75 @@ fn sleep_until(deadline: Instant, stop: &smokenav_platform_runtime::Shutdown) {
     }
 }
 
+/// What `play` reads: a smokenav recording (every topic, bit for bit) or a
+/// team's own bag (its standard topics, by role).
+enum Source {
+    Native(Box<Playback<std::io::BufReader<std::fs::File>>>),
+    Bag(Box<BagMessages>),
+}
+
+impl Source {
+    fn open(args: &PlayArgs) -> anyhow::Result<Self> {
+        let cannot = || format!("cannot open {}", args.file.display());
+        let bag = Bag::open(&args.file).with_context(cannot)?;
+        if bag.is_smokenav() && !args.roles.given() {
+            return Ok(Self::Native(Box::new(
+                Playback::open(&args.file).with_context(cannot)?,
+            )));
+        }
+        let roles = bag.roles(&args.roles.request())?;
+        if roles.laser.is_none() && roles.odom.is_none() {
+            bail!(
+                "{}: no sensor_msgs/msg/LaserScan or nav_msgs/msg/Odometry topic to play; topics: {}",
+                args.file.display(),
+                bag.topics()
+                    .iter()
+                    .map(|t| format!("{} ({})", t.name, t.type_name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        for (role, bus) in [
+            (&roles.laser, topics::LASER_SCAN.name()),
+            (&roles.odom, topics::BASE_ODOM.name()),
+        ] {
+            if let Some(t) = role {
+                tracing::info!("{}: {t} → {bus}", args.file.display());
+            }
+        }
+        Ok(Self::Bag(Box::new(bag.messages(&roles)?)))
+    }
+
+    fn read_next(&mut self) -> anyhow::Result<Option<Played>> {
+        Ok(match self {
+            Self::Native(p) => p.read_next()?,
+            Self::Bag(b) => b.read_next()?,
+        })
+    }
+
+    /// What was added to the stamps' clock to make the log times (a bag's are on it already).
+    fn unix_offset(&self) -> i64 {
+        match self {
+            Self::Native(p) => smokenav_platform_recording::unix_offset(p.source().metadata()),
+            Self::Bag(_) => 0,
+        }
+    }
+
+    fn position(&self) -> u64 {
+        match self {
+            Self::Native(p) => p.source().bytes_read(),
+            Self::Bag(_) => 0,
+        }
+    }
+
+    fn end(&self) -> Option<&EndOfData> {
+        match self {
+            Self::Native(p) => p.source().end(),
+            Self::Bag(b) => b.end(),
+        }
+    }
+}
+
 pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     smokenav_platform_runtime::init_logging("play");
     if !args.fast && (args.rate <= 0.0 || !args.rate.is_finite()) {
@@ -198,8 +272,7 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let size = std::fs::metadata(&args.file)
         .with_context(|| format!("cannot open {}", args.file.display()))?
         .len();
-    let mut playback = Playback::open(&args.file)
-        .with_context(|| format!("cannot open {}", args.file.display()))?;
+    let mut source = Source::open(&args)?;
     let bus = args.bus.open("play")?;
     let wanted = |topic: &str| {
         (args.topics.is_empty() || args.topics.iter().any(|t| t == topic))
@@ -255,7 +328,7 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let mut published = 0u64;
     let mut commands_skipped = 0u64;
     while !stop.requested() {
-        let Some(mut played) = playback
+        let Some(mut played) = source
             .read_next()
             .with_context(|| format!("reading {} failed", args.file.display()))?
         else {
@@ -278,8 +351,7 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
             // Log times are Unix times; the stamps are on the recorder's
             // monotonic clock, which the file's offset converts back to.
             let offset = *stamp_offset.get_or_insert_with(|| {
-                let unix_offset =
-                    smokenav_platform_recording::unix_offset(playback.source().metadata());
+                let unix_offset = source.unix_offset();
                 let received = smokenav_platform_recording::shift_ns(
                     played.log_time,
                     unix_offset.saturating_neg(),
@@ -318,18 +390,17 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
         r.renumbered += u64::from(seq != played.message.header().seq);
         published += 1;
         if published.is_multiple_of(64) {
-            bar.set_position(playback.source().bytes_read());
+            bar.set_position(source.position());
             bar.set_message(format!("{published} messages"));
         }
     }
     bar.finish_and_clear();
 
-    let stats = playback.stats().clone();
     println!(
         "played {published} messages in {:.1} s from {}{}",
         started.elapsed().as_secs_f64(),
         args.file.display(),
-        match playback.source().end() {
+        match source.end() {
             Some(EndOfData::Truncated) => " (the file was cut short; played every complete chunk)",
             None => " (interrupted)",
             Some(EndOfData::Complete) => "",
@@ -351,6 +422,15 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
             "  left out {commands_skipped} velocity commands (base/cmd_vel); --commands replays them"
         );
     }
+    let Source::Native(playback) = &source else {
+        anyhow::ensure!(
+            published > 0 || stop.requested(),
+            "{}: nothing to play",
+            args.file.display()
+        );
+        return Ok(());
+    };
+    let stats = playback.stats().clone();
     println!(
         "skipped: {} views (/tf, sonar points), {} foreign, {} orphaned, {} undecodable",
         stats.views, stats.foreign, stats.orphans, stats.decode_errors
@@ -360,6 +440,13 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     }
     if stats.decode_errors > 0 {
         bail!("{} messages could not be decoded", stats.decode_errors);
+    }
+    if published == 0 && !stop.requested() && stats.foreign > 0 {
+        bail!(
+            "{}: none of its {} messages is a smokenav message",
+            args.file.display(),
+            stats.foreign
+        );
     }
     Ok(())
 }
