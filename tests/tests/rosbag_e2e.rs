@@ -157,6 +157,42 @@ fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result
     Ok(())
 }
 
+/// The fused scans' stamps `smokenav fuse --bag` writes.
+fn fuse(bag: &Path) -> anyhow::Result<Vec<u64>> {
+    let run = Command::new(bin("smokenav"))
+        .args(["fuse", "--method", "v2", "--bag"])
+        .arg(bag)
+        .output()?;
+    anyhow::ensure!(
+        run.status.success(),
+        "smokenav fuse --bag {} failed:\n{}",
+        bag.display(),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mut stamps = Vec::new();
+    for line in String::from_utf8_lossy(&run.stdout).lines() {
+        let v: serde_json::Value = serde_json::from_str(line)?;
+        assert_eq!(v["topic"], "fusion/scan", "{line}");
+        let stamp = v["scan"]["header"]["stamp_ns"].as_u64();
+        stamps.push(stamp.ok_or_else(|| anyhow::anyhow!("no stamp in {line}"))?);
+    }
+    Ok(stamps)
+}
+
+/// `smokenav fuse --bag` fuses a foreign bag's scans as it does the same
+/// scans of the native recording (neither has sonar or smoke: every scan
+/// passes once the synchroniser gives up on them).
+#[test]
+fn fuse_on_a_foreign_bag_matches_the_native_recording() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let (native, bags) = native_and_bags(dir.path())?;
+    let want = fuse(&native)?;
+    assert!(want.len() > 200, "{} fused scans", want.len());
+    assert_eq!(fuse(&bags.join("mcap"))?, want);
+    assert_eq!(fuse(&bags.join("sqlite3"))?, want);
+    Ok(())
+}
+
 /// `smokenav play` of a foreign bag publishes its LaserScan and Odometry
 /// topics as laser/scan and base/odom, message for message; a bag with
 /// neither is an error (it used to play 0 messages and exit 0).
