@@ -606,20 +606,28 @@ impl MessageVisitor for Hz<'_> {
             .with_context(|| format!("topic `{}` does not carry {}", self.topic, M::NAME))?;
         let start = Instant::now();
         let mut last_print = start;
-        let subscribed_ns = smokenav_shared_types::clock::monotonic_now_ns();
         let sub = self.bus.subscriber(topic)?;
         let waiter = Waiter::new()?;
         let _g = waiter.attach(&sub)?;
         let stop = smokenav_platform_runtime::Shutdown::install()?;
+        // Rates are measured on receive time, never on stamps (a replay
+        // keeps its recorded ones). The topic's history arrives in the first
+        // batch together with the newest message: only that newest one
+        // anchors the intervals, or the history would fake near-zero ones.
+        let mut anchored = false;
         loop {
+            let mut first_batch: Option<u64> = None;
             while let Some(s) = sub.receive()? {
-                let header = s.payload().header();
-                // The topic's history sample was published before we
-                // subscribed; counting it would fake a near-zero interval.
-                if header.stamp_ns != 0 && header.stamp_ns < subscribed_ns {
-                    continue;
+                let seq = s.payload().header().seq;
+                if anchored {
+                    self.stats.arrive(Instant::now(), seq);
+                } else {
+                    first_batch = Some(first_batch.map_or(seq, |m: u64| m.max(seq)));
                 }
-                self.stats.arrive(Instant::now(), header.seq);
+            }
+            if let Some(seq) = first_batch {
+                anchored = true;
+                self.stats.arrive(Instant::now(), seq);
             }
             let now = Instant::now();
             if !self.json && now.duration_since(last_print) >= Duration::from_secs(1) {
