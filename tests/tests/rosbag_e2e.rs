@@ -325,3 +325,88 @@ fn topic_hz_measures_a_replay_without_restamp() -> anyhow::Result<()> {
     assert!(received >= 5 && rate > 0.0, "{line}");
     Ok(())
 }
+
+/// (stamp, bus time it arrived at) of each scan replayed, and the clock messages' times.
+type Replayed = (Vec<(u64, u64)>, Vec<u64>);
+
+/// Replays `native` onto a fresh instance with `extra` arguments.
+fn replay_collect(native: &Path, extra: &[&str]) -> anyhow::Result<Replayed> {
+    use smokenav_shared_types::SimClock;
+    let instance = unique_instance("rosbag_clock");
+    let bus = open_bus(&instance);
+    let scans: Subscriber<LaserScan> = bus.subscriber(topics::LASER_SCAN)?;
+    let clock: Subscriber<SimClock> = bus.subscriber(topics::CLOCK)?;
+    let waiter = Waiter::new()?;
+    let _g = [waiter.attach(&scans)?, waiter.attach(&clock)?];
+    let mut args = vec!["play", native.to_str().unwrap(), "--instance", &instance];
+    args.extend_from_slice(extra);
+    let mut player = Child::spawn(&bin("smokenav"), &args, &instance)?;
+    let (mut got, mut clocks) = (Vec::new(), Vec::new());
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        waiter.wait(Some(Duration::from_millis(100)))?;
+        while let Some(s) = scans.receive()? {
+            got.push((
+                s.header.stamp_ns,
+                smokenav_shared_types::clock::monotonic_now_ns(),
+            ));
+        }
+        while let Some(c) = clock.receive()? {
+            clocks.push(c.header.stamp_ns);
+        }
+        if !player.is_running() {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "replay did not end:\n{}",
+            player.output()
+        );
+    }
+    let status = player.wait_exit(Duration::from_secs(10))?;
+    assert!(status.success(), "{}", player.output());
+    Ok((got, clocks))
+}
+
+/// `play` publishes sim time on `clock` (the data's instant, at any
+/// `--rate`), and `--rate 4 --restamp` keeps every stamp at its message's
+/// arrival on the bus clock: a constant shift used to run the stamps ahead
+/// of the data by the time the faster replay saved (19 s here by the end).
+#[test]
+fn play_publishes_sim_time_and_restamps_at_the_replay_pace() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let native = dir.path().join("native.mcap");
+    record_native(&native)?;
+
+    let (scans, clocks) = replay_collect(&native, &["--rate", "4"])?;
+    assert!(scans.len() > 100, "{} scans", scans.len());
+    assert!(clocks.len() > 100, "{} clock messages", clocks.len());
+    assert!(
+        clocks.windows(2).all(|w| w[0] <= w[1]),
+        "sim time went back"
+    );
+    // Sim time is the recording's own time (its stamps' clock), not the bus clock.
+    let (first, last) = (scans[0].0, scans[scans.len() - 1].0);
+    assert!(
+        clocks[0] <= first + 100_000_000 && *clocks.last().unwrap() + 200_000_000 >= last,
+        "clock {}..{} vs scans {first}..{last}",
+        clocks[0],
+        clocks.last().unwrap()
+    );
+    assert!(*clocks.last().unwrap() <= last + 200_000_000);
+
+    let (scans, _) = replay_collect(&native, &["--rate", "4", "--restamp", "--no-clock"])?;
+    assert!(scans.len() > 100, "{} scans", scans.len());
+    for (i, &(stamp, arrived)) in scans.iter().enumerate() {
+        let ahead = stamp as i128 - arrived as i128;
+        assert!(
+            ahead < 2_000_000_000,
+            "scan {i} stamped {:.1} s after it arrived",
+            ahead as f64 * 1e-9
+        );
+    }
+    // Stamps advance at the replay's pace: 4× closer than recorded.
+    let span = (scans[scans.len() - 1].0 - scans[0].0) as f64 * 1e-9;
+    assert!(span < 0.5 * 25.0, "restamped stamps span {span:.1} s");
+    Ok(())
+}

@@ -47,6 +47,9 @@ pub struct PlayArgs {
     /// Without it, messages are republished bit for bit.
     #[arg(long)]
     pub restamp: bool,
+    /// Do not publish the replay's time on `clock` (ROS 2 `/clock`, sim time).
+    #[arg(long)]
+    pub no_clock: bool,
     /// Seconds to wait after a topic's publisher appears, before its first
     /// message, so subscribers that start with the replay connect.
     #[arg(long, default_value_t = 0.0)]
@@ -286,6 +289,10 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
         args.topics.clone()
     };
     let playable: Vec<String> = playable.into_iter().filter(|t| wanted(t)).collect();
+    let mut playable = playable;
+    if !args.no_clock {
+        playable.push(topics::CLOCK.name().to_owned());
+    }
     let conflicts = live_conflicts(&bus, &playable)?;
     if !conflicts.is_empty() {
         let list = conflicts
@@ -323,7 +330,16 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let mut publishers: HashMap<String, Box<dyn Replay>> = HashMap::new();
     let mut report: BTreeMap<String, TopicReport> = BTreeMap::new();
     let mut clock: Option<(u64, Instant)> = None;
-    let mut stamp_offset: Option<i64> = None;
+    // Restamping: (first receive time on the stamps' clock, bus time it maps to).
+    let mut restamp_base: Option<(u64, u64)> = None;
+    let unix_offset = source.unix_offset();
+    let mut clock_pub = if args.no_clock {
+        None
+    } else {
+        Some(bus.publisher(topics::CLOCK)?)
+    };
+    let mut last_clock: Option<u64> = None;
+    let mut clocks = 0u64;
     let started = Instant::now();
     let mut published = 0u64;
     let mut commands_skipped = 0u64;
@@ -346,20 +362,34 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
                 break;
             }
         }
+        // When the recorder received it, on the clock of the stamps.
+        let received =
+            smokenav_platform_recording::shift_ns(played.log_time, unix_offset.saturating_neg());
+        let mut data_time = received;
         if args.restamp {
-            // Recorder receive time → now: stamps keep their lag behind it.
-            // Log times are Unix times; the stamps are on the recorder's
-            // monotonic clock, which the file's offset converts back to.
-            let offset = *stamp_offset.get_or_insert_with(|| {
-                let unix_offset = source.unix_offset();
-                let received = smokenav_platform_recording::shift_ns(
-                    played.log_time,
-                    unix_offset.saturating_neg(),
-                );
-                (i128::from(monotonic_now_ns()) - i128::from(received))
-                    .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64
-            });
+            // Recorder receive time → the bus clock, at the replay's pace, so
+            // at any --rate a stamp keeps its lag behind its message's
+            // arrival (a constant shift would run ahead by the time saved).
+            let (r0, m0) = *restamp_base.get_or_insert_with(|| (received, monotonic_now_ns()));
+            let elapsed = received.saturating_sub(r0) as f64;
+            let scaled = if args.fast {
+                elapsed
+            } else {
+                elapsed / args.rate
+            };
+            let target = i128::from(m0) + scaled as i128;
+            let offset = (target - i128::from(received))
+                .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64;
             played.message.shift_stamps(offset);
+            data_time = smokenav_platform_recording::shift_ns(received, offset);
+        }
+        // Sim time at most every 10 ms of data, just before the data it dates.
+        if let Some(c) = &mut clock_pub
+            && last_clock.is_none_or(|t| data_time >= t + 10_000_000)
+        {
+            c.publish_with(|m| m.header.stamp_ns = data_time)?;
+            last_clock = Some(data_time);
+            clocks += 1;
         }
         if !publishers.contains_key(&played.topic) {
             let p = played
@@ -415,6 +445,12 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
             } else {
                 String::new()
             }
+        );
+    }
+    if clocks > 0 {
+        println!(
+            "  {:<16} published {clocks:>8}  (simulated time)",
+            topics::CLOCK.name()
         );
     }
     if commands_skipped > 0 {

@@ -408,6 +408,7 @@ fn summary(r: &TopicRecord) -> String {
                 .collect::<Vec<_>>()
                 .join(" ")
         ),
+        Message::SimClock(_) => format!("{head} Clock (simulated time)"),
         Message::Odometry(o) => format!(
             "{head} Odometry x={:.3} y={:.3} θ={:.1}° v={:.3} ω={:.1}°/s battery={:.1}V",
             o.x,
