@@ -19,6 +19,7 @@ mod slam;
 mod status;
 mod topic;
 mod topic_info;
+mod topic_pub;
 
 #[derive(Parser)]
 #[command(
@@ -40,7 +41,7 @@ enum Command {
     /// Robot profile tools.
     #[command(subcommand)]
     Config(ConfigCommand),
-    /// See what flows on the bus: list, echo, hz, info, bw (ROS spellings like /laser/scan work).
+    /// See what flows on the bus: list, echo, hz, info, bw, pub (ROS spellings like /laser/scan work).
     #[command(subcommand)]
     Topic(topic::TopicCommand),
     /// One line per process: up/down, heartbeat age, rates, counters. Exit 1 if anything is unhealthy.

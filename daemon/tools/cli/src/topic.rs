@@ -101,6 +101,8 @@ pub enum TopicCommand {
         #[command(flatten)]
         bus: BusArgs,
     },
+    /// Publish a message given as JSON (`base/cmd_vel` only with --motion and --for, then stop).
+    Pub(crate::topic_pub::PubArgs),
     /// Measure a topic's bandwidth on the bus (bytes per second, message sizes).
     Bw {
         /// e.g. laser/scan (or /laser/scan).
@@ -157,6 +159,7 @@ pub fn run(cmd: TopicCommand) -> anyhow::Result<()> {
             };
             echo(&bus, &topic, &opts)
         }
+        TopicCommand::Pub(args) => crate::topic_pub::run(args),
         TopicCommand::Info { topic, json, bus } => {
             crate::topic_info::info(&bus.open("topic-info")?, &topic, json)
         }
