@@ -332,7 +332,8 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let mut clock: Option<(u64, Instant)> = None;
     // Restamping: (first receive time on the stamps' clock, bus time it maps to).
     let mut restamp_base: Option<(u64, u64)> = None;
-    let unix_offset = source.unix_offset();
+    // Read with the first message: the file's metadata precedes it.
+    let mut unix_offset: Option<i64> = None;
     let mut clock_pub = if args.no_clock {
         None
     } else {
@@ -363,6 +364,7 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
             }
         }
         // When the recorder received it, on the clock of the stamps.
+        let unix_offset = *unix_offset.get_or_insert_with(|| source.unix_offset());
         let received =
             smokenav_platform_recording::shift_ns(played.log_time, unix_offset.saturating_neg());
         let mut data_time = received;
