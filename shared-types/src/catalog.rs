@@ -118,6 +118,18 @@ macro_rules! for_each_message {
                     companion: Some(("/extras", "smokenav_msgs/msg/StampSeq")),
                     latched: false,
                 }
+                SimClock {
+                    doc: "Simulated time during a replay (`smokenav play`): the instant of the data.",
+                    rust: $crate::sim_clock::SimClock,
+                    header: [header],
+                    owned: $crate::sim_clock::SimClock,
+                    json: $crate::record::SimClockRecord,
+                    topics: [CLOCK = "clock"],
+                    family: [],
+                    ros2: "rosgraph_msgs/msg/Clock",
+                    companion: Some(("/extras", "smokenav_msgs/msg/StampSeq")),
+                    latched: false,
+                }
                 SmokeReading {
                     doc: "One smoke sensor reading and the level derived from it.",
                     rust: $crate::smoke::SmokeReading,

@@ -123,6 +123,12 @@ impl BitIdentical for SonarRing {
     }
 }
 
+impl BitIdentical for crate::sim_clock::SimClock {
+    fn bit_identical(&self, o: &Self) -> bool {
+        self.header.bit_identical(&o.header)
+    }
+}
+
 impl BitIdentical for VelocityCommand {
     fn bit_identical(&self, o: &Self) -> bool {
         self.header.bit_identical(&o.header)

@@ -457,6 +457,26 @@ impl JsonForm for Odometry {
     }
 }
 
+/// [`SimClock`](crate::SimClock) as JSON.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct SimClockRecord {
+    /// The simulated time, sequence number.
+    pub header: HeaderRecord,
+}
+
+impl JsonForm for crate::sim_clock::SimClock {
+    type Record = SimClockRecord;
+    fn to_record(&self) -> SimClockRecord {
+        SimClockRecord {
+            header: (&self.header).into(),
+        }
+    }
+    fn write_record(r: &SimClockRecord, out: &mut Self) -> Result<(), ConversionError> {
+        out.header = (&r.header).into();
+        Ok(())
+    }
+}
+
 /// [`VelocityCommand`] as JSON.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct VelocityCommandRecord {

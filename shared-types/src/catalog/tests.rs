@@ -418,6 +418,9 @@ fn messages(kind: MessageKind) -> BoxedStrategy<AnyMessage> {
             .prop_map(AnyMessage::VelocityCommand)
             .boxed(),
         MessageKind::SmokeReading => smoke_reading().prop_map(AnyMessage::SmokeReading).boxed(),
+        MessageKind::SimClock => header()
+            .prop_map(|header| AnyMessage::SimClock(crate::SimClock { header }))
+            .boxed(),
         MessageKind::FusedScan => fused_scan().prop_map(AnyMessage::FusedScan).boxed(),
         MessageKind::PoseEstimate => pose_estimate().prop_map(AnyMessage::PoseEstimate).boxed(),
         MessageKind::Health => health().prop_map(AnyMessage::Health).boxed(),

@@ -12,8 +12,8 @@ use smokenav_shared_types::health::{LAST_ERROR_LEN, MAX_METRICS, METRIC_NAME_LEN
 use smokenav_shared_types::laser::{BEAM_OK, BEAM_SENSOR_CODE};
 use smokenav_shared_types::{
     FixedStr, FusedScan, Header, Health, LaserScan, MAX_BEAMS, MAX_SONARS, MAX_VOXELS, MapInfo,
-    Metric, Odometry, PoseEstimate, SmokeReading, SonarReading, SonarRing, VelocityCommand,
-    VoxelCloud,
+    Metric, Odometry, PoseEstimate, SimClock, SmokeReading, SonarReading, SonarRing,
+    VelocityCommand, VoxelCloud,
 };
 
 /// `child_frame_id` of odometry and of the odom → base transform.
@@ -394,6 +394,21 @@ pub fn decode_twist_stamped(data: &[u8]) -> Result<VelocityCommand, CdrError> {
         header,
         linear: t[0],
         angular: t[5],
+    })
+}
+
+// ---- rosgraph_msgs/Clock + smokenav_msgs/StampSeq ----------------------------
+
+pub fn encode_clock(c: &SimClock, buf: &mut Vec<u8>) {
+    let mut w = CdrWriter::new(buf);
+    write_time(&mut w, c.header.stamp_ns);
+}
+
+pub fn decode_clock(data: &[u8]) -> Result<SimClock, CdrError> {
+    let mut r = CdrReader::new(data)?;
+    let stamp_ns = read_time(&mut r)?;
+    Ok(SimClock {
+        header: Header::new(stamp_ns, 0, ""),
     })
 }
 

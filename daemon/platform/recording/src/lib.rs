@@ -24,6 +24,8 @@
 //! | `base/cmd_vel` (VelocityCmd) | `/base/cmd_vel`           | `geometry_msgs/msg/TwistStamped`    | standard   |
 //! |                              | `/base/cmd_vel/extras`    | `smokenav_msgs/msg/StampSeq`        | companion  |
 //! | `smoke/level` (SmokeReading) | `/smoke/level`            | `smokenav_msgs/msg/SmokeReading`    | complete   |
+//! | `clock` (SimClock)           | `/clock`                  | `rosgraph_msgs/msg/Clock`           | standard   |
+//! |                              | `/clock/extras`           | `smokenav_msgs/msg/StampSeq`        | companion  |
 //! | `slam/pose` (PoseEstimate)   | `/slam/pose`              | `geometry_msgs/msg/PoseStamped`     | standard   |
 //! |                              | `/slam/pose/extras`       | `smokenav_msgs/msg/PoseExtras`      | companion  |
 //! | `slam/map` (MapInfo + cells) | `/slam/map`               | `nav_msgs/msg/OccupancyGrid`        | standard   |
@@ -59,6 +61,9 @@
 //! that leaves other values in unused capacity or reserved fields gets the
 //! defaults back. `has_intensities` is replayed as 0 or 1.
 
+/// ROS 2 bags in (rosbag2 folders, `.mcap`, `.db3`): see [`bag`].
+pub mod bag;
+pub mod bag_decode;
 pub mod cdr;
 pub mod codec;
 pub mod encoder;

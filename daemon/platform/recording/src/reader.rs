@@ -353,6 +353,9 @@ fn decode_step(
             return Ok(None);
         };
         held.held = false;
+        let layout = ros2::kinds_with_companion(name)
+            .find(|l| l.standard.name == held.schema)
+            .unwrap_or(layout);
         if held.sequence != raw.sequence || held.schema != layout.standard.name {
             stats.orphans += 2;
             return Ok(None);

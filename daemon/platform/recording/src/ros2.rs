@@ -12,7 +12,7 @@ use crate::codec;
 use crate::schema::{self, MsgDef};
 use smokenav_shared_types::{
     AnyMessage, AnyMessageRef, FusedScan, Health, LaserScan, MessageKind, Odometry, PoseEstimate,
-    SmokeReading, SonarRing, VelocityCommand, VoxelCloud,
+    SimClock, SmokeReading, SonarRing, VelocityCommand, VoxelCloud,
 };
 use std::borrow::BorrowMut;
 
@@ -76,6 +76,19 @@ impl Ros2Codec for VelocityCommand {
     }
     fn decode(standard: &[u8], companion: Option<&[u8]>, out: &mut Self) -> Result<(), CdrError> {
         *out = codec::decode_twist_stamped(standard)?;
+        companion.map_or(Ok(()), |c| codec::apply_stamp_seq(c, &mut out.header))
+    }
+}
+
+impl Ros2Codec for SimClock {
+    fn encode_standard(&self, out: &mut Vec<u8>) {
+        codec::encode_clock(self, out);
+    }
+    fn encode_companion(&self, out: &mut Vec<u8>) {
+        codec::encode_stamp_seq(&self.header, out);
+    }
+    fn decode(standard: &[u8], companion: Option<&[u8]>, out: &mut Self) -> Result<(), CdrError> {
+        *out = codec::decode_clock(standard)?;
         companion.map_or(Ok(()), |c| codec::apply_stamp_seq(c, &mut out.header))
     }
 }
@@ -213,9 +226,15 @@ pub fn kinds_with_standard(name: &str) -> impl Iterator<Item = &'static Ros2Layo
 
 /// The kind whose companion has schema `name`.
 pub fn kind_with_companion(name: &str) -> Option<&'static Ros2Layout> {
+    kinds_with_companion(name).next()
+}
+
+/// The kinds whose companion has schema `name` (`StampSeq` completes both a
+/// velocity command and a clock; their standard schemas tell them apart).
+pub fn kinds_with_companion(name: &str) -> impl Iterator<Item = &'static Ros2Layout> + '_ {
     LAYOUTS
         .iter()
-        .find(|l| l.companion.is_some_and(|(_, def)| def.name == name))
+        .filter(move |l| l.companion.is_some_and(|(_, def)| def.name == name))
 }
 
 macro_rules! ros2_dispatch {

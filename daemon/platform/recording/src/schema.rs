@@ -55,6 +55,12 @@ pub static TIME: MsgDef = MsgDef {
     deps: &[],
 };
 
+pub static CLOCK: MsgDef = MsgDef {
+    name: "rosgraph_msgs/msg/Clock",
+    text: "builtin_interfaces/Time clock\n",
+    deps: &[&TIME],
+};
+
 pub static HEADER: MsgDef = MsgDef {
     name: "std_msgs/msg/Header",
     text: "builtin_interfaces/Time stamp\nstring frame_id\n",
@@ -420,6 +426,7 @@ pub static ALL: &[&MsgDef] = &[
     &POSE_STAMPED,
     &TWIST_STAMPED,
     &TF_MESSAGE,
+    &CLOCK,
     &SCAN_EXTRAS,
     &FUSED_DECISIONS,
     &ODOMETRY_EXTRAS,

@@ -197,6 +197,12 @@ fn sample(kind: MessageKind, seq: u64) -> (String, Message) {
         MessageKind::SonarRing => ("base/sonar", Message::SonarRing(sonar(seq))),
         MessageKind::VelocityCommand => ("base/cmd_vel", Message::VelocityCommand(cmd(seq))),
         MessageKind::SmokeReading => ("smoke/level", Message::SmokeReading(smoke(seq))),
+        MessageKind::SimClock => (
+            "clock",
+            Message::SimClock(smokenav_shared_types::SimClock {
+                header: Header::new(9_000_000_000 + seq * 2_500_000, seq, ""),
+            }),
+        ),
         MessageKind::PoseEstimate => ("slam/pose", Message::PoseEstimate(pose(seq))),
         MessageKind::Map => {
             let (info, cells) = map(seq);
@@ -278,8 +284,8 @@ fn file_has_ros2_profile_statistics_and_no_schema_id_0() {
     let (bytes, _) = record_to_vec(2, SinkOptions::default());
     let summary = mcap::Summary::read(&bytes).unwrap().expect("summary");
     let stats = summary.stats.expect("statistics");
-    // 10 message kinds × 2 rounds, 7 of them with a companion, + tf_static + tf + points.
-    assert_eq!(stats.message_count, 2 * (10 + 7) + 1 + 2 * 3);
+    // 11 message kinds × 2 rounds, 8 of them with a companion, + tf_static + tf + points.
+    assert_eq!(stats.message_count, 2 * (11 + 8) + 1 + 2 * 3);
     assert!(summary.schemas.keys().all(|&id| id != 0));
     for c in summary.channels.values() {
         assert_eq!(c.message_encoding, "cdr", "{}", c.topic);
@@ -556,7 +562,8 @@ fn recorded_bytes_do_not_change() {
     // The shared `Pose2` moved it once more: map → odom is now composed as
     // map_base ⊕ odom_base⁻¹ with the heading normalised (the same transform,
     // a few last bits of the translation and the quaternion's sign differ).
-    // The voxel cloud (`mapping/voxels`) added a kind to the sample set.
+    // The voxel cloud (`mapping/voxels`) added a kind to the sample set, and
+    // so did the replay clock (`clock`).
     let opts = SinkOptions {
         compression: Compression::None,
         ..Default::default()
@@ -564,7 +571,7 @@ fn recorded_bytes_do_not_change() {
     let (bytes, _) = record_to_vec(3, opts);
     assert_eq!(
         (bytes.len(), fnv1a(&bytes)),
-        (93_317, 0x9324_83ad_7953_e267),
+        (95_411, 0x07d2_881f_11c0_1d95),
         "the recording's bytes changed"
     );
 }

@@ -2,9 +2,12 @@
 //!
 //! Reads JSON lines exactly as `smokenav topic echo --json` prints them
 //! (`laser/scan`, `base/sonar`, `smoke/level`; other topics are skipped) on
-//! stdin, runs the fusion process's synchroniser and the chosen method, and
-//! writes one `fusion/scan` record per fused scan on stdout. Bad lines are
-//! reported on stderr with their line number and skipped.
+//! stdin — or, with `--bag BAG`, a smokenav recording or a ROS 2 bag, fed in
+//! receive order at its receive times as the process is — runs the fusion
+//! process's synchroniser and the chosen method, and writes one
+//! `fusion/scan` record per fused scan on stdout. Bad lines are reported on
+//! stderr with their line number and skipped; a damaged bag message ends the
+//! run with an error naming its file, topic and index.
 
 use anyhow::Context;
 use clap::Args;
@@ -27,6 +30,14 @@ pub struct FuseArgs {
     /// the shipped Pioneer 3-DX profile.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// Read a `smokenav record` file or a ROS 2 bag (rosbag2 folder, .mcap,
+    /// .db3) instead of stdin. A foreign bag gives the laser only (sonar and
+    /// smoke topics are smokenav's), so its scans pass through once the
+    /// synchroniser gives up on the silent topics.
+    #[arg(long, value_name = "BAG")]
+    bag: Option<PathBuf>,
+    #[command(flatten)]
+    roles: crate::bag::RoleArgs,
 }
 
 pub fn run(args: FuseArgs) -> anyhow::Result<()> {
@@ -37,6 +48,13 @@ pub fn run(args: FuseArgs) -> anyhow::Result<()> {
     };
     let mut pipeline = FusionPipeline::from_config(&cfg, Some(args.method))
         .context("the profile's sonar geometry is unusable")?;
+    if let Some(bag) = &args.bag {
+        return run_bag(&mut pipeline, bag, &args.roles);
+    }
+    anyhow::ensure!(
+        !args.roles.given(),
+        "--laser and --odom choose a bag's topics: give --bag BAG"
+    );
     let stdin = std::io::stdin().lock();
     let stdout = BufWriter::new(std::io::stdout().lock());
     let mut stderr = std::io::stderr().lock();
@@ -59,6 +77,81 @@ pub fn run(args: FuseArgs) -> anyhow::Result<()> {
         report.ignored,
         report.bad,
         report.written,
+        100.0 * pipeline.stats().sonar_usage(),
+        sync.dropped_all(),
+    );
+    Ok(())
+}
+
+fn run_bag(
+    pipeline: &mut FusionPipeline,
+    path: &std::path::Path,
+    roles: &crate::bag::RoleArgs,
+) -> anyhow::Result<()> {
+    use smokenav_platform_recording::AnyMessage;
+    use smokenav_shared_types::catalog::topic_names;
+    use smokenav_shared_types::record::{FusedScanRecord, Message, TopicRecord};
+    let (bag, map) = crate::bag::open(path, roles, false)?;
+    anyhow::ensure!(
+        map.laser.is_some(),
+        "{}: no sensor_msgs/msg/LaserScan topic to fuse",
+        path.display()
+    );
+    let mut messages = bag.messages(&map)?;
+    let laser_topic = messages.laser_topic().to_owned();
+    let mut out = BufWriter::new(std::io::stdout().lock());
+    let mut written = 0u64;
+    let mut failed: Option<std::io::Error> = None;
+    let mut emit = |f: &smokenav_shared_types::FusedScan, _: &_| {
+        if failed.is_some() {
+            return;
+        }
+        let rec = TopicRecord {
+            topic: topic_names::FUSION_SCAN.to_owned(),
+            message: Message::FusedScan(FusedScanRecord::from(f)),
+        };
+        match serde_json::to_writer(&mut out, &rec)
+            .map_err(std::io::Error::from)
+            .and_then(|()| out.write_all(b"\n"))
+        {
+            Ok(()) => written += 1,
+            Err(e) => failed = Some(e),
+        }
+    };
+    let (mut laser, mut sonar, mut smoke, mut other) = (0u64, 0u64, 0u64, 0u64);
+    while let Some(p) = messages.read_next()? {
+        let now = p.log_time;
+        match &p.message {
+            AnyMessage::LaserScan(s) if p.topic == laser_topic => {
+                laser += 1;
+                pipeline.push_laser(s, now, &mut emit);
+            }
+            AnyMessage::SonarRing(r) => {
+                sonar += 1;
+                pipeline.push_sonar(r, now, &mut emit);
+            }
+            AnyMessage::SmokeReading(r) => {
+                smoke += 1;
+                pipeline.push_smoke(r, now, &mut emit);
+            }
+            _ => {
+                other += 1;
+                continue;
+            }
+        }
+        pipeline.poll(now, &mut emit);
+    }
+    pipeline.flush(&mut emit);
+    if let Some(e) = failed {
+        return Err(e).context("smokenav fuse: cannot write stdout");
+    }
+    out.flush().context("smokenav fuse: cannot write stdout")?;
+    drop(out);
+    let sync = pipeline.sync_counters();
+    eprintln!(
+        "smokenav fuse: {} (laser {laser} on {}, sonar {sonar}, smoke {smoke}, other {other}); {written} fused scans, sonar usage {:.1}%, sync drops {}",
+        path.display(),
+        map.laser.as_deref().unwrap_or("?"),
         100.0 * pipeline.stats().sonar_usage(),
         sync.dropped_all(),
     );

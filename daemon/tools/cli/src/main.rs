@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 mod access;
 mod arcos;
+mod bag;
 mod drive;
 mod eval;
 mod fleet;
@@ -20,6 +21,7 @@ mod slam;
 mod status;
 mod topic;
 mod topic_info;
+mod topic_pub;
 
 #[derive(Parser)]
 #[command(
@@ -41,12 +43,12 @@ enum Command {
     /// Robot profile tools.
     #[command(subcommand)]
     Config(ConfigCommand),
-    /// See what flows on the bus: list, echo, hz, info, bw (ROS spellings like /laser/scan work).
+    /// See what flows on the bus: list, echo, hz, info, bw, pub (ROS spellings like /laser/scan work).
     #[command(subcommand)]
     Topic(topic::TopicCommand),
     /// One line per process: up/down, heartbeat age, rates, counters. Exit 1 if anything is unhealthy.
     Status(status::StatusArgs),
-    /// Run SLAM offline over a CARMEN log; write trajectory (`--format tum` for evo), map and timing.
+    /// Run SLAM offline over a CARMEN log or a ROS 2 bag; write trajectory (`--format tum` for evo), map and timing.
     Slam(slam::SlamArgs),
     /// Maps published by the SLAM process: `map save [DIR] [--mode trinary|scale|raw]` writes them as nav2's map_saver does (and the 3D octree of smokenav-mapping).
     #[command(subcommand)]

@@ -16,7 +16,8 @@ use crate::topic::BusArgs;
 use anyhow::{Context, bail};
 use clap::Args;
 use smokenav_platform_bus::{Bus, MapPublisher, Publisher, topics};
-use smokenav_platform_recording::{AnyMessage, EndOfData, Playback};
+use smokenav_platform_recording::bag::{Bag, BagMessages};
+use smokenav_platform_recording::{AnyMessage, EndOfData, Playback, Played};
 use smokenav_shared_types::catalog::{self, Cataloged, MessageVisitor};
 use smokenav_shared_types::clock::monotonic_now_ns;
 use std::collections::{BTreeMap, HashMap};
@@ -26,8 +27,12 @@ use std::time::{Duration, Instant};
 
 #[derive(Debug, Args)]
 pub struct PlayArgs {
-    /// The recording (an MCAP file written by `smokenav record`; a file cut short is fine).
+    /// The recording (an MCAP file written by `smokenav record`; a file cut
+    /// short is fine), or a ROS 2 bag (a rosbag2 folder, .mcap or .db3), whose
+    /// LaserScan and Odometry topics are played as laser/scan and base/odom.
     pub file: PathBuf,
+    #[command(flatten)]
+    pub roles: crate::bag::RoleArgs,
     /// Only these bus topics, as laser/scan or /laser/scan (default: every recorded one).
     #[arg(value_parser = crate::topic::bus_topic)]
     pub topics: Vec<String>,
@@ -42,6 +47,9 @@ pub struct PlayArgs {
     /// Without it, messages are republished bit for bit.
     #[arg(long)]
     pub restamp: bool,
+    /// Do not publish the replay's time on `clock` (ROS 2 `/clock`, sim time).
+    #[arg(long)]
+    pub no_clock: bool,
     /// Seconds to wait after a topic's publisher appears, before its first
     /// message, so subscribers that start with the replay connect.
     #[arg(long, default_value_t = 0.0)]
@@ -190,6 +198,75 @@ fn sleep_until(deadline: Instant, stop: &smokenav_platform_runtime::Shutdown) {
     }
 }
 
+/// What `play` reads: a smokenav recording (every topic, bit for bit) or a
+/// team's own bag (its standard topics, by role).
+enum Source {
+    Native(Box<Playback<std::io::BufReader<std::fs::File>>>),
+    Bag(Box<BagMessages>),
+}
+
+impl Source {
+    fn open(args: &PlayArgs) -> anyhow::Result<Self> {
+        let cannot = || format!("cannot open {}", args.file.display());
+        let bag = Bag::open(&args.file).with_context(cannot)?;
+        if bag.is_smokenav() && !args.roles.given() {
+            return Ok(Self::Native(Box::new(
+                Playback::open(&args.file).with_context(cannot)?,
+            )));
+        }
+        let roles = bag.roles(&args.roles.request())?;
+        if roles.laser.is_none() && roles.odom.is_none() {
+            bail!(
+                "{}: no sensor_msgs/msg/LaserScan or nav_msgs/msg/Odometry topic to play; topics: {}",
+                args.file.display(),
+                bag.topics()
+                    .iter()
+                    .map(|t| format!("{} ({})", t.name, t.type_name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        for (role, bus) in [
+            (&roles.laser, topics::LASER_SCAN.name()),
+            (&roles.odom, topics::BASE_ODOM.name()),
+        ] {
+            if let Some(t) = role {
+                tracing::info!("{}: {t} → {bus}", args.file.display());
+            }
+        }
+        Ok(Self::Bag(Box::new(bag.messages(&roles)?)))
+    }
+
+    fn read_next(&mut self) -> anyhow::Result<Option<Played>> {
+        Ok(match self {
+            Self::Native(p) => p.read_next()?,
+            Self::Bag(b) => b.read_next()?,
+        })
+    }
+
+    /// What was added to the stamps' clock to make the log times (a bag's are on it already).
+    fn unix_offset(&self) -> i64 {
+        match self {
+            Self::Native(p) => smokenav_platform_recording::unix_offset(p.source().metadata()),
+            Self::Bag(_) => 0,
+        }
+    }
+
+    fn position(&self) -> u64 {
+        match self {
+            Self::Native(p) => p.source().bytes_read(),
+            Self::Bag(_) => 0,
+        }
+    }
+
+    fn end(&self) -> Option<&EndOfData> {
+        match self {
+            Self::Native(p) => p.source().end(),
+            Self::Bag(b) => b.end(),
+        }
+    }
+}
+
 pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     smokenav_platform_runtime::init_logging("play");
     if !args.fast && (args.rate <= 0.0 || !args.rate.is_finite()) {
@@ -198,8 +275,7 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let size = std::fs::metadata(&args.file)
         .with_context(|| format!("cannot open {}", args.file.display()))?
         .len();
-    let mut playback = Playback::open(&args.file)
-        .with_context(|| format!("cannot open {}", args.file.display()))?;
+    let mut source = Source::open(&args)?;
     let bus = args.bus.open("play")?;
     let wanted = |topic: &str| {
         (args.topics.is_empty() || args.topics.iter().any(|t| t == topic))
@@ -213,6 +289,10 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
         args.topics.clone()
     };
     let playable: Vec<String> = playable.into_iter().filter(|t| wanted(t)).collect();
+    let mut playable = playable;
+    if !args.no_clock {
+        playable.push(topics::CLOCK.name().to_owned());
+    }
     let conflicts = live_conflicts(&bus, &playable)?;
     if !conflicts.is_empty() {
         let list = conflicts
@@ -250,12 +330,22 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     let mut publishers: HashMap<String, Box<dyn Replay>> = HashMap::new();
     let mut report: BTreeMap<String, TopicReport> = BTreeMap::new();
     let mut clock: Option<(u64, Instant)> = None;
-    let mut stamp_offset: Option<i64> = None;
+    // Restamping: (first receive time on the stamps' clock, bus time it maps to).
+    let mut restamp_base: Option<(u64, u64)> = None;
+    // Read with the first message: the file's metadata precedes it.
+    let mut unix_offset: Option<i64> = None;
+    let mut clock_pub = if args.no_clock {
+        None
+    } else {
+        Some(bus.publisher(topics::CLOCK)?)
+    };
+    let mut last_clock: Option<u64> = None;
+    let mut clocks = 0u64;
     let started = Instant::now();
     let mut published = 0u64;
     let mut commands_skipped = 0u64;
     while !stop.requested() {
-        let Some(mut played) = playback
+        let Some(mut played) = source
             .read_next()
             .with_context(|| format!("reading {} failed", args.file.display()))?
         else {
@@ -273,21 +363,35 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
                 break;
             }
         }
+        // When the recorder received it, on the clock of the stamps.
+        let unix_offset = *unix_offset.get_or_insert_with(|| source.unix_offset());
+        let received =
+            smokenav_platform_recording::shift_ns(played.log_time, unix_offset.saturating_neg());
+        let mut data_time = received;
         if args.restamp {
-            // Recorder receive time → now: stamps keep their lag behind it.
-            // Log times are Unix times; the stamps are on the recorder's
-            // monotonic clock, which the file's offset converts back to.
-            let offset = *stamp_offset.get_or_insert_with(|| {
-                let unix_offset =
-                    smokenav_platform_recording::unix_offset(playback.source().metadata());
-                let received = smokenav_platform_recording::shift_ns(
-                    played.log_time,
-                    unix_offset.saturating_neg(),
-                );
-                (i128::from(monotonic_now_ns()) - i128::from(received))
-                    .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64
-            });
+            // Recorder receive time → the bus clock, at the replay's pace, so
+            // at any --rate a stamp keeps its lag behind its message's
+            // arrival (a constant shift would run ahead by the time saved).
+            let (r0, m0) = *restamp_base.get_or_insert_with(|| (received, monotonic_now_ns()));
+            let elapsed = received.saturating_sub(r0) as f64;
+            let scaled = if args.fast {
+                elapsed
+            } else {
+                elapsed / args.rate
+            };
+            let target = i128::from(m0) + scaled as i128;
+            let offset = (target - i128::from(received))
+                .clamp(i128::from(i64::MIN), i128::from(i64::MAX)) as i64;
             played.message.shift_stamps(offset);
+            data_time = smokenav_platform_recording::shift_ns(received, offset);
+        }
+        // Sim time at most every 10 ms of data, just before the data it dates.
+        if let Some(c) = &mut clock_pub
+            && last_clock.is_none_or(|t| data_time >= t + 10_000_000)
+        {
+            c.publish_with(|m| m.header.stamp_ns = data_time)?;
+            last_clock = Some(data_time);
+            clocks += 1;
         }
         if !publishers.contains_key(&played.topic) {
             let p = played
@@ -318,18 +422,17 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
         r.renumbered += u64::from(seq != played.message.header().seq);
         published += 1;
         if published.is_multiple_of(64) {
-            bar.set_position(playback.source().bytes_read());
+            bar.set_position(source.position());
             bar.set_message(format!("{published} messages"));
         }
     }
     bar.finish_and_clear();
 
-    let stats = playback.stats().clone();
     println!(
         "played {published} messages in {:.1} s from {}{}",
         started.elapsed().as_secs_f64(),
         args.file.display(),
-        match playback.source().end() {
+        match source.end() {
             Some(EndOfData::Truncated) => " (the file was cut short; played every complete chunk)",
             None => " (interrupted)",
             Some(EndOfData::Complete) => "",
@@ -346,11 +449,26 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
             }
         );
     }
+    if clocks > 0 {
+        println!(
+            "  {:<16} published {clocks:>8}  (simulated time)",
+            topics::CLOCK.name()
+        );
+    }
     if commands_skipped > 0 {
         println!(
             "  left out {commands_skipped} velocity commands (base/cmd_vel); --commands replays them"
         );
     }
+    let Source::Native(playback) = &source else {
+        anyhow::ensure!(
+            published > 0 || stop.requested(),
+            "{}: nothing to play",
+            args.file.display()
+        );
+        return Ok(());
+    };
+    let stats = playback.stats().clone();
     println!(
         "skipped: {} views (/tf, sonar points), {} foreign, {} orphaned, {} undecodable",
         stats.views, stats.foreign, stats.orphans, stats.decode_errors
@@ -360,6 +478,13 @@ pub fn run(args: PlayArgs) -> anyhow::Result<()> {
     }
     if stats.decode_errors > 0 {
         bail!("{} messages could not be decoded", stats.decode_errors);
+    }
+    if published == 0 && !stop.requested() && stats.foreign > 0 {
+        bail!(
+            "{}: none of its {} messages is a smokenav message",
+            args.file.display(),
+            stats.foreign
+        );
     }
     Ok(())
 }

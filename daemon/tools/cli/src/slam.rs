@@ -1,6 +1,11 @@
-//! `smokenav slam --carmen LOG [--particles N] [--backend rbpf] --out DIR`:
-//! runs the SLAM pipeline over a CARMEN log as fast as the CPU allows and
-//! writes the trajectory, the map and timing statistics.
+//! `smokenav slam --carmen LOG | --bag BAG [--particles N] [--backend rbpf] --out DIR`:
+//! runs the SLAM pipeline over a CARMEN log or a ROS 2 bag as fast as the
+//! CPU allows and writes the trajectory, the map and timing statistics.
+//!
+//! A bag's messages go through the pipeline in the order they were received,
+//! polled at their receive times, exactly as the SLAM process handles them
+//! live (`offline::replay`); the laser's mounting pose comes from the bag's
+//! `/tf_static`, else from `--profile`.
 
 use anyhow::Context;
 use smokenav_algorithms_eval::{
@@ -12,9 +17,11 @@ use smokenav_algorithms_slam::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::scan::{EndpointLimits, RangeScan};
 use smokenav_algorithms_slam::vote::VoteSlam;
-use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, StampedPose};
+use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, SlamUpdate, StampedPose};
 use smokenav_platform_config::{RobotConfig, SlamBackendKind, SlamSection, parse_toml};
 use smokenav_platform_map::OccupancyGrid;
+use smokenav_platform_recording::bag::{Bag, RoleMap};
+use smokenav_shared_types::{AnyMessage, Pose2};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::{BufReader, IsTerminal};
@@ -24,8 +31,19 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 pub struct SlamArgs {
     /// CARMEN log (FLASER / ROBOTLASER1 + ODOM records).
-    #[arg(long, value_name = "LOG")]
-    carmen: PathBuf,
+    #[arg(
+        long,
+        value_name = "LOG",
+        required_unless_present = "bag",
+        conflicts_with = "bag"
+    )]
+    carmen: Option<PathBuf>,
+    /// ROS 2 bag: a rosbag2 folder (metadata.yaml + .mcap or .db3), an .mcap
+    /// or .db3 file, or a `smokenav record` file; LaserScan + Odometry topics.
+    #[arg(long, value_name = "BAG")]
+    bag: Option<PathBuf>,
+    #[command(flatten)]
+    roles: crate::bag::RoleArgs,
     /// Number of particles (overrides the configuration).
     #[arg(long)]
     particles: Option<usize>,
@@ -157,24 +175,45 @@ fn write(path: &Path, text: &str) -> anyhow::Result<()> {
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }
 
-pub fn run(args: SlamArgs) -> anyhow::Result<()> {
-    let cfg = load_config(&args)?;
-    anyhow::ensure!(
-        args.save_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
-        "--save-graph needs --backend graph (the particle filter keeps no pose graph)"
-    );
-    let file = std::fs::File::open(&args.carmen)
-        .with_context(|| format!("cannot open {}", args.carmen.display()))?;
-    let size = file.metadata().map(|m| m.len()).unwrap_or(0);
-    let reference = match &args.reference {
-        Some(p) => Some(load_trajectory(p).context("bad reference file")?),
-        None => None,
-    };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+enum Input {
+    Carmen(PathBuf, std::fs::File),
+    Bag(Box<Bag>, RoleMap),
+}
 
+/// Per scan handed to the pipeline: the pose it gave, and what it cost.
+#[derive(Default)]
+struct Run {
+    online: Vec<StampedPose>,
+    cpu_per_scan: Vec<u64>,
+    wall_per_scan: Vec<u64>,
+    processed: usize,
+}
+
+impl Run {
+    /// Times `f` (one scan through the pipeline) and keeps its update.
+    fn timed(&mut self, f: impl FnOnce() -> Option<SlamUpdate>) {
+        let (c0, w0) = (
+            cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID),
+            Instant::now(),
+        );
+        let Some(update) = f() else {
+            return;
+        };
+        let wall = w0.elapsed().as_nanos() as u64;
+        let cpu = cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).saturating_sub(c0);
+        self.cpu_per_scan.push(cpu);
+        self.wall_per_scan.push(wall);
+        self.processed += usize::from(update.processed);
+        self.online.push(StampedPose {
+            stamp_ns: update.stamp_ns,
+            pose: update.pose,
+        });
+    }
+}
+
+fn progress_bar(len: u64) -> indicatif::ProgressBar {
     let bar = if std::io::stderr().is_terminal() {
-        indicatif::ProgressBar::new(size)
+        indicatif::ProgressBar::new(len)
     } else {
         indicatif::ProgressBar::hidden()
     };
@@ -184,17 +223,198 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let mut scans = LogScans::new(BufReader::new(bar.wrap_read(file)));
+    bar
+}
 
-    let process_cpu_start = cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID);
-    let wall_start = Instant::now();
+/// A CARMEN log: each scan with the odometry the logger attached.
+fn run_carmen(
+    args: &SlamArgs,
+    log: &Path,
+    file: std::fs::File,
+    slam: &mut SlamPipeline,
+    run: &mut Run,
+    mut reference_map: Option<&mut ReferenceMap>,
+) -> anyhow::Result<String> {
+    let bar = progress_bar(file.metadata().map(|m| m.len()).unwrap_or(0));
+    let mut scans = LogScans::new(BufReader::new(bar.wrap_read(file)));
+    while let Some((scan, odom)) = scans.next_scan() {
+        if let Some(rm) = reference_map.as_deref_mut() {
+            rm.add(scan);
+        }
+        run.timed(|| Some(slam.process(scan, &odom)));
+        if run.online.len().is_multiple_of(20) {
+            bar.set_message(format!("{} scans", run.online.len()));
+        }
+        if args.max_scans.is_some_and(|m| run.online.len() >= m) {
+            break;
+        }
+    }
+    bar.finish_and_clear();
+    let mut report = String::new();
+    let _ = writeln!(report, "log                {}", log.display());
+    let _ = writeln!(
+        report,
+        "log records        {} bad lines, {} ODOM records, {} odometry resets",
+        scans.error_count,
+        scans.odom_records,
+        scans.odometry_resets()
+    );
+    for e in &scans.errors {
+        let _ = writeln!(report, "bad line           {e}");
+    }
+    Ok(report)
+}
+
+/// The laser's pose on the robot: the bag's `/tf_static`, else the profile's
+/// `[laser] mount`, else the base origin; and where it came from.
+fn laser_mount(
+    bag: &Bag,
+    roles: &RoleMap,
+    profile: Option<&Path>,
+) -> anyhow::Result<(Pose2, String)> {
+    let frames = bag.frames(roles)?;
+    if let Some((x, y, yaw)) = frames.laser_mount() {
+        return Ok((
+            Pose2::new(x, y, yaw),
+            format!(
+                "({x:.3}, {y:.3}, {:.2}°) from /tf_static ({} in {})",
+                yaw.to_degrees(),
+                frames.laser_frame.as_deref().unwrap_or("?"),
+                frames.base_frame.as_deref().unwrap_or("base_link")
+            ),
+        ));
+    }
+    if let Some(p) = profile {
+        let cfg = RobotConfig::load(p)
+            .with_context(|| format!("invalid robot profile {}", p.display()))?;
+        let m = cfg.laser.mount;
+        return Ok((
+            Pose2::new(m.x, m.y, m.yaw_rad()),
+            format!(
+                "({:.3}, {:.3}, {:.2}°) from {} [laser] mount",
+                m.x,
+                m.y,
+                m.yaw_rad().to_degrees(),
+                p.display()
+            ),
+        ));
+    }
+    Ok((
+        Pose2::default(),
+        "none: the bag's /tf_static does not place the laser; the base origin is used (--profile gives one)".into(),
+    ))
+}
+
+/// A bag: its messages in receive order, polled at their receive times as the process does.
+fn run_bag(
+    args: &SlamArgs,
+    bag: &Bag,
+    roles: &RoleMap,
+    slam: &mut SlamPipeline,
+    run: &mut Run,
+) -> anyhow::Result<String> {
+    let total: u64 = bag
+        .topics()
+        .iter()
+        .filter(|t| Some(&t.name) == roles.laser.as_ref() || Some(&t.name) == roles.odom.as_ref())
+        .filter_map(|t| t.messages)
+        .sum();
+    let bar = progress_bar(total);
+    let mut messages = bag.messages(roles)?;
+    let (laser_topic, odom_topic) = (
+        messages.laser_topic().to_owned(),
+        messages.odom_topic().to_owned(),
+    );
+    let (mut n_laser, mut n_odom, mut read) = (0u64, 0u64, 0u64);
+    while let Some(p) = messages.read_next()? {
+        read += 1;
+        if read.is_multiple_of(64) {
+            bar.set_position(read);
+        }
+        match &p.message {
+            AnyMessage::Odometry(o) if p.topic == odom_topic => {
+                n_odom += 1;
+                slam.push_odom(o);
+            }
+            AnyMessage::LaserScan(l) if p.topic == laser_topic => {
+                n_laser += 1;
+                slam.push_laser(l);
+            }
+            AnyMessage::FusedScan(f) if p.topic == laser_topic => {
+                n_laser += 1;
+                slam.push_fused(f);
+            }
+            _ => continue,
+        }
+        run.timed(|| slam.poll(p.log_time));
+        if args.max_scans.is_some_and(|m| run.online.len() >= m) {
+            break;
+        }
+    }
+    if args.max_scans.is_none_or(|m| run.online.len() < m) {
+        run.timed(|| slam.flush());
+    }
+    bar.finish_and_clear();
+    anyhow::ensure!(
+        n_laser > 0 && n_odom > 0,
+        "{}: {n_laser} scans on {} and {n_odom} odometry readings on {}: SLAM needs both",
+        bag.path().display(),
+        roles.laser.as_deref().unwrap_or("?"),
+        roles.odom.as_deref().unwrap_or("?")
+    );
+    let mut report = String::new();
+    let _ = writeln!(report, "bag                {}", bag.path().display());
+    let _ = writeln!(
+        report,
+        "bag topics         {} scans on {}, {} odometry on {}",
+        n_laser,
+        roles.laser.as_deref().unwrap_or("?"),
+        n_odom,
+        roles.odom.as_deref().unwrap_or("?")
+    );
+    let s = slam.stats();
+    let _ = writeln!(
+        report,
+        "pairing            {} superseded, {} without odometry, {} odometry out of order, {} odometry resets",
+        s.superseded, s.no_odometry, s.odom_out_of_order, s.odom_resets
+    );
+    Ok(report)
+}
+
+pub fn run(args: SlamArgs) -> anyhow::Result<()> {
+    let cfg = load_config(&args)?;
+    anyhow::ensure!(
+        args.save_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
+        "--save-graph needs --backend graph (the particle filter keeps no pose graph)"
+    );
+    let reference = match &args.reference {
+        Some(p) => Some(load_trajectory(p).context("bad reference file")?),
+        None => None,
+    };
+    let input = match (&args.carmen, &args.bag) {
+        (Some(log), _) => {
+            anyhow::ensure!(
+                !args.roles.given(),
+                "--laser and --odom choose a bag's topics; a CARMEN log has none"
+            );
+            let file = std::fs::File::open(log)
+                .with_context(|| format!("cannot open {}", log.display()))?;
+            Input::Carmen(log.clone(), file)
+        }
+        (None, Some(path)) => {
+            let (bag, roles) = crate::bag::open(path, &args.roles, true)?;
+            Input::Bag(Box::new(bag), roles)
+        }
+        (None, None) => anyhow::bail!("give --carmen LOG or --bag BAG"),
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut slam = SlamPipeline::from_config(
         &cfg,
         BackendOptions {
             keep_trajectory: true,
         },
     );
-    let mut online: Vec<StampedPose> = Vec::new();
     let truth_map = match &args.truth_map {
         Some(p) => Some(
             smokenav_platform_map::load_map_server(p)
@@ -206,38 +426,35 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         .as_ref()
         .filter(|_| truth_map.is_none())
         .map(|r| ReferenceMap::new(r, &cfg));
-    let mut cpu_per_scan: Vec<u64> = Vec::new();
-    let mut wall_per_scan: Vec<u64> = Vec::new();
-    let mut processed = 0usize;
-    while let Some((scan, odom)) = scans.next_scan() {
-        let (c0, w0) = (
-            cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID),
-            Instant::now(),
-        );
-        if let Some(rm) = &mut reference_map {
-            rm.add(scan);
+    let mut run = Run::default();
+    let process_cpu_start = cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID);
+    let wall_start = Instant::now();
+    let input_report = match input {
+        Input::Carmen(log, file) => run_carmen(
+            &args,
+            &log,
+            file,
+            &mut slam,
+            &mut run,
+            reference_map.as_mut(),
+        ),
+        Input::Bag(bag, roles) => {
+            let mount = laser_mount(&bag, &roles, args.profile.as_deref())?;
+            slam = slam.with_sensor_pose(mount.0);
+            let mut text = run_bag(&args, &bag, &roles, &mut slam, &mut run)?;
+            let _ = writeln!(text, "laser mount        {}", mount.1);
+            Ok(text)
         }
-        let update = slam.process(scan, &odom);
-        let wall = w0.elapsed().as_nanos() as u64;
-        let cpu = cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).saturating_sub(c0);
-        cpu_per_scan.push(cpu);
-        wall_per_scan.push(wall);
-        processed += usize::from(update.processed);
-        online.push(StampedPose {
-            stamp_ns: update.stamp_ns,
-            pose: update.pose,
-        });
-        if online.len().is_multiple_of(20) {
-            bar.set_message(format!("{} scans", online.len()));
-        }
-        if args.max_scans.is_some_and(|m| online.len() >= m) {
-            break;
-        }
-    }
+    }?;
     let total_cpu_ns =
         cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID).saturating_sub(process_cpu_start);
     let wall_total = wall_start.elapsed();
-    bar.finish_and_clear();
+    let Run {
+        online,
+        cpu_per_scan,
+        wall_per_scan,
+        processed,
+    } = run;
 
     let trajectory = slam.trajectory();
     let trajectory = eval_poses(&trajectory);
@@ -263,16 +480,13 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     let ms = |ns: u64| ns as f64 / 1e6;
     let stats = slam.stats();
     let mut report = String::new();
-    let _ = writeln!(report, "log                {}", args.carmen.display());
     let _ = writeln!(
         report,
-        "scans              {} read, {} processed, {} bad lines, {} ODOM records, {} odometry resets",
+        "scans              {} read, {} processed",
         online.len(),
-        processed,
-        scans.error_count,
-        scans.odom_records,
-        scans.odometry_resets()
+        processed
     );
+    report.push_str(&input_report);
     match cfg.backend {
         SlamBackendKind::Rbpf => writeln!(
             report,
@@ -382,9 +596,6 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         )?;
     } else if let (Some(t), Some(m)) = (&truth, slam.map()) {
         let _ = writeln!(report, "map error          {}", map_error(t, &m));
-    }
-    for e in &scans.errors {
-        let _ = writeln!(report, "bad line           {e}");
     }
     write(&args.out.join("stats.txt"), &report)?;
     print!("{report}");

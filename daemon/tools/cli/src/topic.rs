@@ -101,6 +101,8 @@ pub enum TopicCommand {
         #[command(flatten)]
         bus: BusArgs,
     },
+    /// Publish a message given as JSON (`base/cmd_vel` only with --motion and --for, then stop).
+    Pub(crate::topic_pub::PubArgs),
     /// Measure a topic's bandwidth on the bus (bytes per second, message sizes).
     Bw {
         /// e.g. laser/scan (or /laser/scan).
@@ -157,6 +159,7 @@ pub fn run(cmd: TopicCommand) -> anyhow::Result<()> {
             };
             echo(&bus, &topic, &opts)
         }
+        TopicCommand::Pub(args) => crate::topic_pub::run(args),
         TopicCommand::Info { topic, json, bus } => {
             crate::topic_info::info(&bus.open("topic-info")?, &topic, json)
         }
@@ -408,6 +411,7 @@ fn summary(r: &TopicRecord) -> String {
                 .collect::<Vec<_>>()
                 .join(" ")
         ),
+        Message::SimClock(_) => format!("{head} Clock (simulated time)"),
         Message::Odometry(o) => format!(
             "{head} Odometry x={:.3} y={:.3} θ={:.1}° v={:.3} ω={:.1}°/s battery={:.1}V",
             o.x,
@@ -606,20 +610,28 @@ impl MessageVisitor for Hz<'_> {
             .with_context(|| format!("topic `{}` does not carry {}", self.topic, M::NAME))?;
         let start = Instant::now();
         let mut last_print = start;
-        let subscribed_ns = smokenav_shared_types::clock::monotonic_now_ns();
         let sub = self.bus.subscriber(topic)?;
         let waiter = Waiter::new()?;
         let _g = waiter.attach(&sub)?;
         let stop = smokenav_platform_runtime::Shutdown::install()?;
+        // Rates are measured on receive time, never on stamps (a replay
+        // keeps its recorded ones). The topic's history arrives in the first
+        // batch together with the newest message: only that newest one
+        // anchors the intervals, or the history would fake near-zero ones.
+        let mut anchored = false;
         loop {
+            let mut first_batch: Option<u64> = None;
             while let Some(s) = sub.receive()? {
-                let header = s.payload().header();
-                // The topic's history sample was published before we
-                // subscribed; counting it would fake a near-zero interval.
-                if header.stamp_ns != 0 && header.stamp_ns < subscribed_ns {
-                    continue;
+                let seq = s.payload().header().seq;
+                if anchored {
+                    self.stats.arrive(Instant::now(), seq);
+                } else {
+                    first_batch = Some(first_batch.map_or(seq, |m: u64| m.max(seq)));
                 }
-                self.stats.arrive(Instant::now(), header.seq);
+            }
+            if let Some(seq) = first_batch {
+                anchored = true;
+                self.stats.arrive(Instant::now(), seq);
             }
             let now = Instant::now();
             if !self.json && now.duration_since(last_print) >= Duration::from_secs(1) {
