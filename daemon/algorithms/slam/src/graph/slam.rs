@@ -714,11 +714,16 @@ mod tests {
     /// blind (smoke) on the middle three legs: returns the back-end and the
     /// largest position error on the last leg, where the robot sees the start again.
     fn drive(p: GraphParams) -> (GraphSlam, f64) {
+        drive_legs(p, &[10.0, 6.0, 10.0, 6.0, 8.0], &[1, 2, 3])
+    }
+
+    /// [`drive`] over the given legs, blind on the legs in `blind`; the
+    /// worst error is that of the last leg.
+    fn drive_legs(p: GraphParams, legs: &[f64], blind: &[usize]) -> (GraphSlam, f64) {
         let mut slam = GraphSlam::new(&SlamSection::default(), p);
         let start = Pose2::new(-5.0, -3.0, 0.0);
         let mut truth = start;
         let mut odom = Pose2::new(3.0, -1.0, 0.4);
-        let legs = [10.0, 6.0, 10.0, 6.0, 8.0];
         let mut k = 0u64;
         let mut worst = 0.0f64;
         for (leg, &len) in legs.iter().enumerate() {
@@ -727,11 +732,11 @@ mod tests {
             moves.extend((0..5).map(|_| Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2 / 5.0)));
             for step in moves {
                 let mut scan = scan_at(&truth, k * 100_000_000);
-                if (1..=3).contains(&leg) {
+                if blind.contains(&leg) {
                     scan.beams.iter_mut().for_each(|b| b.range = None);
                 }
                 let u = slam.process(&scan, &odom);
-                if leg == 4 && step.x > 0.0 {
+                if leg + 1 == legs.len() && step.x > 0.0 {
                     let t = start.between(&truth);
                     worst = worst.max((u.pose.x - t.x).hypot(u.pose.y - t.y));
                 }
@@ -854,5 +859,35 @@ mod tests {
         // The trajectory has a pose per scan and the map is finite.
         assert_eq!(slam.trajectory().len() as u64, stats.scans);
         assert!(slam.map().is_some());
+    }
+
+    /// Two and a quarter laps: nodes of the third pass along the first leg
+    /// are tied to both earlier passes, not only to the nearest node.
+    #[test]
+    fn a_place_passed_three_times_is_tied_to_both_earlier_passes() {
+        let legs = [10.0, 6.0, 10.0, 6.0, 10.0, 6.0, 10.0, 6.0, 8.0];
+        let tied_to_both = |p: GraphParams| {
+            let (slam, _) = drive_legs(p, &legs, &[]);
+            // Nodes per lap: 32 m at 0.25 m a scan, 4 × 5 turning scans (each a node).
+            let lap = slam.graph().len() * 4 / 9;
+            let closures: Vec<_> = slam.graph().edges().iter().filter(|e| e.robust).collect();
+            (2 * lap..slam.graph().len())
+                .filter(|&k| {
+                    let from =
+                        |pass: usize| closures.iter().any(|e| e.to == k && e.from / lap == pass);
+                    from(0) && from(1)
+                })
+                .count()
+        };
+        let many = tied_to_both(GraphParams::default());
+        let one = tied_to_both(GraphParams {
+            closure_candidates: 1,
+            ..GraphParams::default()
+        });
+        assert!(
+            many >= 5,
+            "{many} nodes of the third pass tied to both earlier passes"
+        );
+        assert_eq!(one, 0);
     }
 }
