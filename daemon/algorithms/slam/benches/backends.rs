@@ -5,7 +5,8 @@
 //! alignment), plus the graph's loop-closure counters.
 //!
 //! `cargo bench -p smokenav-algorithms-slam --bench backends`
-//! Environment: `CSAIL_DIR` (the folder of the log; required), `BACKENDS` (`rbpf,graph` by default; `fuzzy` too), `CSAIL_LOG` / `CSAIL_REFERENCE`
+//! Environment: `CSAIL_DIR` (the folder of the log; required), `CSAIL_DRIFT=SEED` (run on the
+//! corrected log's scans with seeded drifted odometry instead, see `drift`), `BACKENDS` (`rbpf,graph` by default; `fuzzy` too), `CSAIL_LOG` / `CSAIL_REFERENCE`
 //! (other log and reference files in that folder), `SLAM_TOML` (`[slam]` keys), `CSAIL_OUT` (folder for
 //! each back-end's map PNG and trajectory).
 
@@ -13,6 +14,7 @@ use smokenav_algorithms_eval::{
     StampedPose as EvalPose, TrajectoryOptions, evaluate_trajectories, format_trajectory,
     load_trajectory,
 };
+use smokenav_algorithms_slam::drift;
 use smokenav_algorithms_slam::fuzzy::FuzzySlam;
 use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam};
 use smokenav_algorithms_slam::offline::LogScans;
@@ -42,6 +44,9 @@ fn graph_params() -> GraphParams {
             "closure_search_m" => p.closure_search_m = v,
             "closure_min_separation" => p.closure_min_separation = v as usize,
             "closure_neighbours" => p.closure_neighbours = v as usize,
+            "closure_candidates" => p.closure_candidates = v as usize,
+            "share_frontend_match" => p.share_frontend_match = v != 0.0,
+            "max_iterations" => p.optimize.max_iterations = v as u32,
             "closure_window_m" => p.closure_window_m = v,
             "closure_window_rad" => p.closure_window_rad = v,
             "closure_min_score" => p.closure_min_score = v,
@@ -73,6 +78,48 @@ fn main() {
     let reference =
         std::env::var("CSAIL_REFERENCE").unwrap_or_else(|_| "csail-reference-poses.txt".into());
     let reference = load_trajectory(&dir.join(&reference)).unwrap();
+    // `CSAIL_DRIFT=SEED`: the corrected log's scans with its motion drifted
+    // (`drift::DriftParams::default()` with that seed), against its own poses.
+    let (dir, log) = match std::env::var("CSAIL_DRIFT") {
+        Ok(seed) => {
+            let p = drift::DriftParams {
+                seed: seed.parse().expect("CSAIL_DRIFT is a seed"),
+                ..drift::DriftParams::default()
+            };
+            let text = std::process::Command::new("gzip")
+                .arg("-dc")
+                .arg(dir.join("csail-corrected.log.gz"))
+                .output()
+                .expect("gzip -dc csail-corrected.log.gz");
+            let stamps: Vec<u64> = reference
+                .iter()
+                .map(|r| (r.t * 1e6).round() as u64 * 1000)
+                .collect();
+            let out = std::env::temp_dir().join(format!("csail-drifted-{}.log", p.seed));
+            let file = std::io::BufWriter::new(std::fs::File::create(&out).unwrap());
+            let r = drift::drift_log(text.stdout.as_slice(), file, &p, Some(&stamps)).unwrap();
+            let odom: Vec<EvalPose> = {
+                let mut scans = LogScans::new(BufReader::new(std::fs::File::open(&out).unwrap()));
+                let mut v = Vec::new();
+                while let Some((scan, odom)) = scans.next_scan() {
+                    v.push(EvalPose::from_ns(scan.stamp_ns, &odom));
+                }
+                v
+            };
+            let ate = evaluate_trajectories(&reference, &odom, &TrajectoryOptions::same_stamp())
+                .map(|a| a.ate_m.rmse)
+                .unwrap_or(f64::NAN);
+            println!(
+                "backends drifted CSAIL (seed {}): {} scans over {:.1} m, end {:.2} m off, odometry ATE RMS {ate:.3} m",
+                p.seed, r.laser_records, r.path_m, r.end_offset_m
+            );
+            (
+                out.parent().unwrap().to_path_buf(),
+                out.file_name().unwrap().to_string_lossy().into_owned(),
+            )
+        }
+        Err(_) => (dir, log),
+    };
     let which = std::env::var("BACKENDS").unwrap_or_else(|_| "rbpf,graph".into());
     // `SLAM_TOML='frontend = false\n[fuzzy]\nsearch = "correlative"'` overrides `[slam]` keys.
     let cfg = match std::env::var("SLAM_TOML") {

@@ -12,6 +12,7 @@
 //! several back-ends (which needs each one's covariance and a cheap way to
 //! tell whether its map changed).
 
+use crate::frontend::Tracked;
 use crate::fuzzy::FuzzySlam;
 use crate::graph::{GraphParams, GraphSlam};
 use crate::rbpf::{Rbpf, RbpfParams};
@@ -66,6 +67,11 @@ pub trait SlamBackend: Send {
     fn name(&self) -> &'static str;
     /// Uses one scan (the first one starts the map).
     fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate;
+    /// The pipeline's front end matched the next scan: `process` or `predict`
+    /// follows with `tracked.pose` as its odometry. A back-end that tracks
+    /// scans itself can take this match (and its covariance) instead of
+    /// matching the scan a second time. Default: ignored.
+    fn frontend_match(&mut self, _tracked: &Tracked) {}
     /// A scan the motion filter held back: only its odometry moves the estimate.
     fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate;
     /// The odometry frame jumped: the next odometry must not be compared with the last.

@@ -124,6 +124,8 @@ pub struct FrontEnd {
     prior_t: f64,
     prior_r: f64,
     blur: Vec<u8>,
+    /// Scratch of the row pass of the pooling.
+    pool: Vec<u8>,
     degeneracy: DegeneracyParams,
     /// Scans whose match had at least one direction replaced by the prediction.
     degenerate_matches: u64,
@@ -169,6 +171,7 @@ impl FrontEnd {
             prior_t: 0.0,
             prior_r: 0.0,
             blur,
+            pool: Vec::new(),
             degeneracy: DegeneracyParams::default(),
             degenerate_matches: 0,
         }
@@ -366,16 +369,44 @@ impl FrontEnd {
     }
 
     /// Builds the blurred table and its max-pooled levels around `center`.
+    ///
+    /// The table spans ± (range + window) around `center`, but only the
+    /// part the local map's points reach is stored: outside their bounding
+    /// box (plus the blur, and the pooling's reach on the low side) every
+    /// level is zero, which is what reading outside the table gives, so the
+    /// search is the same as over the whole square at a fraction of the cost.
     fn build_tables(&mut self, center: &Pose2) {
         let res = self.p.resolution;
         let half =
             ((MAX_POINT_RANGE + self.p.window_m) / res).ceil() as i32 + BLUR_RADIUS + (1 << LEVELS);
         let cx = (center.x / res).floor() as i32;
         let cy = (center.y / res).floor() as i32;
-        self.table_x0 = cx - half;
-        self.table_y0 = cy - half;
-        self.table_w = 2 * half + 1;
-        self.table_h = 2 * half + 1;
+        // Cells of the whole square a point may blur into.
+        let (lo_x, lo_y) = (cx - half + BLUR_RADIUS, cy - half + BLUR_RADIUS);
+        let (hi_x, hi_y) = (cx + half - BLUR_RADIUS, cy + half - BLUR_RADIUS);
+        let inside = |gx: i32, gy: i32| gx >= lo_x && gy >= lo_y && gx <= hi_x && gy <= hi_y;
+        let mut bbox = (i32::MAX, i32::MAX, i32::MIN, i32::MIN);
+        for &(px, py) in self.history.iter().flatten() {
+            let gx = (px as f64 / res).floor() as i32;
+            let gy = (py as f64 / res).floor() as i32;
+            if inside(gx, gy) {
+                bbox = (
+                    bbox.0.min(gx),
+                    bbox.1.min(gy),
+                    bbox.2.max(gx),
+                    bbox.3.max(gy),
+                );
+            }
+        }
+        if bbox.0 > bbox.2 {
+            bbox = (cx, cy, cx, cy);
+        }
+        // Low side: the blur and the coarsest pooling block; high side: the
+        // blur and two zero cells (the interpolation reads one cell on).
+        self.table_x0 = bbox.0 - BLUR_RADIUS - (1 << LEVELS);
+        self.table_y0 = bbox.1 - BLUR_RADIUS - (1 << LEVELS);
+        self.table_w = bbox.2 + BLUR_RADIUS + 2 - self.table_x0 + 1;
+        self.table_h = bbox.3 + BLUR_RADIUS + 2 - self.table_y0 + 1;
         let (w, h) = (self.table_w, self.table_h);
         let n = (w * h) as usize;
         let base = &mut self.tables[0];
@@ -384,48 +415,57 @@ impl FrontEnd {
         let side = 2 * BLUR_RADIUS + 1;
         for scan in &self.history {
             for &(px, py) in scan {
-                let gx = (px as f64 / res).floor() as i32 - self.table_x0;
-                let gy = (py as f64 / res).floor() as i32 - self.table_y0;
-                if gx < BLUR_RADIUS
-                    || gy < BLUR_RADIUS
-                    || gx >= w - BLUR_RADIUS
-                    || gy >= h - BLUR_RADIUS
-                {
+                let (ax, ay) = (
+                    (px as f64 / res).floor() as i32,
+                    (py as f64 / res).floor() as i32,
+                );
+                if !inside(ax, ay) {
                     continue;
                 }
+                let (gx, gy) = (ax - self.table_x0, ay - self.table_y0);
                 for dy in 0..side {
                     let row = ((gy + dy - BLUR_RADIUS) * w + gx - BLUR_RADIUS) as usize;
                     let krow = (dy * side) as usize;
-                    for dx in 0..side as usize {
-                        let v = self.blur[krow + dx];
-                        let cell = &mut base[row + dx];
-                        if v > *cell {
-                            *cell = v;
-                        }
+                    let cells = &mut base[row..row + side as usize];
+                    for (cell, &v) in cells.iter_mut().zip(&self.blur[krow..krow + side as usize]) {
+                        *cell = (*cell).max(v);
                     }
                 }
             }
         }
-        // Level l holds, at each cell, the max over the 2^l × 2^l block starting there.
+        // Level l holds, at each cell, the max over the 2^l × 2^l block
+        // starting there (clamped at the table's edge): a max along the rows,
+        // then along the columns.
+        let (wu, hu) = (w as usize, h as usize);
+        let mut rows = std::mem::take(&mut self.pool);
         for level in 1..=LEVELS {
-            let step = 1i32 << (level - 1);
+            let step = 1usize << (level - 1);
             let (prev, rest) = self.tables.split_at_mut(level);
             let src = &prev[level - 1];
+            rows.clear();
+            rows.resize(n, 0);
+            for (out, row) in rows.chunks_exact_mut(wu).zip(src.chunks_exact(wu)) {
+                let split = wu.saturating_sub(step);
+                for ((o, &a), &b) in out[..split].iter_mut().zip(&row[..split]).zip(&row[step..]) {
+                    *o = a.max(b);
+                }
+                let last = row[wu - 1];
+                for (o, &a) in out[split..].iter_mut().zip(&row[split..]) {
+                    *o = a.max(last);
+                }
+            }
             let dst = &mut rest[0];
             dst.clear();
             dst.resize(n, 0);
-            for y in 0..h {
-                let y2 = (y + step).min(h - 1);
-                for x in 0..w {
-                    let x2 = (x + step).min(w - 1);
-                    let a = src[(y * w + x) as usize];
-                    let b = src[(y * w + x2) as usize];
-                    let c = src[(y2 * w + x) as usize];
-                    let d = src[(y2 * w + x2) as usize];
-                    dst[(y * w + x) as usize] = a.max(b).max(c).max(d);
+            for y in 0..hu {
+                let y2 = (y + step).min(hu - 1);
+                let (a, b) = (&rows[y * wu..(y + 1) * wu], &rows[y2 * wu..(y2 + 1) * wu]);
+                for ((o, &a), &b) in dst[y * wu..(y + 1) * wu].iter_mut().zip(a).zip(b) {
+                    *o = a.max(b);
                 }
             }
         }
+        self.pool = rows;
     }
 
     /// Mean table value at `level` of the points rotated by angle index `a`, shifted by (ix, iy) cells.

@@ -27,6 +27,7 @@
 pub mod backend;
 pub mod carmen;
 pub mod degeneracy;
+pub mod drift;
 pub mod frontend;
 pub mod fuzzy;
 pub mod graph;

@@ -259,6 +259,7 @@ impl SlamPipeline {
                 if tracked.score.is_none() && self.last_corrected.is_some() {
                     self.stats.frontend_fallbacks += 1;
                 }
+                self.backend.frontend_match(&tracked);
                 tracked.pose
             }
             None => odom,

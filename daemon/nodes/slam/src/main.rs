@@ -268,10 +268,13 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let mut next_map = Instant::now() + map_period;
     let clock = MonotonicClock;
     let rate = p.health.add_rate("pose_hz", Some(10.0));
+    // Only the particle filter has particles to speak of.
+    let backend = match cfg.backend {
+        SlamBackendKind::Rbpf => format!("rbpf with {} particles", cfg.particles),
+        _ => pipeline.backend().name().to_string(),
+    };
     p.ready(&format!(
-        "{} with {} particles on {} + {}, map every {:.1} s",
-        pipeline.backend().name(),
-        cfg.particles,
+        "{backend} on {} + {}, map every {:.1} s",
         scans.topic(),
         topics::BASE_ODOM,
         map_period.as_secs_f64()

@@ -33,7 +33,7 @@
 use super::pose_graph::{Edge, Information, OptimizeParams, PoseGraph, RobustKernel};
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
 use crate::degeneracy::{DegeneracyParams, ScanConstraint};
-use crate::frontend::{FrontEnd, FrontEndParams};
+use crate::frontend::{FrontEnd, FrontEndParams, Tracked};
 use crate::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use crate::rbpf::matcher::{MatchParams, PreparedScan, RobotBeam};
 use crate::scan::RangeScan;
@@ -56,6 +56,15 @@ pub struct GraphParams {
     pub closure_min_separation: usize,
     /// Nodes either side of the candidate that form its local map.
     pub closure_neighbours: usize,
+    /// Separate stretches of the trajectory (runs of nodes within
+    /// `closure_search_m`) tried per new node, nearest first: a place passed
+    /// several times is tied to each pass, not only to the nearest node.
+    pub closure_candidates: usize,
+    /// Take the pipeline front end's match of each scan instead of matching
+    /// it again with the own tracker (which then only runs when the
+    /// pipeline's front end is off). On MIT CSAIL the second match bought
+    /// no accuracy once closures tie each pass to the earlier ones.
+    pub share_frontend_match: bool,
     pub closure_window_m: f64,
     pub closure_window_rad: f64,
     /// Mean blurred-table value (0–1) a closure match must reach.
@@ -85,8 +94,10 @@ impl Default for GraphParams {
             node_distance_m: 0.3,
             node_angle_rad: 0.3,
             closure_search_m: 4.0,
-            closure_min_separation: 30,
-            closure_neighbours: 6,
+            closure_min_separation: 15,
+            closure_neighbours: 20,
+            closure_candidates: 5,
+            share_frontend_match: true,
             closure_window_m: 1.5,
             closure_window_rad: 0.35,
             closure_min_score: 0.45,
@@ -162,6 +173,9 @@ pub struct GraphSlam {
     /// Sum of the sonar shares of the scans since the last node, and their number.
     since_node_sonar: (f64, u32),
     degeneracy: DegeneracyParams,
+    /// The pipeline front end's match of the scan about to come (used
+    /// instead of the own tracker's: the scan is matched once).
+    shared: Option<Tracked>,
 }
 
 /// Covariance of `a ⊕ b` from those of `a` (`ca`) and of `b` in `a`'s frame (`cb`).
@@ -248,6 +262,7 @@ impl GraphSlam {
             since_node_cov: Matrix3::zeros(),
             since_node_sonar: (0.0, 0),
             degeneracy: DegeneracyParams::default(),
+            shared: None,
         }
     }
 
@@ -278,43 +293,110 @@ impl GraphSlam {
         self.graph.add_vertex(id, pose)
     }
 
-    /// Looks for a loop closure of node `k`; returns whether one was added.
-    fn close_loop(&mut self, k: usize) -> bool {
+    /// Looks for loop closures of node `k`: one candidate per separate
+    /// stretch of the older trajectory near its estimate (up to
+    /// `closure_candidates`, nearest first), each verified by matching; the
+    /// verified edges are added together and the graph optimised once. An
+    /// edge the optimised graph contradicts is taken out again (the others
+    /// are kept and re-optimised). Returns the number of closures kept.
+    fn close_loops(&mut self, k: usize) -> usize {
         if k < self.p.closure_min_separation || self.nodes[k].points.len() < self.min_laser_points {
-            return false;
+            return 0;
         }
+        let here = self.graph.poses()[k];
+        let last = k - self.p.closure_min_separation;
+        // Runs of consecutive nodes within the search radius; the nearest node of each.
+        let mut candidates: Vec<(usize, f64)> = Vec::new();
+        let mut run: Option<(usize, f64)> = None;
+        for (j, x) in self.graph.poses().iter().enumerate().take(last + 1) {
+            let d = (x.x - here.x).hypot(x.y - here.y);
+            if d <= self.p.closure_search_m {
+                if run.is_none_or(|(_, bd)| d < bd) {
+                    run = Some((j, d));
+                }
+            } else if let Some(r) = run.take() {
+                candidates.push(r);
+            }
+        }
+        candidates.extend(run);
+        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+        candidates.truncate(self.p.closure_candidates.max(1));
+        let mut edges = Vec::new();
+        for &(j, _) in &candidates {
+            self.stats.closures_tried += 1;
+            match self.verify_closure(j, k, last) {
+                Some(edge) => edges.push(edge),
+                None => self.stats.closures_low_score += 1,
+            }
+        }
+        if edges.is_empty() {
+            return 0;
+        }
+        let before = self.graph.poses().to_vec();
+        let mut kept = edges.clone();
+        for round in 0..2 {
+            for e in &kept {
+                self.graph.add_edge(*e);
+            }
+            self.stats.optimizations += 1;
+            self.revision += 1;
+            let result = self.graph.optimize(&self.p.optimize);
+            let consistent: Vec<Edge> = kept
+                .iter()
+                .copied()
+                .filter(|e| self.graph.edge_chi2(e) <= self.p.closure_max_chi2)
+                .collect();
+            if result.is_ok() && consistent.len() == kept.len() {
+                self.stats.closures_accepted += kept.len() as u64;
+                return kept.len();
+            }
+            for _ in &kept {
+                self.graph.pop_edge();
+            }
+            for (i, p) in before.iter().enumerate() {
+                self.graph.set_pose(i, *p);
+            }
+            if result.is_err() {
+                self.stats.optimization_failures += 1;
+                break;
+            }
+            self.stats.closures_inconsistent += (kept.len() - consistent.len()) as u64;
+            kept = consistent;
+            // Only the edges the first optimisation agreed with get a second one.
+            if kept.is_empty() || round == 1 {
+                break;
+            }
+        }
+        if !kept.is_empty() {
+            // The second optimisation disagreed again: none of them is trusted.
+            self.stats.closures_inconsistent += kept.len() as u64;
+        }
+        0
+    }
+
+    /// Matches node `k` against the local map around older node `j` (its
+    /// neighbours up to node `last`): the closure edge j → k, if the match
+    /// reaches `closure_min_score`.
+    fn verify_closure(&mut self, j: usize, k: usize, last: usize) -> Option<Edge> {
         let poses = self.graph.poses();
         let here = poses[k];
-        let last = k - self.p.closure_min_separation;
-        let Some((j, _)) = (0..=last)
-            .map(|j| (j, (poses[j].x - here.x).hypot(poses[j].y - here.y)))
-            .filter(|&(_, d)| d <= self.p.closure_search_m)
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-        else {
-            return false;
-        };
-        self.stats.closures_tried += 1;
         let lo = j.saturating_sub(self.p.closure_neighbours);
         let hi = (j + self.p.closure_neighbours).min(last);
-        self.world.clear();
-        for (n, &x) in poses.iter().enumerate().take(hi + 1).skip(lo) {
+        self.world.resize_with(hi + 1 - lo, Vec::new);
+        for (slot, n) in self.world.iter_mut().zip(lo..=hi) {
+            let x = poses[n];
             let (s, c) = x.theta.sin_cos();
-            self.world.push(
-                self.nodes[n]
-                    .points
-                    .iter()
-                    .map(|&(px, py)| {
-                        let (px, py) = (px as f64, py as f64);
-                        (
-                            (x.x + c * px - s * py) as f32,
-                            (x.y + s * px + c * py) as f32,
-                        )
-                    })
-                    .collect(),
-            );
+            slot.clear();
+            slot.extend(self.nodes[n].points.iter().map(|&(px, py)| {
+                let (px, py) = (px as f64, py as f64);
+                (
+                    (x.x + c * px - s * py) as f32,
+                    (x.y + s * px + c * py) as f32,
+                )
+            }));
         }
         let map: Vec<&[(f32, f32)]> = self.world.iter().map(|v| v.as_slice()).collect();
-        let found = self.closer.match_against(
+        let (matched, score) = self.closer.match_against(
             &map,
             self.nodes[k]
                 .points
@@ -323,14 +405,9 @@ impl GraphSlam {
             &here,
             self.p.closure_window_m,
             self.p.closure_window_rad,
-        );
-        let Some((matched, score)) = found else {
-            self.stats.closures_low_score += 1;
-            return false;
-        };
+        )?;
         if score < self.p.closure_min_score {
-            self.stats.closures_low_score += 1;
-            return false;
+            return None;
         }
         // The match's covariance in the new node's frame: its scan's
         // information, and the search window where the scan is degenerate
@@ -347,41 +424,19 @@ impl GraphSlam {
         let sigma = self.p.closure_point_sigma_m;
         let in_k = constraint.covariance(sigma * sigma, &window, 1.0, &self.degeneracy);
         // Rotated into the frame of node j, where the measurement is expressed.
-        let measurement = poses[j].between(&matched);
+        let measurement = self.graph.poses()[j].between(&matched);
         let (sn, cs) = measurement.theta.sin_cos();
         let rot = Matrix3::new(cs, -sn, 0.0, sn, cs, 0.0, 0.0, 0.0, 1.0);
         let cov = rot * in_k * rot.transpose();
         let information = information_of(&cov, self.p.closure_sigma)
             .unwrap_or_else(|| diagonal(self.p.closure_sigma.0, self.p.closure_sigma.1));
-        let edge = Edge {
+        Some(Edge {
             from: j,
             to: k,
             measurement,
             information,
             robust: true,
-        };
-        let before = self.graph.poses().to_vec();
-        self.graph.add_edge(edge);
-        self.stats.optimizations += 1;
-        self.revision += 1;
-        match self.graph.optimize(&self.p.optimize) {
-            Ok(_) if self.graph.edge_chi2(&edge) <= self.p.closure_max_chi2 => {
-                self.stats.closures_accepted += 1;
-                true
-            }
-            result => {
-                if result.is_err() {
-                    self.stats.optimization_failures += 1;
-                } else {
-                    self.stats.closures_inconsistent += 1;
-                }
-                self.graph.pop_edge();
-                for (i, p) in before.into_iter().enumerate() {
-                    self.graph.set_pose(i, p);
-                }
-                false
-            }
-        }
+        })
     }
 
     fn pose_of_scan(&self, node: usize, offset: &Pose2) -> Pose2 {
@@ -424,7 +479,10 @@ impl SlamBackend for GraphSlam {
             self.p.edge_sigma_t.1 * step.translation_norm(),
             self.p.edge_sigma_r.1 * step.theta.abs(),
         );
-        let step_cov = Matrix3::from_diagonal(&Vector3::new(st * st, st * st, sr * sr));
+        let step_cov = match self.shared.take() {
+            Some(t) => t.covariance,
+            None => Matrix3::from_diagonal(&Vector3::new(st * st, st * st, sr * sr)),
+        };
         let since = self.last_node_tracked.between(&self.last_tracked);
         self.since_node_cov = compose_covariance(&since, &self.since_node_cov, &step, &step_cov);
         self.last_odom = Some(*odom);
@@ -432,6 +490,12 @@ impl SlamBackend for GraphSlam {
         let rel = self.last_node_tracked.between(&tracked);
         self.scans.push((stamp_ns, node, rel));
         self.update(stamp_ns, self.pose_of_scan(node, &rel), false)
+    }
+
+    fn frontend_match(&mut self, tracked: &Tracked) {
+        if self.p.share_frontend_match {
+            self.shared = Some(*tracked);
+        }
     }
 
     fn odometry_reset(&mut self) {
@@ -476,15 +540,20 @@ impl SlamBackend for GraphSlam {
         } else {
             Pose2::default()
         };
-        let t = self.tracker.track(
-            self.prepared
-                .points
-                .iter()
-                .filter(|p| p.from_laser)
-                .map(|p| (p.hx, p.hy)),
-            &odom,
-            stamp_ns,
-        );
+        // Behind the pipeline's front end the scan was matched already: its
+        // pose is `odom`, and its covariance comes with the shared match.
+        let t = match self.shared.take() {
+            Some(t) => Tracked { pose: odom, ..t },
+            None => self.tracker.track(
+                self.prepared
+                    .points
+                    .iter()
+                    .filter(|p| p.from_laser)
+                    .map(|p| (p.hx, p.hy)),
+                &odom,
+                stamp_ns,
+            ),
+        };
         let tracked = t.pose;
         if !self.nodes.is_empty() {
             let since = self.last_node_tracked.between(&self.last_tracked);
@@ -539,7 +608,7 @@ impl SlamBackend for GraphSlam {
         self.last_node_tracked = tracked;
         self.scans.push((stamp_ns, k, Pose2::default()));
         if k.is_multiple_of(self.p.closure_every.max(1)) {
-            self.close_loop(k);
+            self.close_loops(k);
         }
         self.update(stamp_ns, self.graph.poses()[k], true)
     }
@@ -645,11 +714,16 @@ mod tests {
     /// blind (smoke) on the middle three legs: returns the back-end and the
     /// largest position error on the last leg, where the robot sees the start again.
     fn drive(p: GraphParams) -> (GraphSlam, f64) {
+        drive_legs(p, &[10.0, 6.0, 10.0, 6.0, 8.0], &[1, 2, 3])
+    }
+
+    /// [`drive`] over the given legs, blind on the legs in `blind`; the
+    /// worst error is that of the last leg.
+    fn drive_legs(p: GraphParams, legs: &[f64], blind: &[usize]) -> (GraphSlam, f64) {
         let mut slam = GraphSlam::new(&SlamSection::default(), p);
         let start = Pose2::new(-5.0, -3.0, 0.0);
         let mut truth = start;
         let mut odom = Pose2::new(3.0, -1.0, 0.4);
-        let legs = [10.0, 6.0, 10.0, 6.0, 8.0];
         let mut k = 0u64;
         let mut worst = 0.0f64;
         for (leg, &len) in legs.iter().enumerate() {
@@ -658,11 +732,11 @@ mod tests {
             moves.extend((0..5).map(|_| Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2 / 5.0)));
             for step in moves {
                 let mut scan = scan_at(&truth, k * 100_000_000);
-                if (1..=3).contains(&leg) {
+                if blind.contains(&leg) {
                     scan.beams.iter_mut().for_each(|b| b.range = None);
                 }
                 let u = slam.process(&scan, &odom);
-                if leg == 4 && step.x > 0.0 {
+                if leg + 1 == legs.len() && step.x > 0.0 {
                     let t = start.between(&truth);
                     worst = worst.max((u.pose.x - t.x).hypot(u.pose.y - t.y));
                 }
@@ -785,5 +859,35 @@ mod tests {
         // The trajectory has a pose per scan and the map is finite.
         assert_eq!(slam.trajectory().len() as u64, stats.scans);
         assert!(slam.map().is_some());
+    }
+
+    /// Two and a quarter laps: nodes of the third pass along the first leg
+    /// are tied to both earlier passes, not only to the nearest node.
+    #[test]
+    fn a_place_passed_three_times_is_tied_to_both_earlier_passes() {
+        let legs = [10.0, 6.0, 10.0, 6.0, 10.0, 6.0, 10.0, 6.0, 8.0];
+        let tied_to_both = |p: GraphParams| {
+            let (slam, _) = drive_legs(p, &legs, &[]);
+            // Nodes per lap: 32 m at 0.25 m a scan, 4 × 5 turning scans (each a node).
+            let lap = slam.graph().len() * 4 / 9;
+            let closures: Vec<_> = slam.graph().edges().iter().filter(|e| e.robust).collect();
+            (2 * lap..slam.graph().len())
+                .filter(|&k| {
+                    let from =
+                        |pass: usize| closures.iter().any(|e| e.to == k && e.from / lap == pass);
+                    from(0) && from(1)
+                })
+                .count()
+        };
+        let many = tied_to_both(GraphParams::default());
+        let one = tied_to_both(GraphParams {
+            closure_candidates: 1,
+            ..GraphParams::default()
+        });
+        assert!(
+            many >= 5,
+            "{many} nodes of the third pass tied to both earlier passes"
+        );
+        assert_eq!(one, 0);
     }
 }

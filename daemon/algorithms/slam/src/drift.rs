@@ -1,0 +1,277 @@
+//! Drifted logs: real scans whose odometry is a corrected trajectory
+//! corrupted with seeded noise and systematic drift, for measuring SLAM on
+//! large loops with strong drift against a known reference.
+//!
+//! Each laser record's motion since the previous one (taken from its
+//! odometry pose: in a corrected log such as GMapping's CSAIL output that is
+//! the corrected pose) is replaced by
+//!
+//! - translation × (1 + `scale`) plus N(0, (`sigma_t` · step)²) along and across,
+//! - rotation × (1 + `turn_scale`) plus `heading_bias` per metre travelled
+//!   plus N(0, (`sigma_r` · |turn| + `sigma_r_per_m` · step)²),
+//!
+//! and the records are written back with the drifted pose as their
+//! odometry (and laser) pose. The heading bias is what bends a long loop by
+//! metres, as a miscalibrated wheel base does. Same seed, same output.
+//! Optionally the stamps are replaced (`stamps`): the corrected CSAIL log
+//! keeps only six digits of its timestamps, its reference poses file has them.
+
+use crate::carmen::{CarmenReader, LaserRecord, LaserRecordKind, LineError, Record};
+use smokenav_shared_types::{Pose2, Rng};
+use std::io::{BufRead, Write};
+
+/// How a log's motion is corrupted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DriftParams {
+    pub seed: u64,
+    /// Translation scale error (0.02: every step reads 2 % long).
+    pub scale: f64,
+    /// Rotation scale error.
+    pub turn_scale: f64,
+    /// Heading error per metre travelled, rad/m.
+    pub heading_bias: f64,
+    /// σ of the translation noise per metre of step.
+    pub sigma_t: f64,
+    /// σ of the rotation noise per radian of turn.
+    pub sigma_r: f64,
+    /// σ of the rotation noise per metre of step, rad/m.
+    pub sigma_r_per_m: f64,
+}
+
+impl Default for DriftParams {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            scale: 0.02,
+            turn_scale: 0.01,
+            heading_bias: 0.004,
+            sigma_t: 0.02,
+            sigma_r: 0.02,
+            sigma_r_per_m: 0.003,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum DriftError {
+    #[error("line {}: {}", .0.line, .0.error)]
+    Line(LineError),
+    #[error(
+        "line {line}: laser record {index} has no stamp to replace it with ({given} stamps given)"
+    )]
+    TooFewStamps {
+        line: usize,
+        index: usize,
+        given: usize,
+    },
+    #[error("writing the drifted log: {0}")]
+    Write(#[from] std::io::Error),
+}
+
+/// What [`drift_log`] wrote.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DriftReport {
+    pub laser_records: usize,
+    /// Distance travelled along the input's poses, m.
+    pub path_m: f64,
+    /// Distance between the last input pose and the last drifted one, m.
+    pub end_offset_m: f64,
+}
+
+/// Writes `input`'s laser records to `out` with drifted odometry (see the
+/// module). Records other than laser records are left out (they carry no
+/// motion the scans use); a bad line stops with its line number.
+pub fn drift_log<R: BufRead, W: Write>(
+    input: R,
+    mut out: W,
+    p: &DriftParams,
+    stamps: Option<&[u64]>,
+) -> Result<DriftReport, DriftError> {
+    let mut reader = CarmenReader::new(input);
+    let mut rng = Rng::new(p.seed, 0);
+    let mut report = DriftReport::default();
+    let mut last: Option<(Pose2, Pose2)> = None;
+    while let Some(record) = reader.next() {
+        let mut l = match record {
+            Ok(Record::Laser(l)) => l,
+            Ok(Record::Odom(_)) => continue,
+            Err(e) => return Err(DriftError::Line(e)),
+        };
+        let index = report.laser_records;
+        if let Some(stamps) = stamps {
+            l.ipc_timestamp_ns = *stamps.get(index).ok_or(DriftError::TooFewStamps {
+                line: reader.line(),
+                index,
+                given: stamps.len(),
+            })?;
+        }
+        let truth = l.robot_pose;
+        let mount = truth.between(&l.laser_pose);
+        let drifted = match last {
+            None => truth,
+            Some((prev_truth, prev_drifted)) => {
+                let d = prev_truth.between(&truth);
+                let step = d.translation_norm();
+                report.path_m += step;
+                let noisy = Pose2::new(
+                    d.x * (1.0 + p.scale) + rng.gaussian(p.sigma_t * step),
+                    d.y * (1.0 + p.scale) + rng.gaussian(p.sigma_t * step),
+                    d.theta * (1.0 + p.turn_scale)
+                        + p.heading_bias * step
+                        + rng.gaussian(p.sigma_r * d.theta.abs() + p.sigma_r_per_m * step),
+                );
+                prev_drifted.compose(&noisy)
+            }
+        };
+        last = Some((truth, drifted));
+        report.end_offset_m = (truth.x - drifted.x).hypot(truth.y - drifted.y);
+        l.robot_pose = drifted;
+        l.laser_pose = drifted.compose(&mount);
+        write_record(&mut out, &l)?;
+        report.laser_records += 1;
+    }
+    out.flush()?;
+    Ok(report)
+}
+
+fn write_record<W: Write>(out: &mut W, l: &LaserRecord) -> std::io::Result<()> {
+    let stamp = crate::carmen::format_stamp(l.ipc_timestamp_ns);
+    let pose = |p: &Pose2| format!("{:.6} {:.6} {:.6}", p.x, p.y, p.theta);
+    let mut line = String::with_capacity(16 * l.ranges.len() + 200);
+    match l.kind {
+        LaserRecordKind::Flaser => line.push_str(&format!("FLASER {}", l.ranges.len())),
+        LaserRecordKind::RobotLaser1 => line.push_str(&format!(
+            "ROBOTLASER1 0 {} {} {} {} 0.01 0 {}",
+            l.start_angle,
+            l.angular_resolution * l.ranges.len().saturating_sub(1) as f64,
+            l.angular_resolution,
+            l.max_range,
+            l.ranges.len()
+        )),
+    }
+    for r in &l.ranges {
+        line.push_str(&format!(" {r}"));
+    }
+    match l.kind {
+        LaserRecordKind::Flaser => line.push_str(&format!(
+            " {} {} {stamp} drift {stamp}",
+            pose(&l.laser_pose),
+            pose(&l.robot_pose)
+        )),
+        LaserRecordKind::RobotLaser1 => line.push_str(&format!(
+            " 0 {} {} 0 0 0 0 0 {stamp} drift {stamp}",
+            pose(&l.laser_pose),
+            pose(&l.robot_pose)
+        )),
+    }
+    writeln!(out, "{line}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 20 m × 10 m rectangle driven at 0.5 m per record, every record a 5-beam FLASER.
+    fn square_log() -> String {
+        let mut s = String::new();
+        let mut pose = Pose2::default();
+        let mut k = 0u64;
+        for (len, _) in [(20.0, 0), (10.0, 1), (20.0, 2), (10.0, 3)] {
+            let steps = (len / 0.5) as usize;
+            for i in 0..steps {
+                let turn = if i + 1 == steps {
+                    std::f64::consts::FRAC_PI_2
+                } else {
+                    0.0
+                };
+                pose = pose.compose(&Pose2::new(0.5, 0.0, turn));
+                s.push_str(&format!(
+                    "FLASER 5 1 2 3 4 5 {x} {y} {t} {x} {y} {t} {k}.5 host {k}.5\n",
+                    x = pose.x,
+                    y = pose.y,
+                    t = pose.theta
+                ));
+                k += 1;
+            }
+        }
+        s
+    }
+
+    fn drifted(p: &DriftParams) -> (String, DriftReport) {
+        let mut out = Vec::new();
+        let r = drift_log(square_log().as_bytes(), &mut out, p, None).unwrap();
+        (String::from_utf8(out).unwrap(), r)
+    }
+
+    #[test]
+    fn a_loop_drifts_by_metres_and_the_same_seed_repeats() {
+        let (a, ra) = drifted(&DriftParams::default());
+        let (b, _) = drifted(&DriftParams::default());
+        assert_eq!(a, b);
+        let (c, _) = drifted(&DriftParams {
+            seed: 2,
+            ..DriftParams::default()
+        });
+        assert_ne!(a, c);
+        assert_eq!(ra.laser_records, 120);
+        assert!((ra.path_m - 59.5).abs() < 1e-6, "{ra:?}");
+        // 60 m at 4 mrad/m bends the heading ~0.24 rad: metres off at the end.
+        assert!(ra.end_offset_m > 2.0, "{ra:?}");
+        // The scans themselves are untouched, and the output reads back.
+        let mut reader = CarmenReader::new(a.as_bytes());
+        let Some(Ok(Record::Laser(first))) = reader.next() else {
+            panic!("no laser record");
+        };
+        assert_eq!(first.ranges, vec![1.0, 2.0, 3.0, 4.0, 5.0]);
+        assert_eq!(first.ipc_timestamp_ns, 500_000_000);
+        assert_eq!(reader.filter(|r| r.is_ok()).count(), 119);
+    }
+
+    #[test]
+    fn without_drift_the_poses_are_kept() {
+        let zero = DriftParams {
+            scale: 0.0,
+            turn_scale: 0.0,
+            heading_bias: 0.0,
+            sigma_t: 0.0,
+            sigma_r: 0.0,
+            sigma_r_per_m: 0.0,
+            ..DriftParams::default()
+        };
+        let (_, r) = drifted(&zero);
+        assert!(r.end_offset_m < 1e-6, "{r:?}");
+    }
+
+    #[test]
+    fn stamps_are_replaced_and_too_few_are_an_error_with_the_line() {
+        let stamps: Vec<u64> = (0..120).map(|i| 1_000_000_000 + i * 200_000_000).collect();
+        let mut out = Vec::new();
+        drift_log(
+            square_log().as_bytes(),
+            &mut out,
+            &DriftParams::default(),
+            Some(&stamps),
+        )
+        .unwrap();
+        let mut reader = CarmenReader::new(out.as_slice());
+        let Some(Ok(Record::Laser(l))) = reader.nth(1) else {
+            panic!("no second record");
+        };
+        assert_eq!(l.ipc_timestamp_ns, 1_200_000_000);
+        let err = drift_log(
+            square_log().as_bytes(),
+            Vec::new(),
+            &DriftParams::default(),
+            Some(&stamps[..10]),
+        )
+        .unwrap_err();
+        assert!(err.to_string().starts_with("line 11: "), "{err}");
+    }
+
+    #[test]
+    fn a_bad_line_is_reported_with_its_number() {
+        let log = square_log().replacen("FLASER 5 1 2 3 4 5", "FLASER 5 1 2 x 4 5", 1);
+        let err = drift_log(log.as_bytes(), Vec::new(), &DriftParams::default(), None).unwrap_err();
+        assert!(err.to_string().starts_with("line 1: "), "{err}");
+    }
+}

@@ -1,0 +1,268 @@
+//! Online loop closure end to end: the simulator's world feeds the URG-04LX,
+//! Pioneer and smoke-ADC emulators on real PTYs; the real drivers, fusion and
+//! `smokenav-slam --backend graph` run as processes over iceoryx2. The route
+//! goes once round the rack of the `aisles` arena and back past its start
+//! with wheel odometry far worse than the bundled scenario's (scale errors
+//! and slip), so the pose drifts along the featureless aisles until the robot
+//! sees the start hall again. From the bus only: the health report of
+//! `smokenav-slam` must count an accepted loop closure, and the pose on
+//! `slam/pose` must be closer to the world's truth within a second of it.
+
+use smokenav_platform_bus::{Subscriber, Waiter, topics};
+use smokenav_shared_types::{Health, HealthState, PoseEstimate};
+use smokenav_sim_link::{SimLink, SimLinkConfig, Until};
+use smokenav_sim_world::Scenario;
+use smokenav_tests::{Child, bin, open_bus, unique_instance, wait_for};
+use std::time::{Duration, Instant};
+
+/// Round the rack and back into the start hall, odometry drifting.
+const SCENARIO: &str = r#"
+name = "aisles-loop"
+description = "Pioneer 3-DX once round the rack with poor odometry"
+seed = 11
+duration_s = 125.0
+robot = "pioneer-3dx"
+
+[arena]
+builtin = "aisles"
+
+[start]
+x = 2.0
+y = 1.4
+heading_deg = 0.0
+
+[route]
+speed_mps = 0.5
+lookahead_m = 0.6
+waypoints = [[24.4, 1.4], [24.4, 6.1], [1.6, 6.1], [1.6, 1.4], [6.0, 1.4]]
+
+[odometry]
+scale_left = 0.03
+scale_right = 0.01
+track_error = 0.02
+slip_per_sqrt_m = 0.03
+"#;
+
+/// Sim seconds per host second (the graph takes nodes 0.3 m apart: 0.1 m per scan is plenty).
+const SPEED: f64 = 2.0;
+
+#[derive(Clone, Copy)]
+struct P {
+    t: u64,
+    x: f64,
+    y: f64,
+    th: f64,
+}
+
+/// Truth at host time `t`, linearly interpolated (`track` sorted).
+fn truth_at(track: &[P], t: u64) -> Option<P> {
+    let i = track.partition_point(|p| p.t < t);
+    if i == 0 || i >= track.len() {
+        return None;
+    }
+    let (a, b) = (track[i - 1], track[i]);
+    let f = (t - a.t) as f64 / (b.t - a.t).max(1) as f64;
+    let dth = (b.th - a.th + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    Some(P {
+        t,
+        x: a.x + f * (b.x - a.x),
+        y: a.y + f * (b.y - a.y),
+        th: a.th + f * dth,
+    })
+}
+
+fn drain<T: smokenav_platform_bus::Message>(sub: &Subscriber<T>, into: &mut Vec<(Instant, T)>) {
+    while let Some(s) = sub.receive().unwrap() {
+        into.push((Instant::now(), *s));
+    }
+}
+
+#[test]
+#[ignore = "finds a bug: in 3 of 4 debug runs the first accepted closure (in the start hall) moves slam/pose 1.0-1.4 m away from the truth instead of 0.19 -> 0.04 m; run with --ignored"]
+fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = Scenario::parse(SCENARIO, std::path::Path::new("aisles-loop.toml")).unwrap();
+    let mut cfg = SimLinkConfig::new(scenario, dir.path().join("dev"));
+    cfg.speed = SPEED;
+    let mut link = SimLink::start(cfg).unwrap();
+    let instance = unique_instance("slam_loop_e2e");
+    let profile = dir.path().join("robot.toml");
+    link.write_profile(&profile, Some(&instance)).unwrap();
+    let bus = open_bus(&instance);
+    let profile = profile.to_string_lossy().into_owned();
+    let base = link.devices().platform.driver_role();
+    let mut procs = Vec::new();
+    for role in ["hokuyo", base, "smoke", "fusion"] {
+        let p = Child::spawn(
+            &bin(&format!("smokenav-{role}")),
+            &["--config", &profile],
+            &instance,
+        )
+        .unwrap();
+        procs.push((role, p));
+    }
+    let slam = Child::spawn(
+        &bin("smokenav-slam"),
+        &[
+            "--config",
+            &profile,
+            "--backend",
+            "graph",
+            "--input",
+            "fused",
+        ],
+        &instance,
+    )
+    .unwrap();
+    slam.wait_for_line("graph on fusion/scan", Duration::from_secs(30))
+        .unwrap_or_else(|e| panic!("{e}\n{}", slam.output()));
+    for (role, p) in &procs {
+        let pid = p.pid();
+        wait_for::<Health>(&bus, topics::health(role), Duration::from_secs(30), |h| {
+            h.pid == pid && matches!(h.state(), HealthState::Ok | HealthState::Degraded)
+        })
+        .unwrap_or_else(|e| panic!("{role} not ready: {e}\n{}", p.output()));
+    }
+
+    let poses_sub = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE).unwrap();
+    let health_sub = bus.subscriber::<Health>(topics::health("slam")).unwrap();
+    let waiter = Waiter::new().unwrap();
+    let _g = [
+        waiter.attach(&poses_sub).unwrap(),
+        waiter.attach(&health_sub).unwrap(),
+    ];
+    let world = std::thread::spawn(move || {
+        let mut truth = Vec::new();
+        let summary = link.run(
+            Until::RouteDone,
+            &|| false,
+            &mut |s, host| {
+                truth.push(P {
+                    t: host,
+                    x: s.pose.x,
+                    y: s.pose.y,
+                    th: s.pose.theta,
+                })
+            },
+            &mut |_| {},
+        );
+        (truth, summary)
+    });
+    let mut poses = Vec::new();
+    let mut health = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while !world.is_finished() {
+        assert!(Instant::now() < deadline, "the route took over 120 s");
+        waiter.wait(Some(Duration::from_millis(100))).unwrap();
+        drain(&poses_sub, &mut poses);
+        drain(&health_sub, &mut health);
+    }
+    let (truth, summary) = world.join().unwrap();
+    // The last scans and one more health report.
+    let settle = Instant::now() + Duration::from_secs(3);
+    while Instant::now() < settle {
+        waiter.wait(Some(Duration::from_millis(100))).unwrap();
+        drain(&poses_sub, &mut poses);
+        drain(&health_sub, &mut health);
+    }
+    for (role, p) in &procs {
+        assert!(!p.output().contains("panicked"), "{role}: {}", p.output());
+    }
+    assert!(!slam.output().contains("panicked"), "{}", slam.output());
+    eprintln!("{summary:?}");
+    assert!(poses.len() > 200, "{} poses", poses.len());
+
+    // The map frame starts at the first pose; the truth is in the world frame.
+    // Scans from before the world started running have no truth.
+    let (_, first) = *poses
+        .iter()
+        .find(|(_, p)| truth_at(&truth, p.header.stamp_ns).is_some())
+        .expect("no pose within the true track");
+    let t0 = truth_at(&truth, first.header.stamp_ns).unwrap();
+    let rot = t0.th - first.theta;
+    let (c, s) = (rot.cos(), rot.sin());
+    let error = |p: &PoseEstimate| {
+        let t = truth_at(&truth, p.header.stamp_ns)?;
+        let (dx, dy) = (p.x - first.x, p.y - first.y);
+        let (x, y) = (t0.x + c * dx - s * dy, t0.y + s * dx + c * dy);
+        Some((x - t.x).hypot(y - t.y))
+    };
+
+    // Where the error lies at the end (world frame): which way a closure pulled.
+    let (_, last_pose) = poses.last().unwrap();
+    if let Some(t) = truth_at(&truth, last_pose.header.stamp_ns) {
+        let (dx, dy) = (last_pose.x - first.x, last_pose.y - first.y);
+        eprintln!(
+            "last pose: estimate ({:.2}, {:.2}), truth ({:.2}, {:.2})",
+            t0.x + c * dx - s * dy,
+            t0.y + s * dx + c * dy,
+            t.x,
+            t.y
+        );
+    }
+    let metric = |h: &Health, name: &str| h.metric(name).unwrap_or(f64::NAN);
+    let last = &health.last().expect("slam health").1;
+    eprintln!(
+        "closures tried {} accepted {} low score {} inconsistent {}, optimisations {}, nodes {}, scans {} skipped {}",
+        metric(last, "loop_closures_tried"),
+        metric(last, "loop_closures_accepted"),
+        metric(last, "loop_closures_low_score"),
+        metric(last, "loop_closures_inconsistent"),
+        metric(last, "graph_optimizations"),
+        metric(last, "graph_nodes"),
+        metric(last, "scans_processed"),
+        metric(last, "scans_skipped"),
+    );
+    // The first report that counts an accepted closure, and the one before it.
+    let k = health
+        .iter()
+        .position(|(_, h)| metric(h, "loop_closures_accepted") >= 1.0)
+        .expect("no accepted loop closure reported on health/slam");
+    assert!(k > 0, "a closure in the first report");
+    let (before_at, after_at) = (health[k - 1].0, health[k].0);
+    let rms = |e: &[f64]| (e.iter().map(|v| v * v).sum::<f64>() / e.len().max(1) as f64).sqrt();
+    let errors = |from: Instant, to: Instant| -> Vec<f64> {
+        poses
+            .iter()
+            .filter(|(at, _)| *at > from && *at <= to)
+            .filter_map(|(_, p)| error(p))
+            .collect()
+    };
+    let start = poses[0].0;
+    let end = poses.last().unwrap().0;
+    // The drift the closure has to correct: the last 2 s before the report that had none.
+    let before = errors(before_at - Duration::from_secs(2), before_at);
+    let leg = errors(start, before_at);
+    // Within a second of the report: the pose of the closing scan is published before it.
+    let window = errors(before_at, after_at + Duration::from_secs(1));
+    let after = errors(after_at + Duration::from_secs(1), end);
+    let best = window.iter().copied().fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "pose error: {:.3} m RMS before the closure (leg {:.3} m), best {best:.3} m within 1 s of it, {:.3} m RMS after ({} poses)",
+        rms(&before),
+        rms(&leg),
+        rms(&after),
+        after.len()
+    );
+    assert!(
+        !before.is_empty() && !after.is_empty() && !window.is_empty(),
+        "poses before {}, within 1 s {}, after {}",
+        before.len(),
+        window.len(),
+        after.len()
+    );
+    // The odometry was bad enough for the drift to show before the loop closed.
+    assert!(rms(&before) > 0.08, "no drift to correct: {before:?}");
+    assert!(
+        best < 0.5 * rms(&before),
+        "the closure did not reach slam/pose within 1 s: {:.3} m before, {window:?}",
+        rms(&before)
+    );
+    assert!(
+        rms(&after) < 0.5 * rms(&leg),
+        "ATE after the closure {:.3} m, before {:.3} m",
+        rms(&after),
+        rms(&leg)
+    );
+}
