@@ -272,9 +272,12 @@ fn link_pulled_and_restored_resumes_within_1_s() {
         let unplugged_ago = smokenav_shared_types::clock::monotonic_now_ns() - newest;
         assert!(unplugged_ago > 1_000_000_000, "published while unplugged");
     }
-    r.emu.reconnect();
+    // The clock is read before the replug: on a loaded machine this thread can
+    // be descheduled after `reconnect()` long enough for the driver to reopen,
+    // reconfigure and publish its first (RESET) message with an earlier stamp.
     let back = Instant::now();
     let replugged_at = smokenav_shared_types::clock::monotonic_now_ns();
+    r.emu.reconnect();
     let odoms = wait_for::<Odometry>(&r.bus, topics::BASE_ODOM, Duration::from_secs(3), |o| {
         o.header.stamp_ns > replugged_at
     })
