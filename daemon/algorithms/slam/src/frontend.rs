@@ -120,6 +120,8 @@ pub struct FrontEnd {
     rotated: Vec<Vec<(i32, i32)>>,
     angles: Vec<f64>,
     candidates: Vec<Candidate>,
+    /// Scratch of the rival search (blocks still to open, with their level).
+    rival_stack: Vec<(usize, Candidate)>,
     /// Prior coefficients of the current search: score lost per m² and per rad².
     prior_t: f64,
     prior_r: f64,
@@ -168,6 +170,7 @@ impl FrontEnd {
             rotated: Vec::new(),
             angles: Vec::new(),
             candidates: Vec::new(),
+            rival_stack: Vec::new(),
             prior_t: 0.0,
             prior_r: 0.0,
             blur,
@@ -262,8 +265,12 @@ impl FrontEnd {
     /// Matches `endpoints` (robot frame) against `map` (map-frame points of
     /// other scans) around `guess` within ± `window_m` and ± `window_rad`,
     /// without a prior: the branch-and-bound search the tracker uses, for
-    /// verifying a loop closure. Returns the pose and its mean table value
-    /// (0–1). The tracker's own local map and state are left as they were.
+    /// verifying a loop closure. Returns the pose, its mean table value
+    /// (0–1) and, with `rival = Some((distance_m, ratio))`, the score of the
+    /// rival: the best pose more than `distance_m` from the best one, if it
+    /// reaches `ratio` × its score (0 if none does; a match with a rival is
+    /// ambiguous, as along a corridor or between repeated shelves). The
+    /// tracker's own local map and state are left as they were.
     pub fn match_against(
         &mut self,
         map: &[&[(f32, f32)]],
@@ -271,7 +278,8 @@ impl FrontEnd {
         guess: &Pose2,
         window_m: f64,
         window_rad: f64,
-    ) -> Option<(Pose2, f64)> {
+        rival: Option<(f64, f64)>,
+    ) -> Option<(Pose2, f64, f64)> {
         let history =
             std::mem::replace(&mut self.history, map.iter().map(|s| s.to_vec()).collect());
         let saved = (
@@ -287,6 +295,12 @@ impl FrontEnd {
         self.prior_t = 0.0;
         self.prior_r = 0.0;
         let found = self.search(guess);
+        let found = found.map(|(pose, score)| {
+            let rival = rival.map_or(0.0, |(distance_m, ratio)| {
+                self.rival_score(guess, &pose, distance_m, ratio * score)
+            });
+            (pose, score, rival)
+        });
         self.history = history;
         self.points = points;
         (
@@ -646,6 +660,78 @@ impl FrontEnd {
             }
         };
         self.prior(a, nearest(ix) * res, nearest(iy) * res)
+    }
+
+    /// After [`Self::search`] from `prediction` found `best`: the best score
+    /// of the poses more than `distance_m` from it (in translation, any angle
+    /// of the window) if it reaches `threshold`, else 0. The same branch and
+    /// bound, pruned at `threshold` from the start, so it costs little when
+    /// nothing comes near.
+    fn rival_score(
+        &mut self,
+        prediction: &Pose2,
+        best: &Pose2,
+        distance_m: f64,
+        threshold: f64,
+    ) -> f64 {
+        let res = self.p.resolution;
+        let (bx, by) = ((best.x - prediction.x) / res, (best.y - prediction.y) / res);
+        let r2 = (distance_m / res).powi(2);
+        let nw = (self.p.window_m / res).ceil() as i32;
+        let mut stack = std::mem::take(&mut self.rival_stack);
+        stack.clear();
+        // Best first: the candidates are sorted best first, the stack pops the last.
+        stack.extend(
+            self.candidates
+                .iter()
+                .rev()
+                .filter(|c| c.bound >= threshold)
+                .map(|&c| (LEVELS, c)),
+        );
+        let mut found = 0.0f64;
+        while let Some((level, cand)) = stack.pop() {
+            if cand.bound < threshold.max(found) || cand.bound <= found {
+                continue;
+            }
+            if level == 0 {
+                let (dx, dy) = (cand.ix as f64 - bx, cand.iy as f64 - by);
+                if dx * dx + dy * dy > r2 {
+                    found = cand.bound;
+                }
+                continue;
+            }
+            let half = 1i32 << (level - 1);
+            for (ox, oy) in [(0, 0), (half, 0), (0, half), (half, half)] {
+                let (ix, iy) = (cand.ix + ox, cand.iy + oy);
+                if ix > nw || iy > nw {
+                    continue;
+                }
+                // A block whose furthest cell is inside the excluded disc holds no rival.
+                let far = |lo: i32, b: f64| {
+                    (lo as f64 - b)
+                        .abs()
+                        .max(((lo + half - 1) as f64 - b).abs())
+                };
+                let (fx, fy) = (far(ix, bx), far(iy, by));
+                if fx * fx + fy * fy <= r2 {
+                    continue;
+                }
+                let bound = self.table_score(level - 1, cand.angle, ix, iy);
+                if bound >= threshold.max(found) {
+                    stack.push((
+                        level - 1,
+                        Candidate {
+                            angle: cand.angle,
+                            ix,
+                            iy,
+                            bound,
+                        },
+                    ));
+                }
+            }
+        }
+        self.rival_stack = stack;
+        found
     }
 
     fn branch(
