@@ -87,11 +87,20 @@ mod tests {
         let status = stop(&mut polite, Duration::from_secs(5)).unwrap();
         assert_eq!(status.signal(), Some(libc_sigterm()));
 
+        // The shell says when its trap is set: a fixed sleep raced it on a
+        // loaded machine (SIGTERM arrived before `trap` ran).
         let mut stubborn = command(Path::new("/bin/sh"), "t")
-            .args(["-c", "trap '' TERM; sleep 30 & wait; sleep 30"])
+            .args(["-c", "trap '' TERM; echo ready; sleep 30 & wait; sleep 30"])
+            .stdout(std::process::Stdio::piped())
             .spawn()
             .unwrap();
-        std::thread::sleep(Duration::from_millis(200));
+        let mut line = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(stubborn.stdout.take().unwrap()),
+            &mut line,
+        )
+        .unwrap();
+        assert_eq!(line.trim(), "ready");
         let started = Instant::now();
         let status = stop(&mut stubborn, Duration::from_millis(300)).unwrap();
         assert_eq!(status.signal(), Some(9), "SIGKILL after the grace time");
