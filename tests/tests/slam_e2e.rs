@@ -366,7 +366,7 @@ fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> a
         ],
         &instance,
     )?;
-    slam.wait_for_line("fuzzy with", Duration::from_secs(30))?;
+    slam.wait_for_line("fuzzy on laser/scan", Duration::from_secs(30))?;
     let bus = open_bus(&instance);
     let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
     let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
