@@ -211,24 +211,31 @@ fn vote_publishes_every_members_map_and_the_fused_one() {
     );
 }
 
-#[test]
-fn a_crashed_member_is_named_and_the_vote_goes_on() {
-    let r = start("slam_vote_crash", Some("fuzzy:panic:10"));
-    replay(&r, 60);
-    let h = health_until(&r, "fuzzy out", |h| {
-        h.metric("vote_out_fuzzy") == Some(1.0) && h.state() == HealthState::Degraded
+/// Replays until `member` is out with `why` in health, then replays more and
+/// returns the health once the vote has fused again without it.
+fn member_out_then_more_votes(r: &Run, member: &str, why: &str) -> Health {
+    replay(r, 60);
+    let out = format!("vote_out_{member}");
+    let h = health_until(r, &format!("{member} out"), |h| {
+        h.metric(&out) == Some(1.0) && h.state() == HealthState::Degraded
     });
     assert!(
-        h.last_error.as_str().contains("fuzzy") && h.last_error.as_str().contains("panicked"),
+        h.last_error.as_str().contains(member) && h.last_error.as_str().contains(why),
         "{}",
         h.last_error.as_str()
     );
-    // The vote keeps updating on rbpf and graph.
     let fuses = h.metric("vote_fuses").unwrap_or(0.0);
-    replay(&r, 60);
-    let later = health_until(&r, "more votes", |h| {
+    replay(r, 60);
+    health_until(r, "more votes", |h| {
         h.metric("vote_fuses").is_some_and(|n| n > fuses)
-    });
+    })
+}
+
+#[test]
+fn a_crashed_member_is_named_and_the_vote_goes_on() {
+    let r = start("slam_vote_crash", Some("fuzzy:panic:10"));
+    // The vote keeps updating on rbpf and graph.
+    let later = member_out_then_more_votes(&r, "fuzzy", "panicked");
     assert_eq!(later.metric("vote_out_rbpf"), Some(0.0));
     assert_eq!(later.metric("vote_out_graph"), Some(0.0));
     map_with_walls(&r, topics::SLAM_MAP, 100);
@@ -237,20 +244,7 @@ fn a_crashed_member_is_named_and_the_vote_goes_on() {
 #[test]
 fn a_stalled_member_is_named_and_the_vote_goes_on() {
     let r = start("slam_vote_stall", Some("graph:stall:10"));
-    replay(&r, 60);
-    let h = health_until(&r, "graph out", |h| {
-        h.metric("vote_out_graph") == Some(1.0) && h.state() == HealthState::Degraded
-    });
-    assert!(
-        h.last_error.as_str().contains("graph") && h.last_error.as_str().contains("stalled"),
-        "{}",
-        h.last_error.as_str()
-    );
-    let fuses = h.metric("vote_fuses").unwrap_or(0.0);
-    replay(&r, 60);
-    let later = health_until(&r, "more votes", |h| {
-        h.metric("vote_fuses").is_some_and(|n| n > fuses)
-    });
+    let later = member_out_then_more_votes(&r, "graph", "stalled");
     assert_eq!(later.metric("vote_out_rbpf"), Some(0.0));
     assert!(later.metric("vote_drops").is_some_and(|d| d > 0.0));
 }
