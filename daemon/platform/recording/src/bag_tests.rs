@@ -257,7 +257,7 @@ fn two_laser_topics_need_a_choice_and_the_error_lists_them() {
     let roles = bag
         .laser_and_odometry(&RoleRequest {
             laser: Some("rear/scan".into()),
-            odom: None,
+            ..Default::default()
         })
         .unwrap();
     assert_eq!(roles.laser.as_deref(), Some("/rear/scan"));
@@ -265,7 +265,7 @@ fn two_laser_topics_need_a_choice_and_the_error_lists_them() {
     let e = bag
         .roles(&RoleRequest {
             laser: Some("/odom".into()),
-            odom: None,
+            ..Default::default()
         })
         .unwrap_err()
         .to_string();
@@ -273,7 +273,7 @@ fn two_laser_topics_need_a_choice_and_the_error_lists_them() {
     let e = bag
         .roles(&RoleRequest {
             laser: Some("/nope".into()),
-            odom: None,
+            ..Default::default()
         })
         .unwrap_err()
         .to_string();

@@ -215,9 +215,9 @@ impl Source {
             )));
         }
         let roles = bag.roles(&args.roles.request())?;
-        if roles.laser.is_none() && roles.odom.is_none() {
+        if roles.laser.is_none() && roles.odom.is_none() && roles.sonar.is_empty() {
             bail!(
-                "{}: no sensor_msgs/msg/LaserScan or nav_msgs/msg/Odometry topic to play; topics: {}",
+                "{}: no sensor_msgs/msg/LaserScan or nav_msgs/msg/Odometry topic to play (nor a sonar); topics: {}",
                 args.file.display(),
                 bag.topics()
                     .iter()
@@ -234,7 +234,23 @@ impl Source {
                 tracing::info!("{}: {t} → {bus}", args.file.display());
             }
         }
-        Ok(Self::Bag(Box::new(bag.messages(&roles)?)))
+        if let Some(what) = crate::bag::sonar_summary(&roles) {
+            tracing::info!(
+                "{}: {what} → {}",
+                args.file.display(),
+                topics::BASE_SONAR.name()
+            );
+        }
+        // The sonar is mapped onto the transducers of the robot profile (--config).
+        let cfg = match &args.bus.config {
+            Some(path) => smokenav_platform_config::RobotConfig::load(path)
+                .with_context(|| format!("invalid robot profile {}", path.display()))?,
+            None => smokenav_platform_config::RobotConfig::builtin("pioneer-3dx")
+                .context("the built-in profile is invalid")?,
+        };
+        Ok(Self::Bag(Box::new(
+            bag.messages_with_sonar(&roles, &cfg.sonar)?,
+        )))
     }
 
     fn read_next(&mut self) -> anyhow::Result<Option<Played>> {

@@ -395,13 +395,19 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         (Some(log), _) => {
             anyhow::ensure!(
                 !args.roles.given(),
-                "--laser and --odom choose a bag's topics; a CARMEN log has none"
+                "--laser, --odom and --sonar choose a bag's topics; a CARMEN log has none"
             );
             let file = std::fs::File::open(log)
                 .with_context(|| format!("cannot open {}", log.display()))?;
             Input::Carmen(log.clone(), file)
         }
         (None, Some(path)) => {
+            // SLAM maps from the laser; a bag's sonar reaches it through fusion.
+            anyhow::ensure!(
+                args.roles.sonar.is_empty(),
+                "--sonar: smokenav slam maps from the laser scans; fuse the sonar in first \
+                 (smokenav fuse --bag BAG --sonar TOPIC …) — slam --bag does not run the fusion yet"
+            );
             let (bag, roles) = crate::bag::open(path, &args.roles, true)?;
             Input::Bag(Box::new(bag), roles)
         }
