@@ -26,13 +26,13 @@
 //! file, the topic and the message's index on it, never a panic.
 
 use crate::bag_decode::{self, PlanarTransform};
-pub use crate::bag_sonar::{SonarKind, SonarMapper};
 use crate::bag_sonar::SonarError;
-use smokenav_platform_config::SonarSection;
+pub use crate::bag_sonar::{SonarKind, SonarMapper};
 use crate::cdr::CdrError;
 use crate::codec;
 use crate::reader::{EndOfData, MAX_RECORD_BYTES, McapSource, Playback, Played, ReadError};
 use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+use smokenav_platform_config::SonarSection;
 use smokenav_shared_types::catalog::topic_names;
 use smokenav_shared_types::{AnyMessage, LaserScan};
 use std::collections::HashMap;
@@ -621,7 +621,10 @@ impl Bag {
     /// The sonar topics: those asked for (each a Range, or one PointCloud2),
     /// else every Range topic, else the one PointCloud2 topic whose name
     /// says sonar (a bag's other clouds are a lidar's or a camera's).
-    fn sonar_roles(&self, asked: &[String]) -> Result<(Vec<String>, Option<SonarKind>, bool), BagError> {
+    fn sonar_roles(
+        &self,
+        asked: &[String],
+    ) -> Result<(Vec<String>, Option<SonarKind>, bool), BagError> {
         let kind_of = |t: &BagTopic| match t.type_name.as_str() {
             RANGE_TYPE => Some(SonarKind::Range),
             POINT_CLOUD2_TYPE => Some(SonarKind::Cloud),
@@ -643,7 +646,9 @@ impl Bag {
                         t.type_name
                     )));
                 };
-                if kind.is_some_and(|kind| kind != k) || (k == SonarKind::Cloud && !topics.is_empty()) {
+                if kind.is_some_and(|kind| kind != k)
+                    || (k == SonarKind::Cloud && !topics.is_empty())
+                {
                     return Err(self.roles_error(format!(
                         "--sonar {a}: give either Range topics (one per transducer) or one PointCloud2 topic"
                     )));
@@ -660,14 +665,25 @@ impl Bag {
             // Its base/sonar is played as recorded.
             return Ok((Vec::new(), None, false));
         }
-        let mut ranges: Vec<&BagTopic> = self.topics.iter().filter(|t| t.type_name == RANGE_TYPE).collect();
+        let mut ranges: Vec<&BagTopic> = self
+            .topics
+            .iter()
+            .filter(|t| t.type_name == RANGE_TYPE)
+            .collect();
         ranges.sort_by(|a, b| a.name.cmp(&b.name));
         let clouds: Vec<&BagTopic> = self
             .topics
             .iter()
-            .filter(|t| t.type_name == POINT_CLOUD2_TYPE && t.name.to_ascii_lowercase().contains("sonar"))
+            .filter(|t| {
+                t.type_name == POINT_CLOUD2_TYPE && t.name.to_ascii_lowercase().contains("sonar")
+            })
             .collect();
-        let names = |v: &[&BagTopic]| v.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ");
+        let names = |v: &[&BagTopic]| {
+            v.iter()
+                .map(|t| t.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         match (ranges.as_slice(), clouds.as_slice()) {
             ([], []) => Ok((Vec::new(), None, false)),
             ([], [one]) => Ok((vec![one.name.clone()], Some(SonarKind::Cloud), false)),
@@ -1127,7 +1143,9 @@ impl BagMessages {
                         RawRole::Laser => {
                             let mut scan = Box::<LaserScan>::default();
                             codec::decode_laser_scan(m.data, &mut scan)
-                                .map(|()| Some((topic_names::LASER_SCAN, AnyMessage::LaserScan(scan))))
+                                .map(|()| {
+                                    Some((topic_names::LASER_SCAN, AnyMessage::LaserScan(scan)))
+                                })
                                 .map_err(SonarError::Decode)
                         }
                         RawRole::Odom => codec::decode_odometry(m.data)
@@ -1159,7 +1177,8 @@ impl BagMessages {
                 match step? {
                     None => {
                         // The cycle still being collected when the bag ends.
-                        if let Some(ring) = self.sonar.as_deref_mut().and_then(SonarMapper::finish) {
+                        if let Some(ring) = self.sonar.as_deref_mut().and_then(SonarMapper::finish)
+                        {
                             return Ok(Some(Played {
                                 topic: topic_names::BASE_SONAR.to_owned(),
                                 log_time: self.last_log_time,

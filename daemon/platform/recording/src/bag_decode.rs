@@ -151,7 +151,9 @@ pub fn decode_point_cloud2(
             other => {
                 return Err(bad(
                     "fields.datatype",
-                    format!("field {name} has datatype {other}; smokenav reads float32 (7) or float64 (8)"),
+                    format!(
+                        "field {name} has datatype {other}; smokenav reads float32 (7) or float64 (8)"
+                    ),
                 ));
             }
         };
@@ -161,7 +163,10 @@ pub fn decode_point_cloud2(
         coords[slot] = Some(Coord { offset, double });
     }
     if r.bool("is_bigendian")? {
-        return Err(bad("is_bigendian", "big-endian point data; smokenav reads little-endian".into()));
+        return Err(bad(
+            "is_bigendian",
+            "big-endian point data; smokenav reads little-endian".into(),
+        ));
     }
     let point_step = r.u32("point_step")? as usize;
     let row_step = r.u32("row_step")? as usize;
@@ -182,10 +187,16 @@ pub fn decode_point_cloud2(
     for (name, c) in [("x", Some(x)), ("y", Some(y)), ("z", z)] {
         if let Some(c) = c {
             let size = if c.double { 8 } else { 4 };
-            if c.offset.checked_add(size).is_none_or(|end| end > point_step) {
+            if c.offset
+                .checked_add(size)
+                .is_none_or(|end| end > point_step)
+            {
                 return Err(bad(
                     "fields.offset",
-                    format!("field {name} at offset {} lies outside the {point_step}-byte point", c.offset),
+                    format!(
+                        "field {name} at offset {} lies outside the {point_step}-byte point",
+                        c.offset
+                    ),
                 ));
             }
         }

@@ -261,7 +261,11 @@ impl SonarMapper {
     /// The transducer of a Range message on topic `slot` with the frame in `self.frame`.
     fn resolve(&mut self, slot: usize) -> Result<u8, String> {
         let frame = self.frame.trim_start_matches('/');
-        if let Some(k) = self.keys.iter().find(|k| k.slot == slot && k.frame == frame) {
+        if let Some(k) = self
+            .keys
+            .iter()
+            .find(|k| k.slot == slot && k.frame == frame)
+        {
             return Ok(k.index);
         }
         let index = if let Some(pose) = self.frames.in_base(frame) {

@@ -103,7 +103,11 @@ fn range_topics_placed_by_tf_static_map_to_the_profiles_transducers() {
                 5 => f32::NAN,
                 _ => 1.0 + slot as f32 * 0.25,
             };
-            let data = range_msg(10_000_000_000 + cycle * 100_000_000, &format!("s{slot}"), range);
+            let data = range_msg(
+                10_000_000_000 + cycle * 100_000_000,
+                &format!("s{slot}"),
+                range,
+            );
             rings.extend(m.range(slot, &data).unwrap());
         }
     }
@@ -164,14 +168,23 @@ fn one_range_topic_with_a_frame_per_transducer_needs_tf_static() {
     );
     let mut rings = Vec::new();
     for i in 0..8 {
-        rings.extend(m.range(0, &range_msg(5, &format!("sonar_{i}"), 2.0)).unwrap());
+        rings.extend(
+            m.range(0, &range_msg(5, &format!("sonar_{i}"), 2.0))
+                .unwrap(),
+        );
     }
     assert_eq!(rings.len(), 1);
     assert_eq!(rings[0].len(), 8);
     assert_eq!(m.mapping().len(), 8);
 
     // Without them, the second frame on the one topic is refused by name.
-    let mut m = SonarMapper::new(SonarKind::Range, vec!["/sonar".into()], true, frames(vec![]), &g);
+    let mut m = SonarMapper::new(
+        SonarKind::Range,
+        vec!["/sonar".into()],
+        true,
+        frames(vec![]),
+        &g,
+    );
     m.range(0, &range_msg(5, "sonar_0", 2.0)).unwrap();
     let Err(SonarError::Map(e)) = m.range(0, &range_msg(5, "sonar_1", 2.0)) else {
         panic!("two frames on one unplaced topic must be an error");
@@ -241,7 +254,10 @@ fn a_rosaria_cloud_becomes_a_ring_by_bearing() {
     // base = (0.1, 0) + R(90°)·laser  →  laser = R(−90°)·(base − (0.1, 0)).
     let (bx, by) = (f64::from(p[0]) - 0.1, f64::from(p[1]));
     let in_laser = [by as f32, (-bx) as f32, 0.0];
-    let ring = m.cloud(&cloud_msg(1, "laser", &[in_laser])).unwrap().unwrap();
+    let ring = m
+        .cloud(&cloud_msg(1, "laser", &[in_laser]))
+        .unwrap()
+        .unwrap();
     assert_eq!(ring.len(), 1);
     assert!((ring.by_index(4).unwrap().range - 1.5).abs() < 1e-5);
     let Err(SonarError::Map(e)) = m.cloud(&cloud_msg(1, "camera", &[in_laser])) else {
@@ -277,9 +293,11 @@ fn damaged_sonar_messages_never_panic() {
     for data in [&cloud, &range] {
         let mut cuts = 0;
         for len in 0..data.len() {
-            let mut m = SonarMapper::new(SonarKind::Cloud, vec!["c".into()], true, frames(vec![]), &g);
+            let mut m =
+                SonarMapper::new(SonarKind::Cloud, vec!["c".into()], true, frames(vec![]), &g);
             cuts += usize::from(m.cloud(&data[..len]).is_err());
-            let mut m = SonarMapper::new(SonarKind::Range, vec!["r".into()], true, frames(vec![]), &g);
+            let mut m =
+                SonarMapper::new(SonarKind::Range, vec!["r".into()], true, frames(vec![]), &g);
             let _ = m.range(0, &data[..len]);
         }
         assert!(cuts >= data.len() - 1, "a cut message decodes as a cloud");
@@ -290,9 +308,11 @@ fn damaged_sonar_messages_never_panic() {
             state ^= state << 17;
             let at = 4 + (state as usize) % (d.len() - 4);
             d[at] ^= 1 << ((state >> 32) % 8);
-            let mut m = SonarMapper::new(SonarKind::Cloud, vec!["c".into()], true, frames(vec![]), &g);
+            let mut m =
+                SonarMapper::new(SonarKind::Cloud, vec!["c".into()], true, frames(vec![]), &g);
             let _ = m.cloud(&d);
-            let mut m = SonarMapper::new(SonarKind::Range, vec!["r".into()], true, frames(vec![]), &g);
+            let mut m =
+                SonarMapper::new(SonarKind::Range, vec!["r".into()], true, frames(vec![]), &g);
             let _ = m.range(0, &d);
         }
     }

@@ -150,10 +150,7 @@ fn run_bag(
     drop(out);
     let sync = pipeline.sync_counters();
     let sonar_from = match (crate::bag::sonar_summary(&map), messages.sonar()) {
-        (Some(what), Some(m)) => format!(
-            " from {what}, {} cloud points dropped",
-            m.dropped_points
-        ),
+        (Some(what), Some(m)) => format!(" from {what}, {} cloud points dropped", m.dropped_points),
         _ => String::new(),
     };
     eprintln!(
