@@ -71,11 +71,16 @@ fn record_native(path: &Path) -> anyhow::Result<u64> {
 }
 
 fn slam(bag: &Path, out: &Path) -> anyhow::Result<(String, String)> {
+    slam_with(bag, out, &[])
+}
+
+fn slam_with(bag: &Path, out: &Path, extra: &[&str]) -> anyhow::Result<(String, String)> {
     let run = Command::new(bin("smokenav"))
         .args(["slam", "--particles", "8", "--seed", "3", "--bag"])
         .arg(bag)
         .arg("--out")
         .arg(out)
+        .args(extra)
         .output()?;
     let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
     anyhow::ensure!(
@@ -164,6 +169,44 @@ fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result
             );
         }
     }
+    Ok(())
+}
+
+/// `smokenav slam --bag --fuse v2` maps from the fused laser and sonar:
+/// the Range bag's per-transducer topics give the trajectory the native
+/// recording's rings give (`fuse_on_a_foreign_bag…` shows the rings change
+/// the fused scans); `--sonar` without `--fuse` is refused.
+#[test]
+fn slam_fuses_a_foreign_bags_sonar_as_the_native_recordings() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let (native, bags) = native_and_bags(dir.path())?;
+    let fuse = ["--fuse", "v2", "--max-scans", "120"];
+    let (want, native_report) = slam_with(&native, &dir.path().join("native"), &fuse)?;
+    assert!(native_report.contains("sonar rings"), "{native_report}");
+    let (got, report) = slam_with(&bags.join("mcap"), &dir.path().join("mcap"), &fuse)?;
+    assert!(
+        report.contains("/sonar/0") && report.contains("fused scans"),
+        "{report}"
+    );
+    let (want, got) = (poses(&want), poses(&got));
+    assert!(want.len() >= 100, "{native_report}");
+    assert_eq!(got.len(), want.len(), "{report}");
+    for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+        assert_eq!(a[0], b[0], "pose {i} stamp");
+        let d = (a[1] - b[1]).hypot(a[2] - b[2]);
+        assert!(
+            d < 1e-6 && (a[3] - b[3]).abs() < 1e-6,
+            "pose {i} {a:?} vs native {b:?}"
+        );
+    }
+    let err = slam_with(
+        &bags.join("mcap"),
+        &dir.path().join("x"),
+        &["--sonar", "/sonar/0"],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("add --fuse"), "{err}");
     Ok(())
 }
 
