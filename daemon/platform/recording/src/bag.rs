@@ -10,10 +10,12 @@
 //!
 //! The standard topics are mapped to roles ([`RoleRequest`] →
 //! [`RoleMap`]): `sensor_msgs/LaserScan` is the laser, `nav_msgs/Odometry`
-//! the base's odometry, `/tf_static` gives the laser's mounting pose. A role
+//! the base's odometry, `/tf_static` gives the laser's mounting pose, and
+//! `sensor_msgs/Range` or `PointCloud2` topics are the sonar ring
+//! ([`crate::bag_sonar`], through [`Bag::messages_with_sonar`]). A role
 //! not named is guessed by type when exactly one topic has it; otherwise the
 //! error lists the candidates. Messages come out as [`Played`], on the bus
-//! topic of their role (`laser/scan`, `base/odom`), with the time the
+//! topic of their role (`laser/scan`, `base/odom`, `base/sonar`), with the time the
 //! recorder received them — the clock of the bag's header stamps, so the
 //! pipelines' pairing works as live.
 //!

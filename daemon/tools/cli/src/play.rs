@@ -29,7 +29,8 @@ use std::time::{Duration, Instant};
 pub struct PlayArgs {
     /// The recording (an MCAP file written by `smokenav record`; a file cut
     /// short is fine), or a ROS 2 bag (a rosbag2 folder, .mcap or .db3), whose
-    /// LaserScan and Odometry topics are played as laser/scan and base/odom.
+    /// LaserScan and Odometry topics are played as laser/scan and base/odom,
+    /// and its sonar (Range or PointCloud2, mapped onto --config's [sonar]) as base/sonar.
     pub file: PathBuf,
     #[command(flatten)]
     pub roles: crate::bag::RoleArgs,
