@@ -4,12 +4,16 @@
 //! sqlite3, on ROS 2 topic names (`/scan`, `/odom`, `/tf_static`) and with
 //! only what standard messages carry (REP 117 ranges, quaternion headings,
 //! no companions). `smokenav slam --bag` on each must give the trajectory
-//! it gives on smokenav's own recording (which is read exactly).
+//! it gives on smokenav's own recording (which is read exactly). The sonar
+//! ring goes in as a ROS 2 robot publishes it — one `sensor_msgs/Range`
+//! topic per transducer (placed by `/tf_static`, or only by the order of
+//! `--sonar`), or RosAria's one `sensor_msgs/PointCloud2` — and `fuse --bag`
+//! and `play` must give what they give on the native recording.
 
 use smokenav_platform_bus::{Subscriber, Waiter, topics};
 use smokenav_platform_recording::{AnyMessage, Playback};
 use smokenav_platform_recording::{AnyMessageRef, Recorder, RobotGeometry, SinkOptions};
-use smokenav_shared_types::{LaserScan, Odometry};
+use smokenav_shared_types::{LaserScan, Odometry, SonarRing};
 use smokenav_sim_link::{DirectDrivers, DirectMessage};
 use smokenav_sim_world::{Scenario, StepOutput, World};
 use smokenav_tests::{Child, bin, open_bus, python, unique_instance, workspace_root};
@@ -50,6 +54,7 @@ fn record_native(path: &Path) -> anyhow::Result<u64> {
                 DirectMessage::Odometry(o) => {
                     rec.record(msg.topic(), AnyMessageRef::Odometry(o), t)
                 }
+                DirectMessage::Sonar(r) => rec.record(msg.topic(), AnyMessageRef::SonarRing(r), t),
                 _ => return,
             };
             match r {
@@ -66,11 +71,16 @@ fn record_native(path: &Path) -> anyhow::Result<u64> {
 }
 
 fn slam(bag: &Path, out: &Path) -> anyhow::Result<(String, String)> {
+    slam_with(bag, out, &[])
+}
+
+fn slam_with(bag: &Path, out: &Path, extra: &[&str]) -> anyhow::Result<(String, String)> {
     let run = Command::new(bin("smokenav"))
         .args(["slam", "--particles", "8", "--seed", "3", "--bag"])
         .arg(bag)
         .arg("--out")
         .arg(out)
+        .args(extra)
         .output()?;
     let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
     anyhow::ensure!(
@@ -104,6 +114,7 @@ fn native_and_bags(dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
         .arg(&script)
         .arg(&native)
         .arg(&bags)
+        .arg(workspace_root().join("config/pioneer-3dx.toml"))
         .output()?;
     assert!(
         out.status.success(),
@@ -114,6 +125,10 @@ fn native_and_bags(dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
     );
     let summary: serde_json::Value = serde_json::from_slice(&out.stdout)?;
     assert_eq!(summary["topics"]["/tf_static"], 1, "{summary}");
+    assert!(
+        summary["topics"]["sonar rings"].as_u64() > Some(100),
+        "{summary}"
+    );
     assert!(bags.join("mcap/metadata.yaml").exists());
     assert!(
         std::fs::read_dir(bags.join("sqlite3"))?
@@ -157,55 +172,190 @@ fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result
     Ok(())
 }
 
-/// The fused scans' stamps `smokenav fuse --bag` writes.
-fn fuse(bag: &Path) -> anyhow::Result<Vec<u64>> {
+/// `smokenav slam --bag --fuse v2` maps from the fused laser and sonar:
+/// the Range bag's per-transducer topics give the trajectory the native
+/// recording's rings give (`fuse_on_a_foreign_bag…` shows the rings change
+/// the fused scans); `--sonar` without `--fuse` is refused.
+#[test]
+fn slam_fuses_a_foreign_bags_sonar_as_the_native_recordings() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let (native, bags) = native_and_bags(dir.path())?;
+    let fuse = ["--fuse", "v2", "--max-scans", "120"];
+    let (want, native_report) = slam_with(&native, &dir.path().join("native"), &fuse)?;
+    assert!(native_report.contains("sonar rings"), "{native_report}");
+    let (got, report) = slam_with(&bags.join("mcap"), &dir.path().join("mcap"), &fuse)?;
+    assert!(
+        report.contains("/sonar/0") && report.contains("fused scans"),
+        "{report}"
+    );
+    let (want, got) = (poses(&want), poses(&got));
+    assert!(want.len() >= 100, "{native_report}");
+    assert_eq!(got.len(), want.len(), "{report}");
+    for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+        assert_eq!(a[0], b[0], "pose {i} stamp");
+        let d = (a[1] - b[1]).hypot(a[2] - b[2]);
+        assert!(
+            d < 1e-6 && (a[3] - b[3]).abs() < 1e-6,
+            "pose {i} {a:?} vs native {b:?}"
+        );
+    }
+    let err = slam_with(
+        &bags.join("mcap"),
+        &dir.path().join("x"),
+        &["--sonar", "/sonar/0"],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("add --fuse"), "{err}");
+    Ok(())
+}
+
+/// The fused scans `smokenav fuse --bag` writes (one JSON value each) and its summary.
+fn fuse(bag: &Path, extra: &[&str]) -> anyhow::Result<(Vec<serde_json::Value>, String)> {
     let run = Command::new(bin("smokenav"))
         .args(["fuse", "--method", "v2", "--bag"])
         .arg(bag)
+        .args(extra)
         .output()?;
+    let stderr = String::from_utf8_lossy(&run.stderr).into_owned();
     anyhow::ensure!(
         run.status.success(),
-        "smokenav fuse --bag {} failed:\n{}",
+        "smokenav fuse --bag {} failed:\n{stderr}",
         bag.display(),
-        String::from_utf8_lossy(&run.stderr)
     );
-    let mut stamps = Vec::new();
+    let mut fused = Vec::new();
     for line in String::from_utf8_lossy(&run.stdout).lines() {
         let v: serde_json::Value = serde_json::from_str(line)?;
         assert_eq!(v["topic"], "fusion/scan", "{line}");
-        let stamp = v["scan"]["header"]["stamp_ns"].as_u64();
-        stamps.push(stamp.ok_or_else(|| anyhow::anyhow!("no stamp in {line}"))?);
+        fused.push(v);
     }
-    Ok(stamps)
+    Ok((fused, stderr))
 }
 
-/// `smokenav fuse --bag` fuses a foreign bag's scans as it does the same
-/// scans of the native recording (neither has sonar or smoke: every scan
-/// passes once the synchroniser gives up on them).
+/// Fused scans equal up to `tol` in their float fields (0: bit for bit as
+/// printed), but for the header's sequence number.
+fn assert_same_fused(what: &str, got: &[serde_json::Value], want: &[serde_json::Value], tol: f64) {
+    fn close(
+        a: &serde_json::Value,
+        b: &serde_json::Value,
+        tol: f64,
+        at: &str,
+    ) -> Result<(), String> {
+        use serde_json::Value::*;
+        match (a, b) {
+            (Number(x), Number(y)) if x.is_f64() || y.is_f64() => {
+                let (x, y) = (
+                    x.as_f64().unwrap_or(f64::NAN),
+                    y.as_f64().unwrap_or(f64::NAN),
+                );
+                if (x - y).abs() <= tol {
+                    Ok(())
+                } else {
+                    Err(format!("{at}: {x} vs {y}"))
+                }
+            }
+            (Array(x), Array(y)) if x.len() == y.len() => x
+                .iter()
+                .zip(y)
+                .enumerate()
+                .try_for_each(|(i, (a, b))| close(a, b, tol, &format!("{at}[{i}]"))),
+            // ROS 2 headers carry no sequence number.
+            (Object(x), Object(y)) if x.len() == y.len() => x
+                .iter()
+                .filter(|(k, _)| k.as_str() != "seq")
+                .try_for_each(|(k, a)| {
+                    close(a, y.get(k).unwrap_or(&Null), tol, &format!("{at}.{k}"))
+                }),
+            _ if a == b => Ok(()),
+            _ => Err(format!("{at}: {a} vs {b}")),
+        }
+    }
+    assert_eq!(got.len(), want.len(), "{what}: fused scans");
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        if let Err(e) = close(g, w, tol, "") {
+            panic!("{what}: fused scan {i} differs at {e}");
+        }
+    }
+}
+
+/// `smokenav fuse --bag` fuses a foreign bag's laser and sonar as it fuses
+/// the native recording's (neither has a smoke sensor, so v2 takes the air
+/// for smoky and the sonar witnesses every section): the same fused scans
+/// from Range topics placed by `/tf_static` (MCAP and sqlite3), from Range
+/// topics known only by the order of `--sonar`, and — within float32
+/// coordinates — from RosAria's PointCloud2.
 #[test]
 fn fuse_on_a_foreign_bag_matches_the_native_recording() -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let (native, bags) = native_and_bags(dir.path())?;
-    let want = fuse(&native)?;
+    let (want, native_report) = fuse(&native, &[])?;
     assert!(want.len() > 200, "{} fused scans", want.len());
-    assert_eq!(fuse(&bags.join("mcap"))?, want);
-    assert_eq!(fuse(&bags.join("sqlite3"))?, want);
+    // The sonar matters: rings are fused and some beams come from them or are dropped by them.
+    let with_ring = want
+        .iter()
+        .filter(|v| v["sonar_stamp_ns"].as_u64() > Some(0))
+        .count();
+    let not_laser = want
+        .iter()
+        .filter(|v| {
+            v["beam_source"]
+                .as_array()
+                .is_some_and(|b| b.iter().any(|s| s != 0))
+        })
+        .count();
+    assert!(
+        with_ring > 200 && not_laser > 0,
+        "{with_ring} scans with a ring, {not_laser} with beams not the laser's\n{native_report}"
+    );
+
+    for storage in ["mcap", "sqlite3"] {
+        let (got, report) = fuse(&bags.join(storage), &[])?;
+        assert!(
+            report.contains("/sonar/0") && report.contains("sensor_msgs/Range"),
+            "{report}"
+        );
+        assert_same_fused(storage, &got, &want, 0.0);
+    }
+    let order: Vec<String> = (0..8)
+        .flat_map(|i| ["--sonar".to_owned(), format!("/sonar/{i}")])
+        .collect();
+    let order: Vec<&str> = order.iter().map(String::as_str).collect();
+    let (got, _) = fuse(&bags.join("range-notf"), &order)?;
+    assert_same_fused("range-notf --sonar ×8", &got, &want, 0.0);
+    // Guessed, with nothing to say which transducer a frame is: an error saying what to give.
+    let err = fuse(&bags.join("range-notf"), &[]).unwrap_err().to_string();
+    assert!(
+        err.contains("/tf_static does not place frame `sonar_0`") && err.contains("--sonar"),
+        "{err}"
+    );
+    for storage in ["cloud-mcap", "cloud-sqlite3"] {
+        let (got, report) = fuse(&bags.join(storage), &[])?;
+        assert!(
+            report.contains("/sonar_pointcloud2") && report.contains(" 0 cloud points dropped"),
+            "{report}"
+        );
+        // Ranges come back from float32 echo coordinates: within a micrometre or so.
+        assert_same_fused(storage, &got, &want, 1e-5);
+    }
     Ok(())
 }
 
 /// `smokenav play` of a foreign bag publishes its LaserScan and Odometry
-/// topics as laser/scan and base/odom, message for message; a bag with
-/// neither is an error (it used to play 0 messages and exit 0).
+/// topics as laser/scan and base/odom, and its per-transducer Range topics
+/// as base/sonar rings, message for message; a bag with none of them is an
+/// error (it used to play 0 messages and exit 0).
 #[test]
 fn play_publishes_a_foreign_bags_standard_topics() -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let (native, bags) = native_and_bags(dir.path())?;
     let mut want_scans: Vec<LaserScan> = Vec::new();
     let mut want_odom: Vec<Odometry> = Vec::new();
+    let mut want_rings: Vec<SonarRing> = Vec::new();
     for p in Playback::open(&native)? {
         match p?.message {
             AnyMessage::LaserScan(s) => want_scans.push(*s),
             AnyMessage::Odometry(o) => want_odom.push(o),
+            AnyMessage::SonarRing(r) => want_rings.push(r),
             _ => {}
         }
     }
@@ -214,8 +364,13 @@ fn play_publishes_a_foreign_bags_standard_topics() -> anyhow::Result<()> {
     let bus = open_bus(&instance);
     let scans: Subscriber<LaserScan> = bus.subscriber(topics::LASER_SCAN)?;
     let odom: Subscriber<Odometry> = bus.subscriber(topics::BASE_ODOM)?;
+    let sonar: Subscriber<SonarRing> = bus.subscriber(topics::BASE_SONAR)?;
     let waiter = Waiter::new()?;
-    let _g = [waiter.attach(&scans)?, waiter.attach(&odom)?];
+    let _g = [
+        waiter.attach(&scans)?,
+        waiter.attach(&odom)?,
+        waiter.attach(&sonar)?,
+    ];
     let bag = bags.join("sqlite3");
     let bag_s = bag.to_str().unwrap();
     let mut player = Child::spawn(
@@ -223,14 +378,18 @@ fn play_publishes_a_foreign_bags_standard_topics() -> anyhow::Result<()> {
         &["play", bag_s, "--rate", "5", "--instance", &instance],
         &instance,
     )?;
-    let (mut got_scans, mut got_odom) = (Vec::new(), Vec::new());
+    let (mut got_scans, mut got_odom, mut got_rings) = (Vec::new(), Vec::new(), Vec::new());
     let deadline = Instant::now() + Duration::from_secs(60);
-    while got_scans.len() < want_scans.len() || got_odom.len() < want_odom.len() {
+    while got_scans.len() < want_scans.len()
+        || got_odom.len() < want_odom.len()
+        || got_rings.len() < want_rings.len()
+    {
         assert!(
             Instant::now() < deadline,
-            "replay incomplete: {} scans, {} odometry\n{}",
+            "replay incomplete: {} scans, {} odometry, {} sonar rings\n{}",
             got_scans.len(),
             got_odom.len(),
+            got_rings.len(),
             player.output()
         );
         waiter.wait(Some(Duration::from_millis(200)))?;
@@ -239,6 +398,9 @@ fn play_publishes_a_foreign_bags_standard_topics() -> anyhow::Result<()> {
         }
         while let Some(o) = odom.receive()? {
             got_odom.push(*o);
+        }
+        while let Some(r) = sonar.receive()? {
+            got_rings.push(*r);
         }
     }
     let status = player.wait_exit(Duration::from_secs(30))?;
@@ -262,6 +424,16 @@ fn play_publishes_a_foreign_bags_standard_topics() -> anyhow::Result<()> {
         assert_eq!(g.header.stamp_ns, w.header.stamp_ns, "odometry {i}");
         assert_eq!((g.x, g.y), (w.x, w.y), "odometry {i}");
         assert!((g.theta - w.theta).abs() < 1e-9, "odometry {i}");
+    }
+    assert_eq!(got_rings.len(), want_rings.len());
+    for (i, (g, w)) in got_rings.iter().zip(&want_rings).enumerate() {
+        assert_eq!(g.header.stamp_ns, w.header.stamp_ns, "ring {i}");
+        assert_eq!(
+            g.readings(),
+            w.readings(),
+            "ring {i}: every transducer, range and status"
+        );
+        assert_eq!(g.max_range, w.max_range, "ring {i}");
     }
 
     let tf_only = bags.join("tf-only");

@@ -10,10 +10,12 @@
 //!
 //! The standard topics are mapped to roles ([`RoleRequest`] →
 //! [`RoleMap`]): `sensor_msgs/LaserScan` is the laser, `nav_msgs/Odometry`
-//! the base's odometry, `/tf_static` gives the laser's mounting pose. A role
+//! the base's odometry, `/tf_static` gives the laser's mounting pose, and
+//! `sensor_msgs/Range` or `PointCloud2` topics are the sonar ring
+//! ([`crate::bag_sonar`], through [`Bag::messages_with_sonar`]). A role
 //! not named is guessed by type when exactly one topic has it; otherwise the
 //! error lists the candidates. Messages come out as [`Played`], on the bus
-//! topic of their role (`laser/scan`, `base/odom`), with the time the
+//! topic of their role (`laser/scan`, `base/odom`, `base/sonar`), with the time the
 //! recorder received them — the clock of the bag's header stamps, so the
 //! pipelines' pairing works as live.
 //!
@@ -26,10 +28,13 @@
 //! file, the topic and the message's index on it, never a panic.
 
 use crate::bag_decode::{self, PlanarTransform};
+use crate::bag_sonar::SonarError;
+pub use crate::bag_sonar::{SonarKind, SonarMapper};
 use crate::cdr::CdrError;
 use crate::codec;
 use crate::reader::{EndOfData, MAX_RECORD_BYTES, McapSource, Playback, Played, ReadError};
 use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+use smokenav_platform_config::SonarSection;
 use smokenav_shared_types::catalog::topic_names;
 use smokenav_shared_types::{AnyMessage, LaserScan};
 use std::collections::HashMap;
@@ -42,6 +47,7 @@ pub const LASER_SCAN_TYPE: &str = "sensor_msgs/msg/LaserScan";
 pub const ODOMETRY_TYPE: &str = "nav_msgs/msg/Odometry";
 pub const TF_TYPE: &str = "tf2_msgs/msg/TFMessage";
 pub const RANGE_TYPE: &str = "sensor_msgs/msg/Range";
+pub const POINT_CLOUD2_TYPE: &str = "sensor_msgs/msg/PointCloud2";
 /// The latched transforms (sensor mounts) of a ROS 2 system.
 pub const TF_STATIC_TOPIC: &str = "/tf_static";
 
@@ -123,6 +129,9 @@ pub struct Bag {
 pub struct RoleRequest {
     pub laser: Option<String>,
     pub odom: Option<String>,
+    /// Sonar topics in transducer order (`sensor_msgs/Range`, one per
+    /// transducer or one with a frame each; or one `sensor_msgs/PointCloud2`).
+    pub sonar: Vec<String>,
 }
 
 /// The topics chosen for each role (as stored in the bag).
@@ -130,6 +139,12 @@ pub struct RoleRequest {
 pub struct RoleMap {
     pub laser: Option<String>,
     pub odom: Option<String>,
+    /// The sonar topics (empty: none), in the order given or by name when guessed.
+    pub sonar: Vec<String>,
+    /// What they carry.
+    pub sonar_kind: Option<SonarKind>,
+    /// Named on the command line: their order is the transducers' order.
+    pub sonar_ordered: bool,
 }
 
 /// What the start of a bag says about the robot's frames.
@@ -146,16 +161,31 @@ pub struct Frames {
 impl Frames {
     /// The laser's pose in the base frame (x, y, yaw), when `/tf_static` links them.
     pub fn laser_mount(&self) -> Option<(f64, f64, f64)> {
-        let laser = self.laser_frame.as_deref()?;
-        let bases = [
+        self.in_base(self.laser_frame.as_deref()?)
+    }
+
+    /// The base frames a transform may hang from: the odometry's child
+    /// frame, then REP 105's `base_link` and `base_footprint`.
+    fn bases(&self) -> impl Iterator<Item = &str> {
+        [
             self.base_frame.as_deref(),
             Some("base_link"),
             Some("base_footprint"),
-        ];
-        bases
-            .into_iter()
-            .flatten()
-            .find_map(|b| bag_decode::resolve(&self.static_transforms, b, laser))
+        ]
+        .into_iter()
+        .flatten()
+    }
+
+    /// Whether `frame` is the robot's base frame.
+    pub fn is_base(&self, frame: &str) -> bool {
+        let frame = frame.trim_start_matches('/');
+        self.bases().any(|b| b == frame)
+    }
+
+    /// The pose (x, y, yaw) of `frame` in the base frame, when `/tf_static` links them.
+    pub fn in_base(&self, frame: &str) -> Option<(f64, f64, f64)> {
+        self.bases()
+            .find_map(|b| bag_decode::resolve(&self.static_transforms, b, frame))
     }
 }
 
@@ -590,9 +620,92 @@ impl Bag {
         }
     }
 
+    /// The sonar topics: those asked for (each a Range, or one PointCloud2),
+    /// else every Range topic, else the one PointCloud2 topic whose name
+    /// says sonar (a bag's other clouds are a lidar's or a camera's).
+    fn sonar_roles(
+        &self,
+        asked: &[String],
+    ) -> Result<(Vec<String>, Option<SonarKind>, bool), BagError> {
+        let kind_of = |t: &BagTopic| match t.type_name.as_str() {
+            RANGE_TYPE => Some(SonarKind::Range),
+            POINT_CLOUD2_TYPE => Some(SonarKind::Cloud),
+            _ => None,
+        };
+        if !asked.is_empty() {
+            let mut topics = Vec::new();
+            let mut kind = None;
+            for a in asked {
+                let Some(t) = self.topics.iter().find(|t| same_topic(&t.name, a)) else {
+                    return Err(self.roles_error(format!(
+                        "--sonar {a}: no such topic; the bag has:{}",
+                        self.topic_list()
+                    )));
+                };
+                let Some(k) = kind_of(t) else {
+                    return Err(self.roles_error(format!(
+                        "--sonar {a}: the topic carries {}, not {RANGE_TYPE} or {POINT_CLOUD2_TYPE}",
+                        t.type_name
+                    )));
+                };
+                if kind.is_some_and(|kind| kind != k)
+                    || (k == SonarKind::Cloud && !topics.is_empty())
+                {
+                    return Err(self.roles_error(format!(
+                        "--sonar {a}: give either Range topics (one per transducer) or one PointCloud2 topic"
+                    )));
+                }
+                if topics.contains(&t.name) {
+                    return Err(self.roles_error(format!("--sonar {a}: given twice")));
+                }
+                kind = Some(k);
+                topics.push(t.name.clone());
+            }
+            return Ok((topics, kind, true));
+        }
+        if self.smokenav {
+            // Its base/sonar is played as recorded.
+            return Ok((Vec::new(), None, false));
+        }
+        let mut ranges: Vec<&BagTopic> = self
+            .topics
+            .iter()
+            .filter(|t| t.type_name == RANGE_TYPE)
+            .collect();
+        ranges.sort_by(|a, b| a.name.cmp(&b.name));
+        let clouds: Vec<&BagTopic> = self
+            .topics
+            .iter()
+            .filter(|t| {
+                t.type_name == POINT_CLOUD2_TYPE && t.name.to_ascii_lowercase().contains("sonar")
+            })
+            .collect();
+        let names = |v: &[&BagTopic]| {
+            v.iter()
+                .map(|t| t.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        match (ranges.as_slice(), clouds.as_slice()) {
+            ([], []) => Ok((Vec::new(), None, false)),
+            ([], [one]) => Ok((vec![one.name.clone()], Some(SonarKind::Cloud), false)),
+            (r, []) => Ok((r.iter().map(|t| t.name.clone()).collect(), Some(SonarKind::Range), false)),
+            (r, c) => Err(self.roles_error(format!(
+                "the sonar could be the Range topics {} or the PointCloud2 topic{} {}; choose with --sonar TOPIC",
+                names(r),
+                if c.len() > 1 { "s" } else { "" },
+                names(c)
+            ))),
+        }
+    }
+
     /// The topics of each role: those asked for, else guessed by type.
     pub fn roles(&self, request: &RoleRequest) -> Result<RoleMap, BagError> {
+        let (sonar, sonar_kind, sonar_ordered) = self.sonar_roles(&request.sonar)?;
         Ok(RoleMap {
+            sonar,
+            sonar_kind,
+            sonar_ordered,
             laser: self.role(
                 request.laser.as_deref(),
                 LASER_SCAN_TYPE,
@@ -629,7 +742,7 @@ impl Bag {
     /// laser's frame and the base frame.
     pub fn frames(&self, roles: &RoleMap) -> Result<Frames, BagError> {
         let mut frames = Frames::default();
-        let mut raw = RawReader::new(self, roles, true)?;
+        let mut raw = RawReader::new(self, roles, true, false)?;
         let mut seen = 0u64;
         while seen < PREPASS_MESSAGES
             && (frames.laser_frame.is_none() && roles.laser.is_some()
@@ -669,7 +782,33 @@ impl Bag {
         Ok(frames)
     }
 
-    /// The messages of the chosen roles, in the order they were received.
+    /// The messages of the chosen roles, in the order they were received;
+    /// the sonar topics (if any) as rings of `geometry`'s transducers, on
+    /// `base/sonar` (see [`crate::bag_sonar`]).
+    pub fn messages_with_sonar(
+        &self,
+        roles: &RoleMap,
+        geometry: &SonarSection,
+    ) -> Result<BagMessages, BagError> {
+        let mut messages = self.messages(roles)?;
+        if let (Some(kind), false) = (roles.sonar_kind, self.smokenav) {
+            let frames = self.frames(roles)?;
+            messages.sonar = Some(Box::new(SonarMapper::new(
+                kind,
+                roles.sonar.clone(),
+                roles.sonar_ordered,
+                frames,
+                geometry,
+            )));
+            if let Inner::Foreign(raw) = &mut messages.inner {
+                **raw = RawReader::new(self, roles, false, true)?;
+            }
+        }
+        Ok(messages)
+    }
+
+    /// The messages of the chosen roles, in the order they were received
+    /// (the laser and the odometry; for the sonar see [`Self::messages_with_sonar`]).
     pub fn messages(&self, roles: &RoleMap) -> Result<BagMessages, BagError> {
         let inner = if self.smokenav {
             let playback = Playback::open(&self.path).map_err(|source| BagError::Mcap {
@@ -678,7 +817,7 @@ impl Bag {
             })?;
             Inner::Native(Box::new(playback))
         } else {
-            Inner::Foreign(Box::new(RawReader::new(self, roles, false)?))
+            Inner::Foreign(Box::new(RawReader::new(self, roles, false, false)?))
         };
         let bus = |t: &Option<String>, standard: &str| match t {
             Some(t) if self.smokenav => t.trim_start_matches('/').to_owned(),
@@ -690,6 +829,8 @@ impl Bag {
             laser_topic: bus(&roles.laser, topic_names::LASER_SCAN),
             odom_topic: bus(&roles.odom, topic_names::BASE_ODOM),
             roles: roles.clone(),
+            sonar: None,
+            last_log_time: 0,
             end: None,
         })
     }
@@ -702,6 +843,8 @@ enum RawRole {
     Laser,
     Odom,
     Tf,
+    /// The n-th sonar topic of the role map.
+    Sonar(usize),
 }
 
 /// One stored message of a role topic.
@@ -724,8 +867,8 @@ struct SqliteCursor {
     path: PathBuf,
     conn: rusqlite::Connection,
     query: String,
-    /// topic id → (role, name).
-    topics: HashMap<i64, (RawRole, String)>,
+    /// topic id → (role, name, slot in the reader's table).
+    topics: HashMap<i64, (RawRole, String, usize)>,
     last_id: i64,
     page: Vec<SqliteRow>,
     filled: usize,
@@ -734,12 +877,12 @@ struct SqliteCursor {
 }
 
 impl SqliteCursor {
-    fn open(path: &Path, wanted: &[(RawRole, &str)]) -> Result<Self, BagError> {
+    fn open(path: &Path, wanted: &[(RawRole, String)]) -> Result<Self, BagError> {
         let conn = open_sqlite(path)?;
         let mut topics = HashMap::new();
         for (id, name, _) in sqlite_topic_rows(path, &conn)? {
-            if let Some((role, _)) = wanted.iter().find(|(_, w)| *w == name) {
-                topics.insert(id, (*role, name));
+            if let Some(slot) = wanted.iter().position(|(_, w)| *w == name) {
+                topics.insert(id, (wanted[slot].0, name, slot));
             }
         }
         // Only the role topics' rows are fetched (a bag's images stay on disk).
@@ -811,23 +954,36 @@ struct RawReader {
     files: Vec<PathBuf>,
     next_file: usize,
     current: Option<(PathBuf, Source)>,
-    laser: Option<String>,
-    odom: Option<String>,
-    tf: bool,
-    counts: [u64; 3],
+    /// The topics read and their roles.
+    wanted: Vec<(RawRole, String)>,
+    /// Messages read per wanted topic.
+    counts: Vec<u64>,
 }
 
 impl RawReader {
-    fn new(bag: &Bag, roles: &RoleMap, tf: bool) -> Result<Self, BagError> {
+    fn new(bag: &Bag, roles: &RoleMap, tf: bool, sonar: bool) -> Result<Self, BagError> {
+        let mut wanted = Vec::new();
+        if let Some(l) = &roles.laser {
+            wanted.push((RawRole::Laser, l.clone()));
+        }
+        if let Some(o) = &roles.odom {
+            wanted.push((RawRole::Odom, o.clone()));
+        }
+        if tf {
+            wanted.push((RawRole::Tf, TF_STATIC_TOPIC.to_owned()));
+        }
+        if sonar {
+            for (i, t) in roles.sonar.iter().enumerate() {
+                wanted.push((RawRole::Sonar(i), t.clone()));
+            }
+        }
         Ok(Self {
             storage: bag.storage,
             files: bag.files.clone(),
             next_file: 0,
             current: None,
-            laser: roles.laser.clone(),
-            odom: roles.odom.clone(),
-            tf,
-            counts: [0; 3],
+            counts: vec![0; wanted.len()],
+            wanted,
         })
     }
 
@@ -849,19 +1005,7 @@ impl RawReader {
                 let f = File::open(&path).map_err(io(&path))?;
                 Source::Mcap(McapSource::new(BufReader::with_capacity(1 << 16, f)))
             }
-            Storage::Sqlite3 => {
-                let mut wanted: Vec<(RawRole, &str)> = Vec::new();
-                if let Some(l) = &self.laser {
-                    wanted.push((RawRole::Laser, l));
-                }
-                if let Some(o) = &self.odom {
-                    wanted.push((RawRole::Odom, o));
-                }
-                if self.tf {
-                    wanted.push((RawRole::Tf, TF_STATIC_TOPIC));
-                }
-                Source::Sqlite(SqliteCursor::open(&path, &wanted)?)
-            }
+            Storage::Sqlite3 => Source::Sqlite(SqliteCursor::open(&path, &self.wanted)?),
         };
         self.current = Some((path, source));
         Ok(true)
@@ -873,17 +1017,10 @@ impl RawReader {
             if self.current.is_none() && !self.open_next()? {
                 return Ok(None);
             }
-            let roles = (self.laser.clone(), self.odom.clone(), self.tf);
-            let role_of = |topic: &str| -> Option<RawRole> {
-                if roles.0.as_deref() == Some(topic) {
-                    Some(RawRole::Laser)
-                } else if roles.1.as_deref() == Some(topic) {
-                    Some(RawRole::Odom)
-                } else if roles.2 && topic == TF_STATIC_TOPIC {
-                    Some(RawRole::Tf)
-                } else {
-                    None
-                }
+            let wanted = &self.wanted;
+            let role_of = |topic: &str| -> Option<(RawRole, usize)> {
+                let slot = wanted.iter().position(|(_, w)| w == topic)?;
+                Some((wanted[slot].0, slot))
             };
             let counts = &mut self.counts;
             let Some((path, source)) = &mut self.current else {
@@ -893,9 +1030,9 @@ impl RawReader {
                 Source::Mcap(src) => {
                     let step = src
                         .next_message(|m| {
-                            let role = role_of(&m.channel.topic)?;
-                            let index = counts[role as usize];
-                            counts[role as usize] += 1;
+                            let (role, slot) = role_of(&m.channel.topic)?;
+                            let index = counts[slot];
+                            counts[slot] += 1;
                             if m.channel.message_encoding != "cdr" {
                                 return Some(Err(BagError::Topic {
                                     path: path.clone(),
@@ -941,11 +1078,11 @@ impl RawReader {
                     } else {
                         let row = &cur.page[cur.pos];
                         cur.pos += 1;
-                        let Some((role, name)) = cur.topics.get(&row.topic_id) else {
+                        let Some((role, name, slot)) = cur.topics.get(&row.topic_id) else {
                             continue;
                         };
-                        let index = counts[*role as usize];
-                        counts[*role as usize] += 1;
+                        let index = counts[*slot];
+                        counts[*slot] += 1;
                         Some(f(RawMsg {
                             role: *role,
                             topic: name,
@@ -976,6 +1113,9 @@ pub struct BagMessages {
     laser_topic: String,
     odom_topic: String,
     roles: RoleMap,
+    sonar: Option<Box<SonarMapper>>,
+    /// Receive time of the last message returned (the end-of-bag ring's).
+    last_log_time: u64,
     end: Option<EndOfData>,
 }
 
@@ -998,43 +1138,87 @@ impl BagMessages {
                 p.log_time = crate::shift_ns(p.log_time, offset.saturating_neg());
                 Ok(Some(p))
             }
-            Inner::Foreign(raw) => {
+            Inner::Foreign(raw) => loop {
+                let sonar = &mut self.sonar;
                 let step = raw.next(|m| {
                     let decoded = match m.role {
                         RawRole::Laser => {
                             let mut scan = Box::<LaserScan>::default();
                             codec::decode_laser_scan(m.data, &mut scan)
-                                .map(|()| (topic_names::LASER_SCAN, AnyMessage::LaserScan(scan)))
+                                .map(|()| {
+                                    Some((topic_names::LASER_SCAN, AnyMessage::LaserScan(scan)))
+                                })
+                                .map_err(SonarError::Decode)
                         }
                         RawRole::Odom => codec::decode_odometry(m.data)
-                            .map(|o| (topic_names::BASE_ODOM, AnyMessage::Odometry(o))),
-                        RawRole::Tf => unreachable_tf(),
+                            .map(|o| Some((topic_names::BASE_ODOM, AnyMessage::Odometry(o))))
+                            .map_err(SonarError::Decode),
+                        RawRole::Sonar(slot) => match sonar.as_deref_mut() {
+                            Some(s) => match s.kind() {
+                                SonarKind::Range => s.range(slot, m.data),
+                                SonarKind::Cloud => s.cloud(m.data),
+                            }
+                            .map(|ring| {
+                                ring.map(|r| (topic_names::BASE_SONAR, AnyMessage::SonarRing(r)))
+                            }),
+                            None => Ok(None),
+                        },
+                        RawRole::Tf => unreachable_tf().map(Some).map_err(SonarError::Decode),
                     };
                     match decoded {
-                        Ok((topic, message)) => Ok(Played {
+                        Ok(Some((topic, message))) => Ok(Some(Played {
                             topic: topic.to_owned(),
                             log_time: m.log_time,
                             message,
-                        }),
+                        })),
+                        Ok(None) => Ok(None),
                         Err(source) => Err((m.topic.to_owned(), m.index, source)),
                     }
                 });
                 let path = raw.current_path();
                 match step? {
                     None => {
+                        // The cycle still being collected when the bag ends.
+                        if let Some(ring) = self.sonar.as_deref_mut().and_then(SonarMapper::finish)
+                        {
+                            return Ok(Some(Played {
+                                topic: topic_names::BASE_SONAR.to_owned(),
+                                log_time: self.last_log_time,
+                                message: AnyMessage::SonarRing(ring),
+                            }));
+                        }
                         self.end = Some(EndOfData::Complete);
-                        Ok(None)
+                        return Ok(None);
                     }
-                    Some(Ok(p)) => Ok(Some(p)),
-                    Some(Err((topic, index, source))) => Err(BagError::Decode {
-                        path,
-                        topic,
-                        index,
-                        source,
-                    }),
+                    Some(Ok(Some(p))) => {
+                        self.last_log_time = p.log_time;
+                        return Ok(Some(p));
+                    }
+                    // A reading that does not end a ring yet.
+                    Some(Ok(None)) => continue,
+                    Some(Err((topic, index, SonarError::Decode(source)))) => {
+                        return Err(BagError::Decode {
+                            path,
+                            topic,
+                            index,
+                            source,
+                        });
+                    }
+                    Some(Err((topic, index, SonarError::Map(reason)))) => {
+                        return Err(BagError::Topic {
+                            path,
+                            topic,
+                            reason: format!("message {index}: {reason}"),
+                        });
+                    }
                 }
-            }
+            },
         }
+    }
+
+    /// How the sonar topics were read (`None` without sonar).
+    pub fn sonar(&self) -> Option<&SonarMapper> {
+        self.sonar.as_deref()
     }
 
     pub fn roles(&self) -> &RoleMap {

@@ -1,6 +1,7 @@
 //! Pure decoders for the standard ROS 2 messages of a team's own bags that
 //! smokenav's recordings do not carry as such: `tf2_msgs/TFMessage` (the
-//! laser's mounting pose from `/tf_static`) and `sensor_msgs/Range`. Bytes
+//! sensors' mounting poses from `/tf_static`), `sensor_msgs/Range` and the
+//! x, y, z of a `sensor_msgs/PointCloud2` (a sonar ring as points). Bytes
 //! in, values or a [`CdrError`] out; no I/O. `sensor_msgs/LaserScan` and
 //! `nav_msgs/Odometry` decode with [`crate::codec`], as in a recording.
 
@@ -87,6 +88,157 @@ pub fn decode_range(data: &[u8], frame: &mut String) -> Result<RangeReading, Cdr
         max_range: r.f32("max_range")?,
         range: r.f32("range")?,
     })
+}
+
+/// Largest point cloud read as a sonar ring (a ring has at most dozens of
+/// transducers; this bounds what a crafted or mis-chosen cloud can cost).
+pub const MAX_CLOUD_POINTS: usize = 4096;
+/// Largest field list of a PointCloud2 (real ones have a handful).
+pub const MAX_CLOUD_FIELDS: usize = 64;
+
+/// `sensor_msgs/PointField` datatypes smokenav reads.
+const FLOAT32: u8 = 7;
+const FLOAT64: u8 = 8;
+
+/// What a `sensor_msgs/PointCloud2` says besides its points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CloudInfo {
+    pub stamp_ns: u64,
+    /// Points read (`width × height`).
+    pub points: usize,
+}
+
+/// Where one coordinate lies in a point, and how wide it is.
+#[derive(Clone, Copy)]
+struct Coord {
+    offset: usize,
+    double: bool,
+}
+
+/// Decodes the x, y, z of every point of a little-endian
+/// `sensor_msgs/PointCloud2` into `out` (cleared first; NaN points kept, so a
+/// caller can count them); the frame id goes into `frame`. Fields other than
+/// x, y, z are skipped; x, y, z must be float32 or float64 inside the point.
+pub fn decode_point_cloud2(
+    data: &[u8],
+    frame: &mut String,
+    out: &mut Vec<[f64; 3]>,
+) -> Result<CloudInfo, CdrError> {
+    let bad = |field: &'static str, reason: String| CdrError::Inconsistent { field, reason };
+    let mut r = CdrReader::new(data)?;
+    let stamp_ns = read_stamp(&mut r)?;
+    frame.clear();
+    frame.push_str(r.string("header.frame_id", FRAME_ID_LEN)?);
+    let height = r.u32("height")? as usize;
+    let width = r.u32("width")? as usize;
+    // A PointField is at least a 4-byte string length + offset + datatype + count.
+    let n_fields = r.seq_len("fields", MAX_CLOUD_FIELDS, 13)?;
+    let mut coords: [Option<Coord>; 3] = [None; 3];
+    for _ in 0..n_fields {
+        let name = r.string("fields.name", 64)?;
+        let offset = r.u32("fields.offset")? as usize;
+        let datatype = r.u8("fields.datatype")?;
+        let count = r.u32("fields.count")?;
+        let slot = match name {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            _ => continue,
+        };
+        let double = match datatype {
+            FLOAT32 => false,
+            FLOAT64 => true,
+            other => {
+                return Err(bad(
+                    "fields.datatype",
+                    format!(
+                        "field {name} has datatype {other}; smokenav reads float32 (7) or float64 (8)"
+                    ),
+                ));
+            }
+        };
+        if count == 0 {
+            return Err(bad("fields.count", format!("field {name} has count 0")));
+        }
+        coords[slot] = Some(Coord { offset, double });
+    }
+    if r.bool("is_bigendian")? {
+        return Err(bad(
+            "is_bigendian",
+            "big-endian point data; smokenav reads little-endian".into(),
+        ));
+    }
+    let point_step = r.u32("point_step")? as usize;
+    let row_step = r.u32("row_step")? as usize;
+    let bytes = r.seq_bytes("data", usize::MAX)?;
+    let _is_dense = r.bool("is_dense")?;
+    let [Some(x), Some(y), z] = coords else {
+        return Err(bad("fields", "no float x and y fields".into()));
+    };
+    let points = width
+        .checked_mul(height)
+        .filter(|&n| n <= MAX_CLOUD_POINTS)
+        .ok_or_else(|| {
+            bad(
+                "width",
+                format!("{width} × {height} points; a sonar ring has at most {MAX_CLOUD_POINTS}"),
+            )
+        })?;
+    for (name, c) in [("x", Some(x)), ("y", Some(y)), ("z", z)] {
+        if let Some(c) = c {
+            let size = if c.double { 8 } else { 4 };
+            if c.offset
+                .checked_add(size)
+                .is_none_or(|end| end > point_step)
+            {
+                return Err(bad(
+                    "fields.offset",
+                    format!(
+                        "field {name} at offset {} lies outside the {point_step}-byte point",
+                        c.offset
+                    ),
+                ));
+            }
+        }
+    }
+    if width > 0 && row_step < width.saturating_mul(point_step) {
+        return Err(bad(
+            "row_step",
+            format!("{row_step} bytes for {width} points of {point_step} bytes"),
+        ));
+    }
+    let need = row_step
+        .saturating_mul(height.saturating_sub(1))
+        .saturating_add(width.saturating_mul(point_step));
+    if points > 0 && bytes.len() < need {
+        return Err(CdrError::Truncated {
+            field: "data",
+            need,
+            at: 0,
+            len: bytes.len(),
+        });
+    }
+    let read = |p: &[u8], c: Coord| -> f64 {
+        // In bounds: offset + size <= point_step, checked above.
+        if c.double {
+            let mut b = [0u8; 8];
+            b.copy_from_slice(&p[c.offset..c.offset + 8]);
+            f64::from_le_bytes(b)
+        } else {
+            let mut b = [0u8; 4];
+            b.copy_from_slice(&p[c.offset..c.offset + 4]);
+            f64::from(f32::from_le_bytes(b))
+        }
+    };
+    out.clear();
+    for row in 0..height {
+        for col in 0..width {
+            let start = row * row_step + col * point_step;
+            let p = &bytes[start..start + point_step];
+            out.push([read(p, x), read(p, y), z.map_or(0.0, |z| read(p, z))]);
+        }
+    }
+    Ok(CloudInfo { stamp_ns, points })
 }
 
 /// The `child_frame_id` of a `nav_msgs/Odometry` (the robot's base frame).

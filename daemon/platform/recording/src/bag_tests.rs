@@ -257,7 +257,7 @@ fn two_laser_topics_need_a_choice_and_the_error_lists_them() {
     let roles = bag
         .laser_and_odometry(&RoleRequest {
             laser: Some("rear/scan".into()),
-            odom: None,
+            ..Default::default()
         })
         .unwrap();
     assert_eq!(roles.laser.as_deref(), Some("/rear/scan"));
@@ -265,7 +265,7 @@ fn two_laser_topics_need_a_choice_and_the_error_lists_them() {
     let e = bag
         .roles(&RoleRequest {
             laser: Some("/odom".into()),
-            odom: None,
+            ..Default::default()
         })
         .unwrap_err()
         .to_string();
@@ -273,7 +273,7 @@ fn two_laser_topics_need_a_choice_and_the_error_lists_them() {
     let e = bag
         .roles(&RoleRequest {
             laser: Some("/nope".into()),
-            odom: None,
+            ..Default::default()
         })
         .unwrap_err()
         .to_string();
@@ -394,4 +394,124 @@ fn damaged_bags_never_panic() {
             let _ = read_all(&bag, &roles);
         }
     }
+}
+
+/// A Range of transducer `i` (frame `sonar_<i>`) at `range`.
+fn range_cdr(stamp_ns: u64, i: u8, range: f32) -> Vec<u8> {
+    let mut buf = Vec::new();
+    let mut w = crate::cdr::CdrWriter::new(&mut buf);
+    w.i32((stamp_ns / 1_000_000_000) as i32);
+    w.u32((stamp_ns % 1_000_000_000) as u32);
+    w.string(&format!("sonar_{i}"));
+    w.u8(0);
+    w.f32(0.26);
+    w.f32(0.1);
+    w.f32(5.0);
+    w.f32(range);
+    buf
+}
+
+/// Sonar roles: every Range topic when guessed, a PointCloud2 only when its
+/// name says sonar, both kinds an error listing them; a Range bag with
+/// `--sonar` order gives the rings on base/sonar, in both storages.
+#[test]
+fn sonar_topics_are_guessed_named_and_read_as_rings() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut msgs = messages(&["/scan"]);
+    let sonar = smokenav_platform_config::RobotConfig::builtin("pioneer-3dx")
+        .unwrap()
+        .sonar;
+    for cycle in 0..3u64 {
+        let t = 1_700_000_000_000_000_000 + cycle * 100_000_000 + 5;
+        for i in 0..8u8 {
+            msgs.push((
+                format!("/sonar/{i}"),
+                RANGE_TYPE,
+                t + u64::from(i),
+                range_cdr(t, i, 1.0 + f32::from(i) * 0.5),
+            ));
+        }
+    }
+    msgs.push((
+        "/points".into(),
+        POINT_CLOUD2_TYPE,
+        1_700_000_000_900_000_000,
+        vec![0, 1, 0, 0],
+    ));
+    let mcap = dir.path().join("b.mcap");
+    write_mcap(&mcap, &msgs);
+    let db3 = dir.path().join("b.db3");
+    write_db3(&db3, &msgs);
+    for path in [&mcap, &db3] {
+        let bag = Bag::open(path).unwrap();
+        let roles = bag.roles(&RoleRequest::default()).unwrap();
+        // A lidar's /points is not taken for the sonar.
+        assert_eq!(roles.sonar.len(), 8);
+        assert_eq!(roles.sonar_kind, Some(SonarKind::Range));
+        assert!(!roles.sonar_ordered);
+        let e = bag
+            .roles(&RoleRequest {
+                sonar: vec!["/scan".into()],
+                ..Default::default()
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--sonar /scan") && e.contains("LaserScan"),
+            "{e}"
+        );
+        let e = bag
+            .roles(&RoleRequest {
+                sonar: vec!["/sonar/0".into(), "/points".into()],
+                ..Default::default()
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("either Range topics"), "{e}");
+        let order: Vec<String> = (0..8).map(|i| format!("sonar/{i}")).collect();
+        let roles = bag
+            .roles(&RoleRequest {
+                sonar: order,
+                ..Default::default()
+            })
+            .unwrap();
+        assert!(roles.sonar_ordered);
+        let mut m = bag.messages_with_sonar(&roles, &sonar).unwrap();
+        let mut rings = Vec::new();
+        while let Some(p) = m.read_next().unwrap() {
+            if let AnyMessage::SonarRing(r) = p.message {
+                assert_eq!(p.topic, "base/sonar");
+                // Out when its last reading was received.
+                assert_eq!(p.log_time, r.header.stamp_ns + 7);
+                rings.push(r);
+            }
+        }
+        assert_eq!(rings.len(), 3, "{}", path.display());
+        assert_eq!(
+            rings[2].by_index(3),
+            Some(&smokenav_shared_types::SonarReading::new(
+                3,
+                2.5,
+                smokenav_shared_types::SonarStatus::Valid
+            ))
+        );
+    }
+    // A cloud named for the sonar is guessed; beside Range topics it is a choice to make.
+    msgs.push((
+        "/sonar_pointcloud2".into(),
+        POINT_CLOUD2_TYPE,
+        1_700_000_000_950_000_000,
+        vec![0, 1, 0, 0],
+    ));
+    let both = dir.path().join("both.mcap");
+    write_mcap(&both, &msgs);
+    let e = Bag::open(&both)
+        .unwrap()
+        .roles(&RoleRequest::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("/sonar/0") && e.contains("/sonar_pointcloud2") && e.contains("--sonar"),
+        "{e}"
+    );
 }

@@ -44,6 +44,8 @@ pub enum CdrError {
     },
     #[error("{field}: invalid value {value}")]
     InvalidValue { field: &'static str, value: u64 },
+    #[error("{field}: {reason}")]
+    Inconsistent { field: &'static str, reason: String },
 }
 
 /// Appends CDR to a reusable buffer. Writing cannot fail.

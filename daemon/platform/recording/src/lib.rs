@@ -64,6 +64,7 @@
 /// ROS 2 bags in (rosbag2 folders, `.mcap`, `.db3`): see [`bag`].
 pub mod bag;
 pub mod bag_decode;
+pub mod bag_sonar;
 pub mod cdr;
 pub mod codec;
 pub mod encoder;

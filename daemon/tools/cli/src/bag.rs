@@ -2,7 +2,7 @@
 //! the topic → role flags and opening the bag with them.
 
 use anyhow::Context;
-use smokenav_platform_recording::bag::{Bag, RoleMap, RoleRequest};
+use smokenav_platform_recording::bag::{Bag, RoleMap, RoleRequest, SonarKind};
 use std::path::Path;
 
 /// Which of the bag's topics play which role (guessed by type when unambiguous).
@@ -14,6 +14,12 @@ pub struct RoleArgs {
     /// The bag's nav_msgs/Odometry topic (default: the only one).
     #[arg(long, value_name = "TOPIC")]
     pub odom: Option<String>,
+    /// A sonar topic: sensor_msgs/Range (repeat the flag, one topic per
+    /// transducer, in the profile's transducer order unless /tf_static places
+    /// their frames) or one sensor_msgs/PointCloud2 holding the ring
+    /// (default: every Range topic, else the PointCloud2 topic named *sonar*).
+    #[arg(long, value_name = "TOPIC")]
+    pub sonar: Vec<String>,
 }
 
 impl RoleArgs {
@@ -21,11 +27,12 @@ impl RoleArgs {
         RoleRequest {
             laser: self.laser.clone(),
             odom: self.odom.clone(),
+            sonar: self.sonar.clone(),
         }
     }
 
     pub fn given(&self) -> bool {
-        self.laser.is_some() || self.odom.is_some()
+        self.laser.is_some() || self.odom.is_some() || !self.sonar.is_empty()
     }
 }
 
@@ -39,4 +46,22 @@ pub fn open(path: &Path, roles: &RoleArgs, both: bool) -> anyhow::Result<(Bag, R
         bag.roles(&roles.request())?
     };
     Ok((bag, map))
+}
+
+/// One line saying which sonar topics are read and how, for the logs and reports.
+pub fn sonar_summary(map: &RoleMap) -> Option<String> {
+    let kind = map.sonar_kind?;
+    let what = match kind {
+        SonarKind::Range => "sensor_msgs/Range",
+        SonarKind::Cloud => "sensor_msgs/PointCloud2",
+    };
+    Some(format!(
+        "{} ({what}, {})",
+        map.sonar.join(", "),
+        if map.sonar_ordered {
+            "transducers by /tf_static, else in the order given"
+        } else {
+            "transducers by /tf_static"
+        }
+    ))
 }

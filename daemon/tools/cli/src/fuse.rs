@@ -31,9 +31,9 @@ pub struct FuseArgs {
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Read a `smokenav record` file or a ROS 2 bag (rosbag2 folder, .mcap,
-    /// .db3) instead of stdin. A foreign bag gives the laser only (sonar and
-    /// smoke topics are smokenav's), so its scans pass through once the
-    /// synchroniser gives up on the silent topics.
+    /// .db3) instead of stdin. A foreign bag gives the laser and, where it
+    /// has one, the sonar (`--sonar`; mapped onto the profile's [sonar]); it
+    /// has no smoke sensor, so the fusion treats the smoke as silent.
     #[arg(long, value_name = "BAG")]
     bag: Option<PathBuf>,
     #[command(flatten)]
@@ -49,11 +49,11 @@ pub fn run(args: FuseArgs) -> anyhow::Result<()> {
     let mut pipeline = FusionPipeline::from_config(&cfg, Some(args.method))
         .context("the profile's sonar geometry is unusable")?;
     if let Some(bag) = &args.bag {
-        return run_bag(&mut pipeline, bag, &args.roles);
+        return run_bag(&mut pipeline, bag, &args.roles, &cfg);
     }
     anyhow::ensure!(
         !args.roles.given(),
-        "--laser and --odom choose a bag's topics: give --bag BAG"
+        "--laser, --odom and --sonar choose a bag's topics: give --bag BAG"
     );
     let stdin = std::io::stdin().lock();
     let stdout = BufWriter::new(std::io::stdout().lock());
@@ -87,6 +87,7 @@ fn run_bag(
     pipeline: &mut FusionPipeline,
     path: &std::path::Path,
     roles: &crate::bag::RoleArgs,
+    cfg: &RobotConfig,
 ) -> anyhow::Result<()> {
     use smokenav_platform_recording::AnyMessage;
     use smokenav_shared_types::catalog::topic_names;
@@ -97,7 +98,7 @@ fn run_bag(
         "{}: no sensor_msgs/msg/LaserScan topic to fuse",
         path.display()
     );
-    let mut messages = bag.messages(&map)?;
+    let mut messages = bag.messages_with_sonar(&map, &cfg.sonar)?;
     let laser_topic = messages.laser_topic().to_owned();
     let mut out = BufWriter::new(std::io::stdout().lock());
     let mut written = 0u64;
@@ -148,8 +149,12 @@ fn run_bag(
     out.flush().context("smokenav fuse: cannot write stdout")?;
     drop(out);
     let sync = pipeline.sync_counters();
+    let sonar_from = match (crate::bag::sonar_summary(&map), messages.sonar()) {
+        (Some(what), Some(m)) => format!(" from {what}, {} cloud points dropped", m.dropped_points),
+        _ => String::new(),
+    };
     eprintln!(
-        "smokenav fuse: {} (laser {laser} on {}, sonar {sonar}, smoke {smoke}, other {other}); {written} fused scans, sonar usage {:.1}%, sync drops {}",
+        "smokenav fuse: {} (laser {laser} on {}, sonar {sonar}{sonar_from}, smoke {smoke}, other {other}); {written} fused scans, sonar usage {:.1}%, sync drops {}",
         path.display(),
         map.laser.as_deref().unwrap_or("?"),
         100.0 * pipeline.stats().sonar_usage(),

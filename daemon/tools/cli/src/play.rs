@@ -29,7 +29,8 @@ use std::time::{Duration, Instant};
 pub struct PlayArgs {
     /// The recording (an MCAP file written by `smokenav record`; a file cut
     /// short is fine), or a ROS 2 bag (a rosbag2 folder, .mcap or .db3), whose
-    /// LaserScan and Odometry topics are played as laser/scan and base/odom.
+    /// LaserScan and Odometry topics are played as laser/scan and base/odom,
+    /// and its sonar (Range or PointCloud2, mapped onto --config's [sonar]) as base/sonar.
     pub file: PathBuf,
     #[command(flatten)]
     pub roles: crate::bag::RoleArgs,
@@ -215,9 +216,9 @@ impl Source {
             )));
         }
         let roles = bag.roles(&args.roles.request())?;
-        if roles.laser.is_none() && roles.odom.is_none() {
+        if roles.laser.is_none() && roles.odom.is_none() && roles.sonar.is_empty() {
             bail!(
-                "{}: no sensor_msgs/msg/LaserScan or nav_msgs/msg/Odometry topic to play; topics: {}",
+                "{}: no sensor_msgs/msg/LaserScan or nav_msgs/msg/Odometry topic to play (nor a sonar); topics: {}",
                 args.file.display(),
                 bag.topics()
                     .iter()
@@ -234,7 +235,23 @@ impl Source {
                 tracing::info!("{}: {t} → {bus}", args.file.display());
             }
         }
-        Ok(Self::Bag(Box::new(bag.messages(&roles)?)))
+        if let Some(what) = crate::bag::sonar_summary(&roles) {
+            tracing::info!(
+                "{}: {what} → {}",
+                args.file.display(),
+                topics::BASE_SONAR.name()
+            );
+        }
+        // The sonar is mapped onto the transducers of the robot profile (--config).
+        let cfg = match &args.bus.config {
+            Some(path) => smokenav_platform_config::RobotConfig::load(path)
+                .with_context(|| format!("invalid robot profile {}", path.display()))?,
+            None => smokenav_platform_config::RobotConfig::builtin("pioneer-3dx")
+                .context("the built-in profile is invalid")?,
+        };
+        Ok(Self::Bag(Box::new(
+            bag.messages_with_sonar(&roles, &cfg.sonar)?,
+        )))
     }
 
     fn read_next(&mut self) -> anyhow::Result<Option<Played>> {

@@ -12,6 +12,7 @@ use smokenav_algorithms_eval::{
     TrajectoryFormat, TrajectoryOptions, evaluate_trajectories, format_trajectory_as,
     load_trajectory,
 };
+use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_slam::graph::{GraphSlam, g2o};
 use smokenav_algorithms_slam::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use smokenav_algorithms_slam::offline::LogScans;
@@ -21,7 +22,7 @@ use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, SlamUpdate, S
 use smokenav_platform_config::{RobotConfig, SlamBackendKind, SlamSection, parse_toml};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_recording::bag::{Bag, RoleMap};
-use smokenav_shared_types::{AnyMessage, Pose2};
+use smokenav_shared_types::{AnyMessage, FusedScan, Pose2};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::{BufReader, IsTerminal};
@@ -44,6 +45,11 @@ pub struct SlamArgs {
     bag: Option<PathBuf>,
     #[command(flatten)]
     roles: crate::bag::RoleArgs,
+    /// Run the bag's laser and sonar through SmokeNav first (as the fusion
+    /// process does) and map from the fused scans; the sonar is mapped onto
+    /// `--profile`'s [sonar] (default: the built-in Pioneer 3-DX).
+    #[arg(long, value_enum, value_name = "METHOD", requires = "bag")]
+    fuse: Option<smokenav_shared_types::FusionMethod>,
     /// Number of particles (overrides the configuration).
     #[arg(long)]
     particles: Option<usize>,
@@ -312,6 +318,7 @@ fn run_bag(
     roles: &RoleMap,
     slam: &mut SlamPipeline,
     run: &mut Run,
+    mut fusion: Option<(FusionPipeline, RobotConfig)>,
 ) -> anyhow::Result<String> {
     let total: u64 = bag
         .topics()
@@ -320,7 +327,13 @@ fn run_bag(
         .filter_map(|t| t.messages)
         .sum();
     let bar = progress_bar(total);
-    let mut messages = bag.messages(roles)?;
+    let mut messages = match &fusion {
+        Some((_, cfg)) => bag.messages_with_sonar(roles, &cfg.sonar)?,
+        None => bag.messages(roles)?,
+    };
+    // Fused scans of one step (a few at most), handed on to SLAM; reused.
+    let mut fused: Vec<FusedScan> = Vec::new();
+    let (mut n_sonar, mut n_fused) = (0u64, 0u64);
     let (laser_topic, odom_topic) = (
         messages.laser_topic().to_owned(),
         messages.odom_topic().to_owned(),
@@ -338,7 +351,22 @@ fn run_bag(
             }
             AnyMessage::LaserScan(l) if p.topic == laser_topic => {
                 n_laser += 1;
-                slam.push_laser(l);
+                match &mut fusion {
+                    Some((f, _)) => f.push_laser(l, p.log_time, &mut |s, _| fused.push(*s)),
+                    None => slam.push_laser(l),
+                }
+            }
+            AnyMessage::SonarRing(r) if fusion.is_some() => {
+                n_sonar += 1;
+                if let Some((f, _)) = &mut fusion {
+                    f.push_sonar(r, p.log_time, &mut |s, _| fused.push(*s));
+                }
+            }
+            // A smokenav recording's smoke sensor (a foreign bag has none).
+            AnyMessage::SmokeReading(r) if fusion.is_some() => {
+                if let Some((f, _)) = &mut fusion {
+                    f.push_smoke(r, p.log_time, &mut |s, _| fused.push(*s));
+                }
             }
             AnyMessage::FusedScan(f) if p.topic == laser_topic => {
                 n_laser += 1;
@@ -346,12 +374,27 @@ fn run_bag(
             }
             _ => continue,
         }
+        if let Some((f, _)) = &mut fusion {
+            f.poll(p.log_time, &mut |s, _| fused.push(*s));
+            for s in fused.drain(..) {
+                n_fused += 1;
+                slam.push_fused(&s);
+            }
+        }
         run.timed(|| slam.poll(p.log_time));
         if args.max_scans.is_some_and(|m| run.online.len() >= m) {
             break;
         }
     }
     if args.max_scans.is_none_or(|m| run.online.len() < m) {
+        if let Some((f, _)) = &mut fusion {
+            f.flush(&mut |s, _| fused.push(*s));
+            for s in fused.drain(..) {
+                n_fused += 1;
+                slam.push_fused(&s);
+                run.timed(|| slam.poll(s.scan.header.stamp_ns));
+            }
+        }
         run.timed(|| slam.flush());
     }
     bar.finish_and_clear();
@@ -372,6 +415,16 @@ fn run_bag(
         n_odom,
         roles.odom.as_deref().unwrap_or("?")
     );
+    if let Some((f, _)) = &fusion {
+        let _ = writeln!(
+            report,
+            "fusion             {n_fused} fused scans from {n_laser} scans and {n_sonar} sonar rings{}, sonar usage {:.1}%",
+            crate::bag::sonar_summary(roles)
+                .map(|w| format!(" on {w}"))
+                .unwrap_or_default(),
+            100.0 * f.stats().sonar_usage()
+        );
+    }
     let s = slam.stats();
     let _ = writeln!(
         report,
@@ -395,13 +448,18 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         (Some(log), _) => {
             anyhow::ensure!(
                 !args.roles.given(),
-                "--laser and --odom choose a bag's topics; a CARMEN log has none"
+                "--laser, --odom and --sonar choose a bag's topics; a CARMEN log has none"
             );
             let file = std::fs::File::open(log)
                 .with_context(|| format!("cannot open {}", log.display()))?;
             Input::Carmen(log.clone(), file)
         }
         (None, Some(path)) => {
+            // SLAM maps from the laser; a bag's sonar reaches it through fusion.
+            anyhow::ensure!(
+                args.roles.sonar.is_empty() || args.fuse.is_some(),
+                "--sonar: the sonar reaches SLAM through the fusion; add --fuse v2 (or v1)"
+            );
             let (bag, roles) = crate::bag::open(path, &args.roles, true)?;
             Input::Bag(Box::new(bag), roles)
         }
@@ -441,7 +499,21 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         Input::Bag(bag, roles) => {
             let mount = laser_mount(&bag, &roles, args.profile.as_deref())?;
             slam = slam.with_sensor_pose(mount.0);
-            let mut text = run_bag(&args, &bag, &roles, &mut slam, &mut run)?;
+            let fusion = match args.fuse {
+                Some(method) => {
+                    let cfg = match &args.profile {
+                        Some(p) => RobotConfig::load(p)
+                            .with_context(|| format!("invalid robot profile {}", p.display()))?,
+                        None => RobotConfig::builtin("pioneer-3dx")
+                            .context("the built-in profile is invalid")?,
+                    };
+                    let pipeline = FusionPipeline::from_config(&cfg, Some(method))
+                        .context("the profile's sonar geometry is unusable")?;
+                    Some((pipeline, cfg))
+                }
+                None => None,
+            };
+            let mut text = run_bag(&args, &bag, &roles, &mut slam, &mut run, fusion)?;
             let _ = writeln!(text, "laser mount        {}", mount.1);
             Ok(text)
         }
