@@ -49,9 +49,10 @@ pub struct VoteSection {
     pub members: Vec<SlamBackendKind>,
     /// `majority` (the paper) or `weighted`.
     pub rule: VoteRule,
-    /// A member whose alignment residual (RMS distance of its walls to the
-    /// reference's, truncated at `align_truncation_m`) is above this is
-    /// flagged in health and left out of the vote, m.
+    /// A member whose alignment residual (RMS distance of the nearest 80 % of
+    /// its wall cells to the reference's walls, truncated at
+    /// `align_truncation_m`) is above this is flagged in health and left out
+    /// of the vote, m.
     pub max_residual_m: f64,
     /// Translational search window of the alignment around the shared
     /// odometry frame (or the last alignment), ± m.

@@ -16,11 +16,13 @@
 //!   goes on with the rest, and [`VoteSlam::status`] names who is out.
 //! - **Alignment** ([`align`]): the first member's map is the frame. Each
 //!   other member's map is aligned to it by a coarse-to-fine search over
-//!   (x, y, θ) around the shared odometry frame — and, once aligned, around
-//!   its last alignment with a quarter of the window — only when its
-//!   `map_revision` or the reference's changed. The residual (RMS distance of
-//!   its walls to the reference's) is reported; a member above
-//!   `max_residual_m` is flagged and left out of the vote.
+//!   (x, y, θ) around the shared odometry frame — and, while its last
+//!   alignment fits, around that with a quarter of the window: one search per
+//!   update, warm-started — only when its `map_revision` or the reference's
+//!   changed. The residual (robust: RMS distance of the nearest 80 % of its
+//!   walls to the reference's) is reported; a member above `max_residual_m`
+//!   is flagged in health and left out of the vote, and its next search
+//!   spans the whole window again.
 //! - **Vote** ([`rule`]): per cell of the reference's grid over occupied /
 //!   free / unknown, the paper's majority (no majority → occupied) or the
 //!   weighted variant. Recomputed every `fuse_period_s` on a thread of its own
@@ -43,7 +45,7 @@ pub mod rule;
 
 use crate::backend::{BackendOptions, SlamBackend, SlamUpdate, StampedPose, from_config};
 use crate::scan::{BeamKind, RangeScan};
-use align::{Alignment, DistanceField, SearchWindow, align, wall_points};
+use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
 use nalgebra::Matrix3;
 use rule::{CellState, WeightedVote, majority, weighted};
@@ -187,6 +189,7 @@ struct Fuser {
     field_revision: Option<u64>,
     aligned_at: Vec<Option<(u64, u64)>>,
     points: Vec<(f64, f64)>,
+    scratch: Vec<f32>,
     out: FusedOut,
     votes: Vec<CellState>,
     wvotes: Vec<WeightedVote>,
@@ -200,6 +203,7 @@ impl Fuser {
             field_revision: None,
             aligned_at: vec![None; members],
             points: Vec::new(),
+            scratch: Vec::new(),
             out: FusedOut {
                 alignments: vec![None; members],
                 agreement: vec![None; members],
@@ -256,32 +260,19 @@ impl Fuser {
                 window_m: s.align_window_m,
                 window_rad: s.align_window_rad,
             };
-            let a = match self.out.alignments[i] {
-                // Incremental: around the last alignment with a quarter of the
-                // window; the whole window again if that does not fit.
-                Some(prev) => {
-                    let near = align(
-                        &self.field,
-                        &self.points,
-                        &SearchWindow {
-                            center: prev.transform,
-                            window_m: s.align_window_m / 4.0,
-                            window_rad: s.align_window_rad / 4.0,
-                        },
-                    );
-                    if near.residual_m <= s.max_residual_m {
-                        near
-                    } else {
-                        let wide = align(&self.field, &self.points, &full);
-                        if wide.residual_m < near.residual_m {
-                            wide
-                        } else {
-                            near
-                        }
-                    }
-                }
-                None => align(&self.field, &self.points, &full),
+            // One search per update: around the last alignment with a quarter
+            // of the window while it fits, over the whole window when it did
+            // not (or the first time). A member that stays above the threshold
+            // is flagged every update and costs one wide search each.
+            let win = match self.out.alignments[i] {
+                Some(prev) if prev.residual_m <= s.max_residual_m => SearchWindow {
+                    center: prev.transform,
+                    window_m: s.align_window_m / 4.0,
+                    window_rad: s.align_window_rad / 4.0,
+                },
+                _ => full,
             };
+            let a = align_with(&self.field, &self.points, &win, &mut self.scratch);
             self.out.alignments[i] = Some(a);
             self.aligned_at[i] = Some((*rev, ref_rev));
         }
@@ -338,6 +329,7 @@ impl Fuser {
             })
             .collect();
         let mut values = vec![-1i8; maps.len()];
+        let block = &mut (None::<(i32, i32)>, 0.0f64);
         for y in 0..h {
             let fy = y as f64;
             for x in 0..w {
@@ -368,8 +360,13 @@ impl Fuser {
                                 value: v,
                                 weight: m.3,
                             }));
+                        // The share is per 1 m block: looked up when the block changes.
                         let (cx, cy) = (ox + (fx + 0.5) * res, oy + (fy + 0.5) * res);
-                        weighted(&self.wvotes, sonar.share(cx, cy))
+                        let key = (cx.floor() as i32, cy.floor() as i32);
+                        if block.0 != Some(key) {
+                            *block = (Some(key), sonar.share(cx, cy));
+                        }
+                        weighted(&self.wvotes, block.1)
                     }
                 };
                 fused.cells[y * w + x] = state.value();
