@@ -8,7 +8,7 @@
 //! backend = "vote"
 //! [slam.vote]
 //! members = ["rbpf", "graph", "fuzzy"]   # the first is the reference frame
-//! rule = "majority"                      # or "weighted"
+//! rule = "weighted"                      # or "majority" (the paper's)
 //! max_residual_m = 0.15                  # alignment residual above it: flagged, left out
 //! ```
 
@@ -21,12 +21,14 @@ use serde::{Deserialize, Serialize};
 pub enum VoteRule {
     /// The paper's rule: the state most members agree on (more than half);
     /// no majority → occupied.
-    #[default]
     #[serde(rename = "majority")]
     Majority,
     /// Each member's vote weighted by its certainty for that cell, its pose
     /// covariance and (for occupied/free) how little of the region was seen
-    /// only by sonar; ties → occupied.
+    /// only by sonar; ties → occupied. The default: once a member is out,
+    /// majority turns every split of the other two into a wall (MIT CSAIL:
+    /// majority 0.186 m map error, weighted 0.059 m, best member 0.056 m).
+    #[default]
     #[serde(rename = "weighted")]
     Weighted,
 }
@@ -47,7 +49,7 @@ pub struct VoteSection {
     /// The back-ends that vote (2–3 distinct, not `vote`); the first one's map
     /// is the frame the others are aligned to and the fused map's geometry.
     pub members: Vec<SlamBackendKind>,
-    /// `majority` (the paper) or `weighted`.
+    /// `weighted` (default) or `majority` (the paper's).
     pub rule: VoteRule,
     /// A member whose alignment residual (RMS distance of the nearest 80 % of
     /// its wall cells to the reference's walls, truncated at
@@ -83,7 +85,7 @@ impl Default for VoteSection {
                 SlamBackendKind::Graph,
                 SlamBackendKind::Fuzzy,
             ],
-            rule: VoteRule::Majority,
+            rule: VoteRule::Weighted,
             max_residual_m: 0.15,
             align_window_m: 0.5,
             align_window_rad: 0.1,

@@ -44,6 +44,7 @@ pub mod member;
 pub mod rule;
 
 use crate::backend::{BackendOptions, SlamBackend, SlamUpdate, StampedPose, from_config};
+use crate::frontend::Tracked;
 use crate::scan::{BeamKind, RangeScan};
 use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
@@ -470,6 +471,8 @@ pub struct VoteSlam {
     first_odom: Option<Pose2>,
     pose: Option<Pose2>,
     last: Option<SlamUpdate>,
+    /// The pipeline's front-end match of the next scan, forwarded with its job.
+    tracked: Option<Tracked>,
 }
 
 /// Scans kept for reuse: each member holds at most its queue's worth.
@@ -541,6 +544,7 @@ impl VoteSlam {
             first_odom: None,
             pose: None,
             last: None,
+            tracked: None,
         };
         if !v.p.section.lockstep {
             v.fuse_thread = Some(v.spawn_fuser(export_period)?);
@@ -660,6 +664,27 @@ impl VoteSlam {
             *p = f.out.clone();
         }
         Some(f.out.fuse_ms)
+    }
+
+    /// The fused map the other `rule` makes of the members' current maps
+    /// (same alignments; the vote's own rule is restored): the demo and tools
+    /// compare both rules on one run.
+    pub fn map_with_rule(&self, rule: VoteRule) -> Option<OccupancyGrid> {
+        if self.p.section.lockstep {
+            self.fuse_lockstep();
+        }
+        let inputs = self.inputs();
+        let share = self.sonar.lock().map(|s| s.clone()).unwrap_or_default();
+        let mut f = self.fuser.lock().ok()?;
+        let own = f.p.section.rule;
+        f.p.section.rule = rule;
+        let map = f
+            .fuse(&inputs, &share, true)
+            .then(|| f.out.map.as_deref().cloned())
+            .flatten();
+        f.p.section.rule = own;
+        f.fuse(&inputs, &share, true);
+        map
     }
 
     fn inputs(&self) -> Vec<FuseInput> {
@@ -825,7 +850,8 @@ impl SlamBackend for VoteSlam {
     fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
         let shared = self.shared_scan(scan);
         let o = *odom;
-        self.dispatch(&mut || Job::Process(Arc::clone(&shared), o));
+        let t = self.tracked.take();
+        self.dispatch(&mut || Job::Process(Arc::clone(&shared), o, t));
         drop(shared);
         let u = self.update(scan.stamp_ns, odom, true);
         if let Ok(mut s) = self.sonar.lock() {
@@ -834,9 +860,15 @@ impl SlamBackend for VoteSlam {
         u
     }
 
+    fn frontend_match(&mut self, tracked: &Tracked) {
+        // Goes with the next job to every member (the graph uses it).
+        self.tracked = Some(*tracked);
+    }
+
     fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate {
         let o = *odom;
-        self.dispatch(&mut || Job::Predict(stamp_ns, o));
+        let t = self.tracked.take();
+        self.dispatch(&mut || Job::Predict(stamp_ns, o, t));
         self.update(stamp_ns, odom, false)
     }
 
