@@ -579,6 +579,38 @@ impl Arena {
         best
     }
 
+    /// Like [`Arena::clearance`], but only to obstacles whose top is above
+    /// `climb_m`: what a base that drives over cables and sills bumps into.
+    pub fn clearance_above(&self, p: Vec2, radius: f64, climb_m: f64) -> f64 {
+        self.nearest_where(p, radius, |s| s.z[1] > climb_m)
+    }
+
+    /// True when an obstacle at most `climb_m` high (a cable, a sill; top above
+    /// the floor) lies within `radius` of `p`: the base is on it.
+    pub fn low_obstacle_within(&self, p: Vec2, radius: f64, climb_m: f64) -> bool {
+        climb_m > 0.0 && self.nearest_where(p, radius, |s| s.z[1] <= climb_m) < radius
+    }
+
+    fn nearest_where(&self, p: Vec2, radius: f64, keep: impl Fn(&Segment) -> bool) -> f64 {
+        let cell = INDEX_CELL_M;
+        let lo_x = (((p.x - radius - self.min.x) / cell).floor() as i64).max(0);
+        let hi_x = (((p.x + radius - self.min.x) / cell).floor() as i64).min(self.cols as i64 - 1);
+        let lo_y = (((p.y - radius - self.min.y) / cell).floor() as i64).max(0);
+        let hi_y = (((p.y + radius - self.min.y) / cell).floor() as i64).min(self.rows as i64 - 1);
+        let mut best = f64::INFINITY;
+        for cy in lo_y..=hi_y {
+            for cx in lo_x..=hi_x {
+                for &i in self.cell_items(cx as usize, cy as usize) {
+                    let s = &self.segments[i as usize];
+                    if keep(s) {
+                        best = best.min(s.distance_to(p));
+                    }
+                }
+            }
+        }
+        best
+    }
+
     /// The true map: walls occupied, the free space reachable from `start`
     /// free, everything else unknown. For an arena loaded from a pixel map at
     /// the same resolution, that map itself.

@@ -31,7 +31,9 @@
 //!
 //! Optional tables: `[motion]` (track_m, accel_mps2, angular_accel_dps2),
 //! `[odometry]` (scale_left, scale_right, track_error, heading_drift_deg_per_m,
-//! slip_per_sqrt_m), `[smoke]` (cell_m, diffusion_m2ps, decay_per_s, wind_mps,
+//! slip_per_sqrt_m; climb_height_m, bump_heading_deg, bump_slip_m: driving
+//! over obstacles at most climb_height_m high jolts the heading and spins a
+//! wheel), `[smoke]` (cell_m, diffusion_m2ps, decay_per_s, wind_mps,
 //! layer_height_m, mass_extinction_m2pg, `[[smoke.source]]`, `[[smoke.patch]]`
 //! with center/radius_m/density_gpm3), `[laser]` (height_m, lidar_ratio_sr,
 //! wall_reflectance, min_return, patchiness), `[sonar]` (height_m, critical_angle_deg,
@@ -161,6 +163,12 @@ struct OdometryFile {
     heading_drift_deg_per_m: f64,
     #[serde(default)]
     slip_per_sqrt_m: f64,
+    #[serde(default)]
+    climb_height_m: f64,
+    #[serde(default)]
+    bump_heading_deg: f64,
+    #[serde(default)]
+    bump_slip_m: f64,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -394,6 +402,9 @@ impl Scenario {
             track_error: o.track_error,
             heading_drift_rad_per_m: o.heading_drift_deg_per_m.to_radians(),
             slip_per_sqrt_m: o.slip_per_sqrt_m,
+            climb_height_m: o.climb_height_m,
+            bump_heading_rad: o.bump_heading_deg.to_radians(),
+            bump_slip_m: o.bump_slip_m,
         };
         let start = Pose2::new(f.start.x, f.start.y, f.start.heading_deg.to_radians());
         let route = f.route.as_ref().map(|rf| Route {
@@ -716,6 +727,19 @@ impl Validate for OdometryFile {
             0.0,
             1.0,
         );
+        v.within(
+            &format!("{key}.climb_height_m"),
+            self.climb_height_m,
+            0.0,
+            0.2,
+        );
+        v.within(
+            &format!("{key}.bump_heading_deg"),
+            self.bump_heading_deg,
+            0.0,
+            45.0,
+        );
+        v.within(&format!("{key}.bump_slip_m"), self.bump_slip_m, 0.0, 1.0);
     }
 }
 
