@@ -37,15 +37,18 @@ pub enum BuiltinArena {
     Heights,
     /// Two 20 m aisles either side of a rack: parallel walls longer than the laser's range.
     Aisles,
+    /// A workshop with cables and a cable tray to drive over and a low box, all under the laser's plane.
+    Cables,
 }
 
 impl BuiltinArena {
-    pub const ALL: [BuiltinArena; 5] = [
+    pub const ALL: [BuiltinArena; 6] = [
         BuiltinArena::Mrl,
         BuiltinArena::R32,
         BuiltinArena::Corridor,
         BuiltinArena::Heights,
         BuiltinArena::Aisles,
+        BuiltinArena::Cables,
     ];
 
     pub fn name(self) -> &'static str {
@@ -55,6 +58,7 @@ impl BuiltinArena {
             BuiltinArena::Corridor => "corridor",
             BuiltinArena::Heights => "heights",
             BuiltinArena::Aisles => "aisles",
+            BuiltinArena::Cables => "cables",
         }
     }
 
@@ -70,6 +74,7 @@ impl BuiltinArena {
             BuiltinArena::Corridor => include_str!("../../arenas/corridor.toml"),
             BuiltinArena::Heights => include_str!("../../arenas/heights.toml"),
             BuiltinArena::Aisles => include_str!("../../arenas/aisles.toml"),
+            BuiltinArena::Cables => include_str!("../../arenas/cables.toml"),
         }
     }
 

@@ -57,7 +57,7 @@ use smokenav_smoke_codec::mq303a::SensorParams;
 use std::path::{Path, PathBuf};
 
 /// Scenarios shipped with the simulator: (name, text).
-pub const BUILTIN_SCENARIOS: [(&str, &str); 6] = [
+pub const BUILTIN_SCENARIOS: [(&str, &str); 7] = [
     ("mrl-clean", include_str!("../../scenarios/mrl-clean.toml")),
     (
         "r32-light-puff",
@@ -70,6 +70,7 @@ pub const BUILTIN_SCENARIOS: [(&str, &str); 6] = [
     ("corridor", include_str!("../../scenarios/corridor.toml")),
     ("heights", include_str!("../../scenarios/heights.toml")),
     ("aisles", include_str!("../../scenarios/aisles.toml")),
+    ("cables", include_str!("../../scenarios/cables.toml")),
 ];
 
 /// Most smoke sources, patches, waypoints or pulses a file may list.
@@ -428,7 +429,14 @@ impl Scenario {
 
         // Where things are in this arena: the footprint must fit, sources sit in open air.
         let mut v = Validator::default();
-        check_placement(&arena, drive.radius_m, start, route.as_ref(), &mut v);
+        check_placement(
+            &arena,
+            drive.radius_m,
+            odometry.climb_height_m,
+            start,
+            route.as_ref(),
+            &mut v,
+        );
         let (lo, hi) = arena.bounds();
         let cells = ((hi.x - lo.x) / smoke.cell_m) * ((hi.y - lo.y) / smoke.cell_m);
         if cells > 16e6 {
@@ -580,9 +588,17 @@ fn point(v: &mut Validator, key: &str, p: [f64; 2], limit: f64) {
     }
 }
 
-/// The robot (radius `r`) must fit at the start and along every leg of the route.
-fn check_placement(arena: &Arena, r: f64, start: Pose2, route: Option<&Route>, v: &mut Validator) {
-    let fits = |p: Vec2| arena.clearance(p, r) >= r;
+/// The robot (radius `r`) must fit at the start and along every leg of the
+/// route; obstacles at most `climb_m` high it drives over.
+fn check_placement(
+    arena: &Arena,
+    r: f64,
+    climb_m: f64,
+    start: Pose2,
+    route: Option<&Route>,
+    v: &mut Validator,
+) {
+    let fits = |p: Vec2| arena.clearance_above(p, r, climb_m) >= r;
     if !fits(start.position()) {
         v.fail(
             "start",
