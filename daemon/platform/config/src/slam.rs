@@ -458,19 +458,19 @@ mod tests {
     #[test]
     fn vote_keys_are_strict_and_validated() {
         let s = section(
-            "backend = \"vote\"\n[vote]\nmembers = [\"graph\", \"rbpf\"]\nrule = \"majority\"\n",
+            "backend = \"vote\"\n[vote]\nmembers = [\"graph\", \"rbpf\"]\nrule = \"weighted\"\n",
         );
         assert_eq!(s.backend, SlamBackendKind::Vote);
         assert_eq!(
             s.vote.members,
             [SlamBackendKind::Graph, SlamBackendKind::Rbpf]
         );
-        assert_eq!(s.vote.rule, crate::slam_vote::VoteRule::Majority);
+        assert_eq!(s.vote.rule, crate::slam_vote::VoteRule::Weighted);
         assert_eq!(s.vote.max_residual_m, 0.15, "unset keys keep their default");
         assert_eq!(
             section("backend = \"vote\"\n").vote.rule,
-            crate::slam_vote::VoteRule::Weighted,
-            "weighted is the default rule"
+            crate::slam_vote::VoteRule::Majority,
+            "majority is the default rule"
         );
         let err = parse_toml::<SlamSection>("[vote]\nmax_residual = 0.2\n", Path::new("slam.toml"))
             .unwrap_err()
