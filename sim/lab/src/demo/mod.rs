@@ -72,7 +72,7 @@ pub(crate) fn write_tum_copies(dir: &Path) -> anyhow::Result<()> {
 
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
-    /// Scenario: a bundled one (r32-dense-crossing, r32-light-puff, mrl-clean, corridor, aisles) or a scenario TOML file.
+    /// Scenario: a bundled one (r32-dense-crossing, r32-light-puff, mrl-clean, corridor, aisles, heights, cables) or a scenario TOML file.
     #[arg(long, value_name = "FILE|NAME", default_value = "r32-dense-crossing")]
     pub scenario: String,
     /// Skip the live run: record straight from the simulator, as fast as possible, then compare.
