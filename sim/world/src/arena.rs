@@ -37,15 +37,18 @@ pub enum BuiltinArena {
     Heights,
     /// Two 20 m aisles either side of a rack: parallel walls longer than the laser's range.
     Aisles,
+    /// A workshop with cables and a cable tray to drive over and a low box, all under the laser's plane.
+    Cables,
 }
 
 impl BuiltinArena {
-    pub const ALL: [BuiltinArena; 5] = [
+    pub const ALL: [BuiltinArena; 6] = [
         BuiltinArena::Mrl,
         BuiltinArena::R32,
         BuiltinArena::Corridor,
         BuiltinArena::Heights,
         BuiltinArena::Aisles,
+        BuiltinArena::Cables,
     ];
 
     pub fn name(self) -> &'static str {
@@ -55,6 +58,7 @@ impl BuiltinArena {
             BuiltinArena::Corridor => "corridor",
             BuiltinArena::Heights => "heights",
             BuiltinArena::Aisles => "aisles",
+            BuiltinArena::Cables => "cables",
         }
     }
 
@@ -70,6 +74,7 @@ impl BuiltinArena {
             BuiltinArena::Corridor => include_str!("../../arenas/corridor.toml"),
             BuiltinArena::Heights => include_str!("../../arenas/heights.toml"),
             BuiltinArena::Aisles => include_str!("../../arenas/aisles.toml"),
+            BuiltinArena::Cables => include_str!("../../arenas/cables.toml"),
         }
     }
 
@@ -573,6 +578,38 @@ impl Arena {
             for cx in lo_x..=hi_x {
                 for &i in self.cell_items(cx as usize, cy as usize) {
                     best = best.min(self.segments[i as usize].distance_to(p));
+                }
+            }
+        }
+        best
+    }
+
+    /// Like [`Arena::clearance`], but only to obstacles whose top is above
+    /// `climb_m`: what a base that drives over cables and sills bumps into.
+    pub fn clearance_above(&self, p: Vec2, radius: f64, climb_m: f64) -> f64 {
+        self.nearest_where(p, radius, |s| s.z[1] > climb_m)
+    }
+
+    /// True when an obstacle at most `climb_m` high (a cable, a sill; top above
+    /// the floor) lies within `radius` of `p`: the base is on it.
+    pub fn low_obstacle_within(&self, p: Vec2, radius: f64, climb_m: f64) -> bool {
+        climb_m > 0.0 && self.nearest_where(p, radius, |s| s.z[1] <= climb_m) < radius
+    }
+
+    fn nearest_where(&self, p: Vec2, radius: f64, keep: impl Fn(&Segment) -> bool) -> f64 {
+        let cell = INDEX_CELL_M;
+        let lo_x = (((p.x - radius - self.min.x) / cell).floor() as i64).max(0);
+        let hi_x = (((p.x + radius - self.min.x) / cell).floor() as i64).min(self.cols as i64 - 1);
+        let lo_y = (((p.y - radius - self.min.y) / cell).floor() as i64).max(0);
+        let hi_y = (((p.y + radius - self.min.y) / cell).floor() as i64).min(self.rows as i64 - 1);
+        let mut best = f64::INFINITY;
+        for cy in lo_y..=hi_y {
+            for cx in lo_x..=hi_x {
+                for &i in self.cell_items(cx as usize, cy as usize) {
+                    let s = &self.segments[i as usize];
+                    if keep(s) {
+                        best = best.min(s.distance_to(p));
+                    }
                 }
             }
         }

@@ -34,6 +34,15 @@ pub struct OdometryErrors {
     pub heading_drift_rad_per_m: f64,
     /// Random wheel slip: 1σ travel error of each wheel per √m of its travel.
     pub slip_per_sqrt_m: f64,
+    /// Obstacles whose top is at most this high (cables, a cable tray, a
+    /// sill) are driven over rather than bumped into, m; 0: none.
+    pub climb_height_m: f64,
+    /// Each time the base climbs onto or off such an obstacle its true
+    /// heading jolts by this much (1σ, rad), unseen by the encoders.
+    pub bump_heading_rad: f64,
+    /// … and one wheel's encoder counts this much travel that did not happen
+    /// (1σ, m: the wheel spins while climbing).
+    pub bump_slip_m: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -54,6 +63,12 @@ pub struct Robot {
     travel_right: f64,
     stalled: bool,
     rng: Rng,
+    /// Bumps draw from their own stream: an arena without low obstacles
+    /// keeps the very same motion as before bumps existed.
+    bump_rng: Rng,
+    /// On a low obstacle at the last tick.
+    on_low: bool,
+    bumps: u64,
 }
 
 impl Robot {
@@ -70,8 +85,16 @@ impl Robot {
             travel_left: 0.0,
             travel_right: 0.0,
             stalled: false,
+            bump_rng: Rng::new(rng.clone().next_u64(), 0xb0b),
             rng,
+            on_low: false,
+            bumps: 0,
         }
+    }
+
+    /// Times the base climbed onto or off a low obstacle.
+    pub fn bumps(&self) -> u64 {
+        self.bumps
     }
 
     /// Sets the velocity the base should reach (clamped to the platform's limits).
@@ -152,9 +175,10 @@ impl Robot {
             normalize_angle(th + dth),
         );
         let r = self.params.radius_m;
-        let ahead = arena.clearance(next.position(), r);
+        let climb = self.errors.climb_height_m;
+        let ahead = arena.clearance_above(next.position(), r, climb);
         // Touching a wall blocks motion into it, never motion away from it.
-        let blocked = ahead < r && ahead < arena.clearance(self.truth.position(), r);
+        let blocked = ahead < r && ahead < arena.clearance_above(self.truth.position(), r, climb);
         if blocked {
             // A bumper stop: the base stalls and the wheels do not turn.
             self.linear = 0.0;
@@ -164,14 +188,33 @@ impl Robot {
         }
         self.stalled = false;
         self.truth = next;
+        // Climbing onto or off a cable: a heading jolt the encoders do not
+        // see, and a wheel that spins (seed 004's robot driving over small
+        // obstacles). The wheels touch it within half the track of the centre.
+        let on_low = arena.low_obstacle_within(next.position(), self.params.track_m / 2.0, climb);
+        let (mut spin_l, mut spin_r) = (0.0, 0.0);
+        if on_low != self.on_low {
+            self.on_low = on_low;
+            self.bumps += 1;
+            let jolt = self.bump_rng.gaussian(self.errors.bump_heading_rad);
+            self.truth.theta = normalize_angle(self.truth.theta + jolt);
+            let spin = self.bump_rng.gaussian(self.errors.bump_slip_m).abs();
+            if self.bump_rng.chance(0.5) {
+                spin_l = spin;
+            } else {
+                spin_r = spin;
+            }
+        }
         // What the encoders count.
         let b = self.params.track_m;
         let (true_l, true_r) = (ds - dth * b / 2.0, ds + dth * b / 2.0);
         let e = &self.errors;
-        let meas_l =
-            true_l * (1.0 + e.scale_left) + e.slip_per_sqrt_m * true_l.abs().sqrt() * slip_l;
-        let meas_r =
-            true_r * (1.0 + e.scale_right) + e.slip_per_sqrt_m * true_r.abs().sqrt() * slip_r;
+        let meas_l = true_l * (1.0 + e.scale_left)
+            + e.slip_per_sqrt_m * true_l.abs().sqrt() * slip_l
+            + spin_l * ds.signum();
+        let meas_r = true_r * (1.0 + e.scale_right)
+            + e.slip_per_sqrt_m * true_r.abs().sqrt() * slip_r
+            + spin_r * ds.signum();
         self.travel_left += meas_l;
         self.travel_right += meas_r;
         // The controller integrates with the track it believes in.
@@ -391,6 +434,86 @@ mod tests {
         let sd = (spread / (2.0 * runs as f64)).sqrt();
         let d: f64 = 3.8; // ≈ distance with the acceleration ramp
         assert!((sd / (0.02 * d.sqrt()) - 1.0).abs() < 0.35, "sd {sd}");
+    }
+
+    /// A 4 m corridor-like room with a 3 cm cable across the way at x = 3 and
+    /// a 20 cm crate further on at x = 6.
+    fn cable_room() -> Arena {
+        Arena::from_vector_str(
+            "[[wall]]\npoints = [[0.0, 0.0], [9.0, 0.0], [9.0, 4.0], [0.0, 4.0]]\nclosed = true\n\
+             [[box]]\ncenter = [3.0, 2.0]\nsize = [0.04, 4.0]\nheight_m = [0.0, 0.03]\n\
+             [[box]]\ncenter = [6.0, 2.0]\nsize = [0.6, 4.0]\nheight_m = [0.0, 0.2]\n",
+            std::path::Path::new("cable.toml"),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn the_base_drives_over_a_cable_with_a_bump_but_not_over_a_crate() {
+        let arena = cable_room();
+        let errors = OdometryErrors {
+            climb_height_m: 0.05,
+            bump_heading_rad: 3f64.to_radians(),
+            bump_slip_m: 0.05,
+            ..Default::default()
+        };
+        let mut r = Robot::new(params(), errors, Pose2::new(1.0, 2.0, 0.0), Rng::new(3, 1));
+        r.command(0.4, 0.0);
+        run(&mut r, &arena, 20.0);
+        let (t, o) = (r.truth(), r.odometry());
+        assert!(t.x > 3.3, "over the cable: {t:?}");
+        assert!(
+            r.stalled() && t.x < 6.0 - 0.3 + 1e-6,
+            "stopped by the crate: {t:?}"
+        );
+        assert_eq!(r.bumps(), 2, "onto the cable and off it");
+        // The truth turned where the odometry saw nothing, and a wheel spun.
+        assert!(t.theta.abs() > 1e-4 && (t.y - 2.0).abs() > 1e-4, "{t:?}");
+        assert!((o.x - (t.x - 1.0)).abs() > 1e-3 || (o.theta - t.theta).abs() > 1e-4);
+        // With no climbing the cable is a wall like any other.
+        let mut stuck = Robot::new(
+            params(),
+            OdometryErrors::default(),
+            Pose2::new(1.0, 2.0, 0.0),
+            Rng::new(3, 1),
+        );
+        stuck.command(0.4, 0.0);
+        run(&mut stuck, &arena, 20.0);
+        assert!(
+            stuck.stalled() && stuck.truth().x < 3.0,
+            "{:?}",
+            stuck.truth()
+        );
+        assert_eq!(stuck.bumps(), 0);
+    }
+
+    #[test]
+    fn bumps_leave_the_other_random_draws_alone() {
+        // Same seed, one arena with a cable and climbing, one without: up to
+        // the cable the two runs are bit for bit the same.
+        let errors = OdometryErrors {
+            slip_per_sqrt_m: 0.02,
+            climb_height_m: 0.05,
+            bump_heading_rad: 0.05,
+            bump_slip_m: 0.05,
+            ..Default::default()
+        };
+        let plain = BuiltinArena::Corridor.load().unwrap();
+        let mut a = Robot::new(
+            params(),
+            errors.clone(),
+            Pose2::new(1.0, 1.0, 0.0),
+            Rng::new(5, 1),
+        );
+        let mut b = Robot::new(params(), errors, Pose2::new(1.0, 1.0, 0.0), Rng::new(5, 1));
+        a.command(0.4, 0.0);
+        b.command(0.4, 0.0);
+        let cable = cable_room();
+        run(&mut a, &cable, 4.0);
+        run(&mut b, &plain, 4.0);
+        assert!(a.truth().x < 2.6);
+        assert_eq!(a.truth(), b.truth());
+        assert_eq!(a.odometry(), b.odometry());
     }
 
     #[test]

@@ -31,7 +31,9 @@
 //!
 //! Optional tables: `[motion]` (track_m, accel_mps2, angular_accel_dps2),
 //! `[odometry]` (scale_left, scale_right, track_error, heading_drift_deg_per_m,
-//! slip_per_sqrt_m), `[smoke]` (cell_m, diffusion_m2ps, decay_per_s, wind_mps,
+//! slip_per_sqrt_m; climb_height_m, bump_heading_deg, bump_slip_m: driving
+//! over obstacles at most climb_height_m high jolts the heading and spins a
+//! wheel), `[smoke]` (cell_m, diffusion_m2ps, decay_per_s, wind_mps,
 //! layer_height_m, mass_extinction_m2pg, `[[smoke.source]]`, `[[smoke.patch]]`
 //! with center/radius_m/density_gpm3), `[laser]` (height_m, lidar_ratio_sr,
 //! wall_reflectance, min_return, patchiness), `[sonar]` (height_m, critical_angle_deg,
@@ -55,7 +57,7 @@ use smokenav_smoke_codec::mq303a::SensorParams;
 use std::path::{Path, PathBuf};
 
 /// Scenarios shipped with the simulator: (name, text).
-pub const BUILTIN_SCENARIOS: [(&str, &str); 6] = [
+pub const BUILTIN_SCENARIOS: [(&str, &str); 7] = [
     ("mrl-clean", include_str!("../../scenarios/mrl-clean.toml")),
     (
         "r32-light-puff",
@@ -68,6 +70,7 @@ pub const BUILTIN_SCENARIOS: [(&str, &str); 6] = [
     ("corridor", include_str!("../../scenarios/corridor.toml")),
     ("heights", include_str!("../../scenarios/heights.toml")),
     ("aisles", include_str!("../../scenarios/aisles.toml")),
+    ("cables", include_str!("../../scenarios/cables.toml")),
 ];
 
 /// Most smoke sources, patches, waypoints or pulses a file may list.
@@ -161,6 +164,12 @@ struct OdometryFile {
     heading_drift_deg_per_m: f64,
     #[serde(default)]
     slip_per_sqrt_m: f64,
+    #[serde(default)]
+    climb_height_m: f64,
+    #[serde(default)]
+    bump_heading_deg: f64,
+    #[serde(default)]
+    bump_slip_m: f64,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -394,6 +403,9 @@ impl Scenario {
             track_error: o.track_error,
             heading_drift_rad_per_m: o.heading_drift_deg_per_m.to_radians(),
             slip_per_sqrt_m: o.slip_per_sqrt_m,
+            climb_height_m: o.climb_height_m,
+            bump_heading_rad: o.bump_heading_deg.to_radians(),
+            bump_slip_m: o.bump_slip_m,
         };
         let start = Pose2::new(f.start.x, f.start.y, f.start.heading_deg.to_radians());
         let route = f.route.as_ref().map(|rf| Route {
@@ -417,7 +429,14 @@ impl Scenario {
 
         // Where things are in this arena: the footprint must fit, sources sit in open air.
         let mut v = Validator::default();
-        check_placement(&arena, drive.radius_m, start, route.as_ref(), &mut v);
+        check_placement(
+            &arena,
+            drive.radius_m,
+            odometry.climb_height_m,
+            start,
+            route.as_ref(),
+            &mut v,
+        );
         let (lo, hi) = arena.bounds();
         let cells = ((hi.x - lo.x) / smoke.cell_m) * ((hi.y - lo.y) / smoke.cell_m);
         if cells > 16e6 {
@@ -569,9 +588,17 @@ fn point(v: &mut Validator, key: &str, p: [f64; 2], limit: f64) {
     }
 }
 
-/// The robot (radius `r`) must fit at the start and along every leg of the route.
-fn check_placement(arena: &Arena, r: f64, start: Pose2, route: Option<&Route>, v: &mut Validator) {
-    let fits = |p: Vec2| arena.clearance(p, r) >= r;
+/// The robot (radius `r`) must fit at the start and along every leg of the
+/// route; obstacles at most `climb_m` high it drives over.
+fn check_placement(
+    arena: &Arena,
+    r: f64,
+    climb_m: f64,
+    start: Pose2,
+    route: Option<&Route>,
+    v: &mut Validator,
+) {
+    let fits = |p: Vec2| arena.clearance_above(p, r, climb_m) >= r;
     if !fits(start.position()) {
         v.fail(
             "start",
@@ -716,6 +743,19 @@ impl Validate for OdometryFile {
             0.0,
             1.0,
         );
+        v.within(
+            &format!("{key}.climb_height_m"),
+            self.climb_height_m,
+            0.0,
+            0.2,
+        );
+        v.within(
+            &format!("{key}.bump_heading_deg"),
+            self.bump_heading_deg,
+            0.0,
+            45.0,
+        );
+        v.within(&format!("{key}.bump_slip_m"), self.bump_slip_m, 0.0, 1.0);
     }
 }
 

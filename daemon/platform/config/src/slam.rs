@@ -467,6 +467,11 @@ mod tests {
         );
         assert_eq!(s.vote.rule, crate::slam_vote::VoteRule::Weighted);
         assert_eq!(s.vote.max_residual_m, 0.15, "unset keys keep their default");
+        assert_eq!(
+            section("backend = \"vote\"\n").vote.rule,
+            crate::slam_vote::VoteRule::Majority,
+            "majority is the default rule"
+        );
         let err = parse_toml::<SlamSection>("[vote]\nmax_residual = 0.2\n", Path::new("slam.toml"))
             .unwrap_err()
             .to_string();

@@ -20,13 +20,18 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum VoteRule {
     /// The paper's rule: the state most members agree on (more than half);
-    /// no majority → occupied.
+    /// no majority → occupied. The default: on the bundled dense-smoke trial
+    /// (SmokeNav v2, `smokenav-lab demo --fast --seeds 1`) majority 0.113 m
+    /// map error against weighted 0.626 m, clean twin 0.034 against 0.039 m.
     #[default]
     #[serde(rename = "majority")]
     Majority,
     /// Each member's vote weighted by its certainty for that cell, its pose
     /// covariance and (for occupied/free) how little of the region was seen
-    /// only by sonar; ties → occupied.
+    /// only by sonar; ties → occupied. Better where a member is out (MIT
+    /// CSAIL, fuzzy left out: weighted 0.059 m, majority 0.186 m, best member
+    /// 0.056 m), worse where a member's covariance claims more than its map
+    /// is worth (the fuzzy member in smoke carries the vote).
     #[serde(rename = "weighted")]
     Weighted,
 }
@@ -47,11 +52,12 @@ pub struct VoteSection {
     /// The back-ends that vote (2–3 distinct, not `vote`); the first one's map
     /// is the frame the others are aligned to and the fused map's geometry.
     pub members: Vec<SlamBackendKind>,
-    /// `majority` (the paper) or `weighted`.
+    /// `majority` (the paper's, default) or `weighted`.
     pub rule: VoteRule,
-    /// A member whose alignment residual (RMS distance of its walls to the
-    /// reference's, truncated at `align_truncation_m`) is above this is
-    /// flagged in health and left out of the vote, m.
+    /// A member whose alignment residual (RMS distance of the nearest 80 % of
+    /// its wall cells to the reference's walls, truncated at
+    /// `align_truncation_m`) is above this is flagged in health and left out
+    /// of the vote, m.
     pub max_residual_m: f64,
     /// Translational search window of the alignment around the shared
     /// odometry frame (or the last alignment), ± m.

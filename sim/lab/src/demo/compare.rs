@@ -218,15 +218,13 @@ fn same_slam_input(a: &FusedScan, b: &FusedScan, noise: &LaserNoiseModel) -> boo
             == noise.factor(f64::from(b.smoke_level)).to_bits()
 }
 
-/// SLAM over `fused` and the odometry of `log`, fed in receive order through
-/// the pipeline exactly as the SLAM process would have been, scored against the truth.
-fn slam_and_score(
+/// A SLAM pipeline for `profile` fed `fused` and the odometry of `log` in
+/// receive order, exactly as the SLAM process would have been.
+pub(crate) fn replay_slam(
     log: &SensorLog,
     profile: &RobotConfig,
     fused: &[Emitted],
-    truth: &TruthTrack,
-    truth_map: &OccupancyGrid,
-) -> SlamOutcome {
+) -> SlamPipeline {
     let mount = profile.laser.mount;
     let mut slam = SlamPipeline::from_config(
         &profile.slam,
@@ -245,16 +243,26 @@ fn slam_and_score(
         .collect();
     received.sort_by_key(|&(t, _)| t);
     replay(&mut slam, received, |_| {});
-    let mut trajectory = slam.trajectory();
-    // One pose per stamp (a trajectory file's stamps must increase).
-    trajectory.dedup_by_key(|p| p.stamp_ns);
-    let map = slam.map();
-    let confidence_map = slam.confidence_map();
-    let map_report = match &map {
+    slam
+}
+
+/// A SLAM map against the truth (k-NN map error of the SmokeNav paper).
+pub(crate) fn score_map(
+    truth_map: &OccupancyGrid,
+    map: Option<&OccupancyGrid>,
+) -> Result<MapReport, String> {
+    match map {
         Some(m) => smokenav_algorithms_eval::evaluate_maps(truth_map, m, &MapOptions::default())
             .map_err(|e| e.to_string()),
         None => Err("SLAM processed no scan".into()),
-    };
+    }
+}
+
+/// A SLAM trajectory against the true one.
+pub(crate) fn score_trajectory(
+    truth: &TruthTrack,
+    trajectory: &[StampedPose],
+) -> Result<TrajectoryReport, String> {
     let truth_poses: Vec<_> = truth
         .samples()
         .iter()
@@ -264,12 +272,30 @@ fn slam_and_score(
         .iter()
         .map(|p| smokenav_algorithms_eval::StampedPose::from_ns(p.stamp_ns, &p.pose))
         .collect();
-    let trajectory_report = smokenav_algorithms_eval::evaluate_trajectories(
+    smokenav_algorithms_eval::evaluate_trajectories(
         &truth_poses,
         &est,
         &TrajectoryOptions::default(),
     )
-    .map_err(|e| e.to_string());
+    .map_err(|e| e.to_string())
+}
+
+/// SLAM over `fused` and the odometry of `log` ([`replay_slam`]), scored against the truth.
+fn slam_and_score(
+    log: &SensorLog,
+    profile: &RobotConfig,
+    fused: &[Emitted],
+    truth: &TruthTrack,
+    truth_map: &OccupancyGrid,
+) -> SlamOutcome {
+    let slam = replay_slam(log, profile, fused);
+    let mut trajectory = slam.trajectory();
+    // One pose per stamp (a trajectory file's stamps must increase).
+    trajectory.dedup_by_key(|p| p.stamp_ns);
+    let map = slam.map();
+    let confidence_map = slam.confidence_map();
+    let map_report = score_map(truth_map, map.as_ref());
+    let trajectory_report = score_trajectory(truth, &trajectory);
     SlamOutcome {
         map,
         confidence_map,

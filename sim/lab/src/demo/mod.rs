@@ -24,6 +24,7 @@ mod live;
 mod pictures;
 mod recording;
 mod report;
+mod vote;
 
 use anyhow::{Context, bail};
 use compare::MethodResult;
@@ -71,7 +72,7 @@ pub(crate) fn write_tum_copies(dir: &Path) -> anyhow::Result<()> {
 
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
-    /// Scenario: a bundled one (r32-dense-crossing, r32-light-puff, mrl-clean, corridor, aisles) or a scenario TOML file.
+    /// Scenario: a bundled one (r32-dense-crossing, r32-light-puff, mrl-clean, corridor, aisles, heights, cables) or a scenario TOML file.
     #[arg(long, value_name = "FILE|NAME", default_value = "r32-dense-crossing")]
     pub scenario: String,
     /// Skip the live run: record straight from the simulator, as fast as possible, then compare.
@@ -104,6 +105,10 @@ pub struct DemoArgs {
     /// Bayes) on the `heights` scenario (`smokenav-lab map3d`, into OUT/map3d).
     #[arg(long)]
     pub no_map3d: bool,
+    /// Skip the vote back-end's run (its members rbpf, graph, fuzzy and the
+    /// fused map, scored side by side on the trial and its clean twin).
+    #[arg(long)]
+    pub no_vote: bool,
 }
 
 /// Where progress messages go: stderr with `--json` (stdout is for the JSON), else stdout.
@@ -341,6 +346,39 @@ fn laser_damage(smoky: &Path, clean: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
     Ok(out)
 }
 
+/// The vote back-end over the trial's recording and its clean twin's.
+fn vote_runs(
+    main: &Comparison,
+    clean: Option<&Comparison>,
+    profile: &RobotConfig,
+    out: &Path,
+    say: &Say,
+) -> anyhow::Result<Vec<vote::VoteComparison>> {
+    say.line("vote back-end (rbpf, graph, fuzzy and their vote; SmokeNav v2):");
+    let mut runs = vec![(main, out.join("recording.mcap"))];
+    if let Some(c) = clean {
+        runs.push((c, out.join("clean-reference").join("recording.mcap")));
+    }
+    let mut votes = Vec::new();
+    for (c, rec) in runs {
+        let t = Instant::now();
+        let log = recording::SensorLog::read(&rec)?;
+        votes.push(vote::run(
+            &c.scenario,
+            &log,
+            profile,
+            &c.truth,
+            &c.truth_map,
+        )?);
+        say.line(&format!(
+            "  {} in {:.1} s",
+            c.scenario,
+            t.elapsed().as_secs_f64()
+        ));
+    }
+    Ok(votes)
+}
+
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     if std::env::var_os("RUST_LOG").is_some() {
         smokenav_platform_runtime::init_logging("demo");
@@ -432,6 +470,11 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             write_tum_copies(&args.out.join("clean-reference"))?;
         }
     }
+    let votes = if args.no_vote {
+        Vec::new()
+    } else {
+        vote_runs(&main, clean.as_ref(), &profile, &args.out, &say)?
+    };
     // Mapping, not localisation: true poses on the scenario with obstacles
     // out of the laser's plane (the demo's `--duration` shortens it too).
     let map3d = if args.no_map3d {
@@ -443,6 +486,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         Some(crate::map3d::evaluate(&a)?)
     };
     let mut v = report::json_value(&main, clean.as_ref());
+    if let (false, Some(obj)) = (votes.is_empty(), v.as_object_mut()) {
+        obj.insert("vote".into(), serde_json::to_value(&votes)?);
+        let path = args.out.join("comparison.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&v)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     if let (Some(r), Some(obj)) = (&map3d, v.as_object_mut()) {
         obj.insert("occupancy_rules".into(), serde_json::to_value(r)?);
         // comparison.json is what --json prints: with the rules too.
@@ -454,6 +503,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         println!("{v}");
     } else {
         print!("{}", report::table(&main, clean.as_ref()));
+        if !votes.is_empty() {
+            print!("{}", vote::table(&votes));
+        }
         if let Some(r) = &map3d {
             print!("\n{}", crate::map3d::table(r));
         }

@@ -5,6 +5,7 @@
 //! that takes longer than the stall timeout marks it stalled.
 
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
+use crate::frontend::Tracked;
 use crate::scan::RangeScan;
 use smokenav_platform_config::SlamBackendKind;
 use smokenav_platform_map::OccupancyGrid;
@@ -67,8 +68,11 @@ impl std::str::FromStr for MemberFault {
 }
 
 pub(crate) enum Job {
-    Process(Arc<RangeScan>, Pose2),
-    Predict(u64, Pose2),
+    /// A scan, its corrected odometry and the pipeline's front-end match of
+    /// it (handed to the member's `frontend_match` first: the graph takes it
+    /// instead of matching the scan again).
+    Process(Arc<RangeScan>, Pose2, Option<Tracked>),
+    Predict(u64, Pose2, Option<Tracked>),
     /// Export the map now (lockstep: before a fused update).
     Export,
     Trajectory(SyncSender<Vec<StampedPose>>),
@@ -293,7 +297,7 @@ fn worker(
                 backend.odometry_reset();
             }
             let update = match job {
-                Some(Job::Process(scan, odom)) => {
+                Some(Job::Process(scan, odom, tracked)) => {
                     processed += 1;
                     if let Some(f) = fault
                         && processed > f.after_scans
@@ -309,9 +313,17 @@ fn worker(
                             }
                         }
                     }
+                    if let Some(t) = &tracked {
+                        backend.frontend_match(t);
+                    }
                     Some((backend.process(&scan, &odom), odom))
                 }
-                Some(Job::Predict(stamp, odom)) => Some((backend.predict(stamp, &odom), odom)),
+                Some(Job::Predict(stamp, odom, tracked)) => {
+                    if let Some(t) = &tracked {
+                        backend.frontend_match(t);
+                    }
+                    Some((backend.predict(stamp, &odom), odom))
+                }
                 Some(Job::Trajectory(reply)) => {
                     let _ = reply.try_send(backend.trajectory());
                     None

@@ -16,11 +16,13 @@
 //!   goes on with the rest, and [`VoteSlam::status`] names who is out.
 //! - **Alignment** ([`align`]): the first member's map is the frame. Each
 //!   other member's map is aligned to it by a coarse-to-fine search over
-//!   (x, y, θ) around the shared odometry frame — and, once aligned, around
-//!   its last alignment with a quarter of the window — only when its
-//!   `map_revision` or the reference's changed. The residual (RMS distance of
-//!   its walls to the reference's) is reported; a member above
-//!   `max_residual_m` is flagged and left out of the vote.
+//!   (x, y, θ) around the shared odometry frame — and, while its last
+//!   alignment fits, around that with a quarter of the window: one search per
+//!   update, warm-started — only when its `map_revision` or the reference's
+//!   changed. The residual (robust: RMS distance of the nearest 80 % of its
+//!   walls to the reference's) is reported; a member above `max_residual_m`
+//!   is flagged in health and left out of the vote, and its next search
+//!   spans the whole window again.
 //! - **Vote** ([`rule`]): per cell of the reference's grid over occupied /
 //!   free / unknown, the paper's majority (no majority → occupied) or the
 //!   weighted variant. Recomputed every `fuse_period_s` on a thread of its own
@@ -42,8 +44,9 @@ pub mod member;
 pub mod rule;
 
 use crate::backend::{BackendOptions, SlamBackend, SlamUpdate, StampedPose, from_config};
+use crate::frontend::Tracked;
 use crate::scan::{BeamKind, RangeScan};
-use align::{Alignment, DistanceField, SearchWindow, align, wall_points};
+use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
 use nalgebra::Matrix3;
 use rule::{CellState, WeightedVote, majority, weighted};
@@ -187,6 +190,7 @@ struct Fuser {
     field_revision: Option<u64>,
     aligned_at: Vec<Option<(u64, u64)>>,
     points: Vec<(f64, f64)>,
+    scratch: Vec<f32>,
     out: FusedOut,
     votes: Vec<CellState>,
     wvotes: Vec<WeightedVote>,
@@ -200,6 +204,7 @@ impl Fuser {
             field_revision: None,
             aligned_at: vec![None; members],
             points: Vec::new(),
+            scratch: Vec::new(),
             out: FusedOut {
                 alignments: vec![None; members],
                 agreement: vec![None; members],
@@ -256,32 +261,19 @@ impl Fuser {
                 window_m: s.align_window_m,
                 window_rad: s.align_window_rad,
             };
-            let a = match self.out.alignments[i] {
-                // Incremental: around the last alignment with a quarter of the
-                // window; the whole window again if that does not fit.
-                Some(prev) => {
-                    let near = align(
-                        &self.field,
-                        &self.points,
-                        &SearchWindow {
-                            center: prev.transform,
-                            window_m: s.align_window_m / 4.0,
-                            window_rad: s.align_window_rad / 4.0,
-                        },
-                    );
-                    if near.residual_m <= s.max_residual_m {
-                        near
-                    } else {
-                        let wide = align(&self.field, &self.points, &full);
-                        if wide.residual_m < near.residual_m {
-                            wide
-                        } else {
-                            near
-                        }
-                    }
-                }
-                None => align(&self.field, &self.points, &full),
+            // One search per update: around the last alignment with a quarter
+            // of the window while it fits, over the whole window when it did
+            // not (or the first time). A member that stays above the threshold
+            // is flagged every update and costs one wide search each.
+            let win = match self.out.alignments[i] {
+                Some(prev) if prev.residual_m <= s.max_residual_m => SearchWindow {
+                    center: prev.transform,
+                    window_m: s.align_window_m / 4.0,
+                    window_rad: s.align_window_rad / 4.0,
+                },
+                _ => full,
             };
+            let a = align_with(&self.field, &self.points, &win, &mut self.scratch);
             self.out.alignments[i] = Some(a);
             self.aligned_at[i] = Some((*rev, ref_rev));
         }
@@ -338,6 +330,7 @@ impl Fuser {
             })
             .collect();
         let mut values = vec![-1i8; maps.len()];
+        let block = &mut (None::<(i32, i32)>, 0.0f64);
         for y in 0..h {
             let fy = y as f64;
             for x in 0..w {
@@ -368,8 +361,13 @@ impl Fuser {
                                 value: v,
                                 weight: m.3,
                             }));
+                        // The share is per 1 m block: looked up when the block changes.
                         let (cx, cy) = (ox + (fx + 0.5) * res, oy + (fy + 0.5) * res);
-                        weighted(&self.wvotes, sonar.share(cx, cy))
+                        let key = (cx.floor() as i32, cy.floor() as i32);
+                        if block.0 != Some(key) {
+                            *block = (Some(key), sonar.share(cx, cy));
+                        }
+                        weighted(&self.wvotes, block.1)
                     }
                 };
                 fused.cells[y * w + x] = state.value();
@@ -473,6 +471,8 @@ pub struct VoteSlam {
     first_odom: Option<Pose2>,
     pose: Option<Pose2>,
     last: Option<SlamUpdate>,
+    /// The pipeline's front-end match of the next scan, forwarded with its job.
+    tracked: Option<Tracked>,
 }
 
 /// Scans kept for reuse: each member holds at most its queue's worth.
@@ -544,6 +544,7 @@ impl VoteSlam {
             first_odom: None,
             pose: None,
             last: None,
+            tracked: None,
         };
         if !v.p.section.lockstep {
             v.fuse_thread = Some(v.spawn_fuser(export_period)?);
@@ -663,6 +664,27 @@ impl VoteSlam {
             *p = f.out.clone();
         }
         Some(f.out.fuse_ms)
+    }
+
+    /// The fused map the other `rule` makes of the members' current maps
+    /// (same alignments; the vote's own rule is restored): the demo and tools
+    /// compare both rules on one run.
+    pub fn map_with_rule(&self, rule: VoteRule) -> Option<OccupancyGrid> {
+        if self.p.section.lockstep {
+            self.fuse_lockstep();
+        }
+        let inputs = self.inputs();
+        let share = self.sonar.lock().map(|s| s.clone()).unwrap_or_default();
+        let mut f = self.fuser.lock().ok()?;
+        let own = f.p.section.rule;
+        f.p.section.rule = rule;
+        let map = f
+            .fuse(&inputs, &share, true)
+            .then(|| f.out.map.as_deref().cloned())
+            .flatten();
+        f.p.section.rule = own;
+        f.fuse(&inputs, &share, true);
+        map
     }
 
     fn inputs(&self) -> Vec<FuseInput> {
@@ -828,7 +850,8 @@ impl SlamBackend for VoteSlam {
     fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
         let shared = self.shared_scan(scan);
         let o = *odom;
-        self.dispatch(&mut || Job::Process(Arc::clone(&shared), o));
+        let t = self.tracked.take();
+        self.dispatch(&mut || Job::Process(Arc::clone(&shared), o, t));
         drop(shared);
         let u = self.update(scan.stamp_ns, odom, true);
         if let Ok(mut s) = self.sonar.lock() {
@@ -837,9 +860,15 @@ impl SlamBackend for VoteSlam {
         u
     }
 
+    fn frontend_match(&mut self, tracked: &Tracked) {
+        // Goes with the next job to every member (the graph uses it).
+        self.tracked = Some(*tracked);
+    }
+
     fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate {
         let o = *odom;
-        self.dispatch(&mut || Job::Predict(stamp_ns, o));
+        let t = self.tracked.take();
+        self.dispatch(&mut || Job::Predict(stamp_ns, o, t));
         self.update(stamp_ns, odom, false)
     }
 

@@ -182,3 +182,53 @@ fn fault_knob_parses_and_names_bad_parts() {
     assert!(e.contains("hang"), "{e}");
     assert!("graph:stall".parse::<MemberFault>().is_err());
 }
+
+/// The pipeline's front-end match reaches the graph member with its scan: the
+/// graph then takes the given (corrected) odometry as the scan's pose instead
+/// of matching the scan again, which would move it.
+#[test]
+fn the_front_end_match_is_forwarded_to_the_graph_member() {
+    let graph_pose_error = |forward: bool| -> f64 {
+        let mut v = VoteSlam::new(
+            &cfg(&[K::Graph, K::Rbpf], true),
+            BackendOptions::default(),
+            None,
+        )
+        .unwrap();
+        v.set_initial_pose(Pose2::new(-1.5, -1.5, 0.0));
+        let mut worst = 0.0f64;
+        for i in 0..20 {
+            let truth = Pose2::new(-1.5 + 0.04 * i as f64, -1.5, 0.0);
+            // Odometry 3 cm off to the side on every other scan: the graph's
+            // own matcher would pull the pose back onto the walls.
+            let odom = Pose2::new(truth.x, truth.y + 0.03 * (i % 2) as f64, 0.0);
+            if forward {
+                v.frontend_match(&Tracked {
+                    pose: odom,
+                    score: Some(0.9),
+                    stale_odometry: false,
+                    degenerate_directions: 0,
+                    covariance: Matrix3::from_diagonal_element(1e-4),
+                });
+            }
+            v.process(
+                &scan_at(&truth, 1_000_000_000 + i as u64 * 100_000_000),
+                &odom,
+            );
+            let (u, o) = v.members[0].shared.lock().update.expect("graph updated");
+            assert_eq!(o, odom);
+            worst = worst.max((u.pose.x - odom.x).hypot(u.pose.y - odom.y));
+        }
+        worst
+    };
+    let own = graph_pose_error(false);
+    assert!(
+        own > 0.005,
+        "the graph's own matcher left the odometry: {own}"
+    );
+    let shared = graph_pose_error(true);
+    assert!(
+        shared < 1e-6,
+        "with the shared match the pose is the odometry: {shared}"
+    );
+}
