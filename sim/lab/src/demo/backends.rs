@@ -86,7 +86,7 @@ fn smoke_over_clean(
 }
 
 /// Every back-end's results of `c`: the main one first.
-fn all<'a>(c: &'a Comparison) -> Vec<(SlamBackendKind, usize, &'a [MethodResult])> {
+fn all(c: &Comparison) -> Vec<(SlamBackendKind, usize, &[MethodResult])> {
     std::iter::once((c.backend, c.seeds, c.results.as_slice()))
         .chain(
             c.other_backends
