@@ -30,7 +30,7 @@ pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::{LaserSection, ScanLayout};
 pub use mapping::{MappingRule, MappingSection};
 pub use robot::{BusSection, Platform, RobotSection};
-pub use slam::{SlamBackendKind, SlamInput, SlamSection};
+pub use slam::{SlamBackendKind, SlamInput, SlamMode, SlamSection};
 pub use slam_fuzzy::{FuzzyReference, FuzzySearch, FuzzySection};
 pub use slam_vote::{VoteRule, VoteSection};
 pub use smoke::{AdcBackend, SmokeSection};

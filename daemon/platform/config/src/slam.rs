@@ -94,6 +94,21 @@ impl SlamBackendKind {
     }
 }
 
+/// What the SLAM run does with its map (`[slam] mode`, and `--localization`
+/// of `smokenav slam` and `smokenav-slam`): build it, or only track the robot
+/// on a saved one (`--load-graph`, graph back-end) without changing it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum SlamMode {
+    /// Map (and, from a loaded graph, keep mapping).
+    #[default]
+    #[serde(rename = "mapping")]
+    Mapping,
+    /// Localise on the loaded graph's map: no new nodes, the map unchanged.
+    #[serde(rename = "localization")]
+    Localization,
+}
+
 /// Declares the section once: each field with its doc, type, default value and
 /// Table-3 value. Generates the public struct, the all-optional raw form
 /// serde reads, and the preset resolution.
@@ -148,6 +163,8 @@ slam_section! {
     input: SlamInput = (SlamInput::Fused, SlamInput::Fused),
     /// The SLAM algorithm (`rbpf`, `graph`, `fuzzy` or `vote`).
     backend: SlamBackendKind = (SlamBackendKind::Rbpf, SlamBackendKind::Rbpf),
+    /// `mapping`, or `localization` on a saved graph (needs `--load-graph` and the graph back-end).
+    mode: SlamMode = (SlamMode::Mapping, SlamMode::Mapping),
     /// Seed of the filter's random numbers: the same input and seed give the same output.
     seed: u64 = (42, 42),
     /// Readings at or beyond this are "no return" and are ignored, m (GMapping maxRange).
@@ -433,6 +450,22 @@ mod tests {
         assert!(keys.contains(&"slam.srr"), "{keys:?}");
         assert!(keys.contains(&"slam.temporal_update_s"), "{keys:?}");
         assert!(keys.contains(&"slam.max_urange_m"), "{keys:?}");
+    }
+
+    #[test]
+    fn mode_names_are_strict() {
+        assert_eq!(section("").mode, SlamMode::Mapping);
+        assert_eq!(
+            section("mode = \"localization\"\n").mode,
+            SlamMode::Localization
+        );
+        let err = parse_toml::<SlamSection>("mode = \"localisation\"\n", Path::new("slam.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("mode") && err.contains("localisation"),
+            "{err}"
+        );
     }
 
     #[test]

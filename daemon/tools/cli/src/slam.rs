@@ -13,13 +13,13 @@ use smokenav_algorithms_eval::{
     load_trajectory,
 };
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
-use smokenav_algorithms_slam::graph::{GraphSlam, g2o};
+use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam, ResumedGraph, saved};
 use smokenav_algorithms_slam::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::scan::{EndpointLimits, RangeScan};
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, SlamUpdate, StampedPose};
-use smokenav_platform_config::{RobotConfig, SlamBackendKind, SlamSection, parse_toml};
+use smokenav_platform_config::{RobotConfig, SlamBackendKind, SlamMode, SlamSection, parse_toml};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_recording::bag::{Bag, RoleMap};
 use smokenav_shared_types::{AnyMessage, FusedScan, Pose2};
@@ -79,9 +79,19 @@ pub struct SlamArgs {
     /// Stop after this many scans.
     #[arg(long)]
     max_scans: Option<usize>,
-    /// Write the pose graph (2D g2o) here at the end (graph back-end only).
+    /// Write the pose graph (2D g2o) here at the end, and the nodes' scans
+    /// beside it as FILE.g2o.scans (graph back-end only; `--load-graph` reads both).
     #[arg(long, value_name = "FILE.g2o")]
     save_graph: Option<PathBuf>,
+    /// Go on from a run saved with `--save-graph` (G and G.scans): keep
+    /// mapping from where it ended, or with `--localization` only track the
+    /// robot on its map. Implies `--backend graph`.
+    #[arg(long, value_name = "G.g2o")]
+    load_graph: Option<PathBuf>,
+    /// Localise on `--load-graph`'s map without changing it (no new nodes;
+    /// the same as `[slam] mode = "localization"`).
+    #[arg(long)]
+    localization: bool,
     /// Ground-truth map (map_server YAML) to score the map with (with
     /// `--backend vote`: the vote's and every member's). Without it but with
     /// `--reference`, the log's scans drawn at the reference poses are the truth.
@@ -159,6 +169,11 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     }
     if let Some(b) = args.backend {
         cfg.backend = b;
+    } else if args.load_graph.is_some() {
+        cfg.backend = SlamBackendKind::Graph;
+    }
+    if args.localization {
+        cfg.mode = SlamMode::Localization;
     }
     // Offline the vote waits for every member at every scan: nothing dropped, reproducible.
     cfg.vote.lockstep = true;
@@ -440,6 +455,15 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         args.save_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
         "--save-graph needs --backend graph (the particle filter keeps no pose graph)"
     );
+    anyhow::ensure!(
+        args.load_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
+        "--load-graph needs the graph back-end, not --backend {}",
+        cfg.backend.as_str()
+    );
+    anyhow::ensure!(
+        cfg.mode == SlamMode::Mapping || args.load_graph.is_some(),
+        "localization mode tracks the robot on a saved map: give --load-graph G (saved with --save-graph)"
+    );
     let reference = match &args.reference {
         Some(p) => Some(load_trajectory(p).context("bad reference file")?),
         None => None,
@@ -467,12 +491,26 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let mut slam = SlamPipeline::from_config(
-        &cfg,
-        BackendOptions {
-            keep_trajectory: true,
-        },
-    );
+    let mut slam = match &args.load_graph {
+        Some(g) => {
+            let run = saved::load(&cfg, GraphParams::default(), g)
+                .with_context(|| format!("cannot load the saved graph {}", g.display()))?;
+            SlamPipeline::new(
+                &cfg,
+                Box::new(ResumedGraph::new(
+                    run,
+                    cfg.mode == SlamMode::Localization,
+                    true,
+                )),
+            )
+        }
+        None => SlamPipeline::from_config(
+            &cfg,
+            BackendOptions {
+                keep_trajectory: true,
+            },
+        ),
+    };
     let truth_map = match &args.truth_map {
         Some(p) => Some(
             smokenav_platform_map::load_map_server(p)
@@ -629,11 +667,31 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             s.optimization_failures
         );
         if let Some(path) = &args.save_graph {
-            let mut text = Vec::new();
-            g2o::write(g.graph(), &mut text)?;
-            std::fs::write(path, text)
-                .with_context(|| format!("cannot write {}", path.display()))?;
-            let _ = writeln!(report, "pose graph         {}", path.display());
+            saved::save(g, path)?;
+            let _ = writeln!(
+                report,
+                "pose graph         {} (nodes' scans: {})",
+                path.display(),
+                saved::scans_path(path).display()
+            );
+        }
+        if cfg.mode == SlamMode::Localization {
+            let mut m = (0.0, 0.0);
+            slam.backend().metrics(&mut |k, v| match k {
+                "localization_matched" => m.0 = v,
+                "localization_unmatched" => m.1 = v,
+                _ => {}
+            });
+            let _ = writeln!(
+                report,
+                "localization       on {} (unchanged): {} scans matched to its map, {} followed the motion only",
+                args.load_graph
+                    .as_deref()
+                    .unwrap_or(Path::new("?"))
+                    .display(),
+                m.0,
+                m.1
+            );
         }
     }
     if let Some(reference) = &reference {

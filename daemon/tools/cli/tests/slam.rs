@@ -70,3 +70,109 @@ fn one_corrupt_odometry_record_is_reported_by_line_and_never_taken_as_motion() {
     let step = max_step(&trajectory);
     assert!(step < 2.0, "the trajectory jumps {step:.1} m");
 }
+
+/// `--save-graph` on the first half of a real log, then `--load-graph
+/// --localization` on the second: the robot is tracked on the saved map,
+/// which comes out unchanged (the same map file, the same graph files).
+#[test]
+fn localization_on_a_saved_graph_tracks_the_second_half_and_leaves_the_map_unchanged() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(data().join("csail-prefix-200.clf")).unwrap();
+    let mut halves = (String::new(), String::new());
+    let mut scans = 0;
+    for line in text.lines() {
+        scans += usize::from(line.starts_with("FLASER"));
+        let half = if scans <= 100 {
+            &mut halves.0
+        } else {
+            &mut halves.1
+        };
+        half.push_str(line);
+        half.push('\n');
+    }
+    let (first, second) = (dir.path().join("first.clf"), dir.path().join("second.clf"));
+    std::fs::write(&first, &halves.0).unwrap();
+    std::fs::write(&second, &halves.1).unwrap();
+    let slam = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
+            .arg("slam")
+            .args(args)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        (out.status.success(), stdout, stderr)
+    };
+    let d = |p: &str| dir.path().join(p).to_string_lossy().into_owned();
+    let (ok, _, err) = slam(&[
+        "--carmen",
+        &d("first.clf"),
+        "--backend",
+        "graph",
+        "--save-graph",
+        &d("first.g2o"),
+        "--out",
+        &d("a"),
+    ]);
+    assert!(ok, "{err}");
+    assert!(dir.path().join("first.g2o.scans").exists());
+    let (ok, report, err) = slam(&[
+        "--carmen",
+        &d("second.clf"),
+        "--load-graph",
+        &d("first.g2o"),
+        "--localization",
+        "--save-graph",
+        &d("again.g2o"),
+        "--out",
+        &d("b"),
+    ]);
+    assert!(ok, "{err}");
+    let line = report
+        .lines()
+        .find(|l| l.starts_with("localization"))
+        .unwrap_or_else(|| panic!("no localization line in\n{report}"));
+    let matched: f64 = line
+        .split(": ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    // The second half drives on beyond the part the first half mapped (48 of
+    // 100 scans matched here): where it overlaps, the saved map is found.
+    assert!(matched >= 25.0, "{line}");
+    for (a, b) in [
+        ("a/map.pgm", "b/map.pgm"),
+        ("first.g2o", "again.g2o"),
+        ("first.g2o.scans", "again.g2o.scans"),
+    ] {
+        assert_eq!(
+            std::fs::read(dir.path().join(a)).unwrap(),
+            std::fs::read(dir.path().join(b)).unwrap(),
+            "{a} vs {b}"
+        );
+    }
+    // The second half's poses continue where the first half ended (no jump back to the origin).
+    let traj = std::fs::read_to_string(dir.path().join("b/trajectory.txt")).unwrap();
+    assert!(max_step(&traj) < 0.5, "{traj}");
+    // Localisation without a saved graph is refused with the reason.
+    let (ok, _, err) = slam(&[
+        "--carmen",
+        &d("second.clf"),
+        "--localization",
+        "--out",
+        &d("c"),
+    ]);
+    assert!(!ok && err.contains("--load-graph"), "{err}");
+    // A graph without its scans is refused naming the missing file.
+    std::fs::remove_file(dir.path().join("first.g2o.scans")).unwrap();
+    let (ok, _, err) = slam(&[
+        "--carmen",
+        &d("second.clf"),
+        "--load-graph",
+        &d("first.g2o"),
+        "--out",
+        &d("c"),
+    ]);
+    assert!(!ok && err.contains("first.g2o.scans"), "{err}");
+}

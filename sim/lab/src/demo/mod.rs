@@ -18,6 +18,7 @@
 //!    recording, a plot of smoke level vs laser spread vs sonar usage, and
 //!    `comparison.json`.
 
+mod backends;
 mod compare;
 mod draw;
 mod live;
@@ -109,6 +110,10 @@ pub struct DemoArgs {
     /// fused map, scored side by side on the trial and its clean twin).
     #[arg(long)]
     pub no_vote: bool,
+    /// Run only the profile's `[slam] backend`, not also the other of `rbpf` and
+    /// `graph` over the same fused scans.
+    #[arg(long)]
+    pub no_backend_comparison: bool,
 }
 
 /// Where progress messages go: stderr with `--json` (stdout is for the JSON), else stdout.
@@ -173,6 +178,10 @@ pub(crate) struct Comparison {
     /// Share of laser beams the smoke changed, % over time (s since the first
     /// scan): each scan against the same scan of the smoke-free twin.
     pub laser_damage: Vec<(f64, f64)>,
+    /// The profile's SLAM back-end (the one `results` come from).
+    pub backend: smokenav_platform_config::SlamBackendKind,
+    /// The other back-ends over the same fused scans ([`backends`]).
+    pub other_backends: Vec<backends::BackendRun>,
 }
 
 /// The profile the drivers (and the offline runs) use for `scenario`.
@@ -222,6 +231,7 @@ fn fast_comparison(
     until: Until,
     dir: &Path,
     seeds: usize,
+    other_backends: bool,
     say: &Say,
 ) -> anyhow::Result<Comparison> {
     let rec_path = dir.join("recording.mcap");
@@ -250,6 +260,7 @@ fn fast_comparison(
         run.sim_s,
         dir,
         seeds,
+        other_backends,
         say,
     )
 }
@@ -264,6 +275,7 @@ fn compare_recording(
     sim_s: f64,
     dir: &Path,
     seeds: usize,
+    other_backends: bool,
     say: &Say,
 ) -> anyhow::Result<Comparison> {
     smokenav_platform_map::save_map_server(&truth_map, dir, "truth")?;
@@ -284,6 +296,22 @@ fn compare_recording(
     ));
     let results = compare::run_all(&log, profile, &truth, &truth_map, threads(), seeds)?;
     say.line(&format!("  done in {:.1} s", t.elapsed().as_secs_f64()));
+    let other_backends = if other_backends {
+        let names: Vec<&str> = backends::others(profile)
+            .iter()
+            .map(|b| b.as_str())
+            .collect();
+        let t = Instant::now();
+        say.line(&format!(
+            "  the same fused scans through SLAM back-end {} …",
+            names.join(", ")
+        ));
+        let runs = backends::run(&log, profile, &truth, &truth_map, threads(), seeds)?;
+        say.line(&format!("  done in {:.1} s", t.elapsed().as_secs_f64()));
+        runs
+    } else {
+        Vec::new()
+    };
     let c = Comparison {
         scenario: scenario.name.clone(),
         description: scenario.description.clone(),
@@ -304,6 +332,8 @@ fn compare_recording(
         ],
         seeds,
         laser_damage: Vec::new(),
+        backend: profile.slam.backend,
+        other_backends,
     };
     report::write_files(&c, dir)?;
     Ok(c)
@@ -414,7 +444,15 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
 
     let main = if args.fast {
         say.line("recording (straight from the simulator):");
-        fast_comparison(&scenario, &profile, until, &args.out, args.seeds, &say)?
+        fast_comparison(
+            &scenario,
+            &profile,
+            until,
+            &args.out,
+            args.seeds,
+            !args.no_backend_comparison,
+            &say,
+        )?
     } else {
         say.line("live run (simulator → emulated devices → driver, fusion and SLAM processes):");
         let live = live::run(&scenario, &profile, until, &args.out, &say)?;
@@ -435,6 +473,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             live.sim_s,
             &args.out,
             args.seeds,
+            !args.no_backend_comparison,
             &say,
         )?
     };
@@ -446,7 +485,13 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             std::fs::create_dir_all(&dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
             Some(fast_comparison(
-                &twin, &profile, until, &dir, args.seeds, &say,
+                &twin,
+                &profile,
+                until,
+                &dir,
+                args.seeds,
+                !args.no_backend_comparison,
+                &say,
             )?)
         }
         _ => None,

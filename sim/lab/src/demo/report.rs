@@ -11,7 +11,7 @@ fn method_label(m: &MethodResult) -> &'static str {
     m.method.as_str()
 }
 
-fn num(v: Option<f64>) -> Value {
+pub(super) fn num(v: Option<f64>) -> Value {
     match v {
         Some(x) if x.is_finite() => json!((x * 1e4).round() / 1e4),
         _ => Value::Null,
@@ -71,7 +71,13 @@ pub fn json_value(main: &Comparison, clean: Option<&Comparison>) -> Value {
         "duration_s": (main.sim_s * 10.0).round() / 10.0,
         "scans": main.scans,
         "methods": methods_json(main),
+        "slam_backend": main.backend.as_str(),
     });
+    if !main.other_backends.is_empty()
+        && let Some(obj) = v.as_object_mut()
+    {
+        obj.insert("backends".into(), super::backends::json_value(main, clean));
+    }
     if let (Some(c), Some(obj)) = (clean, v.as_object_mut()) {
         obj.insert(
             "clean_reference".into(),
@@ -204,6 +210,7 @@ pub fn table(main: &Comparison, clean: Option<&Comparison>) -> String {
         );
         table_rows(&mut s, c);
     }
+    s.push_str(&super::backends::table(main, clean));
     s
 }
 

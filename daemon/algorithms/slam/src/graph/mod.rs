@@ -12,4 +12,5 @@ pub mod pose_graph;
 pub mod slam;
 
 pub use pose_graph::{Edge, GraphError, OptimizeParams, OptimizeReport, PoseGraph, RobustKernel};
+pub use slam::saved::{self, ResumedGraph, SavedGraphError};
 pub use slam::{GraphParams, GraphSlam, GraphStats};

@@ -42,6 +42,8 @@ use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
 
+pub mod saved;
+
 /// Parameters of the graph back-end.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GraphParams {
