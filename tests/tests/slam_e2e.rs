@@ -425,3 +425,102 @@ fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> a
     assert!(status.success(), "{status:?}");
     Ok(())
 }
+
+/// Localisation in the SLAM process: a graph saved offline by `smokenav slam
+/// --save-graph` is loaded with `--load-graph G --localization`, the same scans
+/// replayed over the bus are tracked on it (close to the reference poses), and
+/// a profile that asks for localisation without a graph is refused at start
+/// instead of quietly mapping from scratch.
+#[test]
+fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one()
+-> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let log = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
+    let graph = dir.path().join("csail.g2o");
+    let out = std::process::Command::new(bin("smokenav"))
+        .args([
+            "slam",
+            "--carmen",
+            log.to_str().unwrap(),
+            "--backend",
+            "graph",
+        ])
+        .args(["--save-graph", graph.to_str().unwrap()])
+        .args(["--out", dir.path().join("offline").to_str().unwrap()])
+        .output()?;
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let cfg = profile(dir.path(), "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Laser;
+        c.slam.backend = smokenav_platform_config::SlamBackendKind::Graph;
+        c.slam.mode = smokenav_platform_config::SlamMode::Localization;
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
+    let map_dir = dir.path().join("maps");
+    let map_dir = map_dir.to_str().unwrap();
+
+    // No graph: refused, naming the way out.
+    let mut refused = Child::spawn(
+        &bin("smokenav-slam"),
+        &["--config", cfg.to_str().unwrap(), "--map-dir", map_dir],
+        &unique_instance("slam_loc_refused"),
+    )?;
+    let status = refused.wait_exit(Duration::from_secs(30))?;
+    assert!(!status.success(), "localisation without a graph started");
+    assert!(
+        refused.output().contains("give --load-graph"),
+        "{}",
+        refused.output()
+    );
+
+    let instance = unique_instance("slam_loc");
+    let mut slam = Child::spawn(
+        &bin("smokenav-slam"),
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--map-dir",
+            map_dir,
+            "--load-graph",
+            graph.to_str().unwrap(),
+        ],
+        &instance,
+    )?;
+    slam.wait_for_line("localizing on", Duration::from_secs(30))?;
+    let bus = open_bus(&instance);
+    let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
+    let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
+    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
+    let waiter = Waiter::new()?;
+    let _g = waiter.attach(&poses)?;
+    let records = log_records();
+    let base_ns = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    let mut estimate = Vec::new();
+    for rec in &records {
+        let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
+        publish(&mut odom, &mut scans, rec, stamp)?;
+        let (p, _) = pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
+        estimate.push(StampedPose::from_ns(
+            rec.ipc_timestamp_ns,
+            &Pose2::new(p.x, p.y, p.theta),
+        ));
+    }
+    slam.terminate(Duration::from_secs(10))?;
+    let reference = smokenav_algorithms_eval::load_trajectory(
+        &workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"),
+    )?;
+    let ate = evaluate_trajectories(&reference, &estimate, &TrajectoryOptions::same_stamp())?;
+    eprintln!("slam_e2e: localisation on the saved graph, ATE over 200 CSAIL scans: {ate:?}");
+    assert_eq!(ate.pairs, 30);
+    assert!(ate.ate_m.rmse < 0.15, "{ate:?}");
+    Ok(())
+}

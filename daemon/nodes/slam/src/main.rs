@@ -30,11 +30,12 @@
 
 use anyhow::Context;
 use clap::Parser;
+use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::vote::member::MemberFault;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
 use smokenav_platform_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
-use smokenav_platform_config::{SlamBackendKind, SlamInput};
+use smokenav_platform_config::{SlamBackendKind, SlamInput, SlamMode};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_runtime::{CommonArgs, Process};
 use smokenav_shared_types::HealthState;
@@ -67,6 +68,13 @@ struct Args {
     /// Number of particles, overriding `[slam] particles`.
     #[arg(long)]
     particles: Option<usize>,
+    /// A graph saved by `smokenav slam --save-graph G` (G and G.scans): keep
+    /// mapping from it, or with `--localization` only track the robot on its map.
+    #[arg(long, value_name = "G")]
+    load_graph: Option<PathBuf>,
+    /// Localise on `--load-graph`'s map without changing it (as `[slam] mode = "localization"`).
+    #[arg(long)]
+    localization: bool,
 }
 
 /// Longest wait on the bus, so signals and the map timer are served promptly.
@@ -189,7 +197,30 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     }
     if let Some(b) = args.backend {
         cfg.backend = b;
+    } else if args.load_graph.is_some() {
+        cfg.backend = SlamBackendKind::Graph;
     }
+    if args.localization {
+        cfg.mode = SlamMode::Localization;
+    }
+    // Checked before the bus is touched: a profile asking to localise must
+    // not quietly start a fresh map instead.
+    anyhow::ensure!(
+        args.load_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
+        "--load-graph needs the graph back-end, not backend {}",
+        cfg.backend.as_str()
+    );
+    anyhow::ensure!(
+        cfg.mode == SlamMode::Mapping || args.load_graph.is_some(),
+        "[slam] mode = \"localization\" tracks the robot on a saved map: give --load-graph G (saved with smokenav slam --save-graph)"
+    );
+    let resumed = match &args.load_graph {
+        Some(g) => Some(
+            saved::load(&cfg, GraphParams::default(), g)
+                .with_context(|| format!("cannot load the saved graph {}", g.display()))?,
+        ),
+        None => None,
+    };
     let input = args.input.unwrap_or(cfg.input);
     let m = &p.config.laser.mount;
     let mount = Pose2::new(m.x, m.y, m.yaw_rad());
@@ -243,6 +274,15 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         let vote = VoteSlam::new(&cfg, BackendOptions::default(), fault)
             .context("cannot start the vote's member threads")?;
         SlamPipeline::new(&cfg, Box::new(vote))
+    } else if let Some(run) = resumed {
+        SlamPipeline::new(
+            &cfg,
+            Box::new(ResumedGraph::new(
+                run,
+                cfg.mode == SlamMode::Localization,
+                false,
+            )),
+        )
     } else {
         SlamPipeline::from_config(&cfg, BackendOptions::default())
     }
@@ -269,10 +309,17 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let clock = MonotonicClock;
     let rate = p.health.add_rate("pose_hz", Some(10.0));
     // Only the particle filter has particles to speak of.
-    let backend = match cfg.backend {
+    let mut backend = match cfg.backend {
         SlamBackendKind::Rbpf => format!("rbpf with {} particles", cfg.particles),
         _ => pipeline.backend().name().to_string(),
     };
+    if let Some(g) = &args.load_graph {
+        let what = match cfg.mode {
+            SlamMode::Localization => "localizing on",
+            SlamMode::Mapping => "continuing",
+        };
+        backend = format!("{backend} {what} {}", g.display());
+    }
     p.ready(&format!(
         "{backend} on {} + {}, map every {:.1} s",
         scans.topic(),
