@@ -27,6 +27,7 @@
 //! coarse-to-fine grid on the same cost (deterministic, the comparison).
 
 use super::map::{FuzzyBeam, FuzzyGrid};
+use crate::scan::BeamKind;
 use smokenav_shared_types::Pose2;
 use smokenav_shared_types::Rng;
 
@@ -61,24 +62,23 @@ pub fn occupied_points(g: &FuzzyGrid, max: usize, out: &mut Vec<FuzzyPoint>) {
     }
 }
 
-/// The peaks of a local map in polar form, B at each reading itself (K
-/// times its lateral confidence), in the robot frame of `sensor`, thinned
-/// evenly to at most `max` points. Matched instead of the Cartesian cells
-/// these readings light, whose centres sit up to half a cell off the
-/// reading: that rounding biases the registration, and its error adds up
-/// from scan to scan.
+/// The peaks of a local map's laser readings in polar form, B at each
+/// reading itself (K), in the robot frame of `sensor`, thinned evenly to at
+/// most `max` points. Matched instead of the Cartesian cells these readings
+/// light, whose centres sit up to half a cell off the reading: that rounding
+/// biases the registration, and its error adds up from scan to scan.
+///
+/// Sonar arcs are painted but not matched: an arc is drawn round the sensor
+/// at its sector's nearest echo, wherever across the cone that echo came
+/// from, so it says little about where the robot is and most about where it
+/// was when the last arcs were painted. Matched, arcs hold the pose still
+/// while the robot drives on (the dense-smoke trial lost the robot so).
 pub fn reading_points(sensor: &Pose2, beams: &[FuzzyBeam], max: usize, out: &mut Vec<FuzzyPoint>) {
     out.clear();
-    let n = beams
-        .iter()
-        .filter(|b| b.hit && b.k * b.lateral > 0.0)
-        .count();
+    let matched = |b: &&FuzzyBeam| b.hit && b.kind == BeamKind::Laser && b.k * b.lateral > 0.0;
+    let n = beams.iter().filter(matched).count();
     let stride = n.div_ceil(max.max(1)).max(1);
-    for (k, b) in beams
-        .iter()
-        .filter(|b| b.hit && b.k * b.lateral > 0.0)
-        .enumerate()
-    {
+    for (k, b) in beams.iter().filter(matched).enumerate() {
         if k % stride == 0 {
             let (s, c) = (sensor.theta + b.angle).sin_cos();
             out.push(FuzzyPoint {
