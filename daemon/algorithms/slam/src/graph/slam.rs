@@ -81,8 +81,15 @@ pub struct GraphParams {
     /// new node's endpoints, placed at the match, fall on cells the target
     /// nodes observed (hit or passed through): a scan of the hall matched
     /// against aisle nodes overlaps them only partly, and its score then
-    /// comes from the few walls both happen to share.
+    /// comes from the few walls both happen to share. Off (0) by default
+    /// for now: at 0.75 it refused 65 of CSAIL's 639 closures and the ATE
+    /// went from 0.103 to 0.130 m; the threshold that keeps CSAIL and
+    /// passes `slam_loop_e2e` is not found yet.
     pub closure_min_overlap: f64,
+    /// Add the target map's covariance (where it is degenerate, e.g. nodes
+    /// that saw only two aisle walls) to a closure's. Off by default until
+    /// measured apart from the overlap check on CSAIL.
+    pub closure_map_covariance: bool,
     /// Try a closure at every n-th new node.
     pub closure_every: usize,
     /// σ of a node-to-node edge: translation floor (m) plus a share of the step (m/m).
@@ -116,7 +123,8 @@ impl Default for GraphParams {
             closure_max_chi2: 25.0,
             closure_rival_m: 0.5,
             closure_rival_ratio: 0.9,
-            closure_min_overlap: 0.75,
+            closure_min_overlap: 0.0,
+            closure_map_covariance: false,
             closure_every: 1,
             edge_sigma_t: (0.02, 0.05),
             edge_sigma_r: (0.005, 0.05),
@@ -515,7 +523,9 @@ impl GraphSlam {
             self.stats.closures_ambiguous += 1;
             return None;
         }
-        if self.overlap(k, lo, hi, &matched) < self.p.closure_min_overlap {
+        if self.p.closure_min_overlap > 0.0
+            && self.overlap(k, lo, hi, &matched) < self.p.closure_min_overlap
+        {
             self.stats.closures_low_overlap += 1;
             return None;
         }
@@ -559,8 +569,12 @@ impl GraphSlam {
         let (wt, wr) = (self.p.closure_window_m, self.p.closure_window_rad);
         let window = Matrix3::from_diagonal(&(Vector3::new(wt * wt, wt * wt, wr * wr) / 3.0));
         let sigma = self.p.closure_point_sigma_m;
-        constraint.covariance(sigma * sigma, &window, 1.0, &self.degeneracy)
-            + self.map_covariance(lo, hi, matched, constraint.normals, &window)
+        let scan = constraint.covariance(sigma * sigma, &window, 1.0, &self.degeneracy);
+        if self.p.closure_map_covariance {
+            scan + self.map_covariance(lo, hi, matched, constraint.normals, &window)
+        } else {
+            scan
+        }
     }
 
     /// The share (0–1) of node `k`'s endpoints, placed at `matched`, that
@@ -1234,12 +1248,16 @@ mod tests {
             (overlap, edge, slam.stats())
         };
         // The same place: all of the scan falls where the target nodes looked.
-        let (overlap, edge, stats) = verify(&FEATURES, GraphParams::default());
+        let on = GraphParams {
+            closure_min_overlap: 0.75,
+            ..GraphParams::default()
+        };
+        let (overlap, edge, stats) = verify(&FEATURES, on.clone());
         assert!(overlap > 0.95, "{overlap}");
         assert!(edge.is_some(), "{stats:?}");
         // Through the gap into the room: a good match on the corridor, but a
         // third of the scan is on walls the target map knows nothing of.
-        let (overlap, edge, stats) = verify(&ROOM, GraphParams::default());
+        let (overlap, edge, stats) = verify(&ROOM, on);
         assert!(overlap < 0.75, "{overlap}");
         assert!(edge.is_none());
         assert_eq!(stats.closures_low_overlap, 1, "{stats:?}");
@@ -1258,8 +1276,11 @@ mod tests {
     fn a_closure_against_nodes_that_saw_only_the_aisle_walls_is_wide_along_the_aisle() {
         let at = Pose2::new(3.0, 0.0, 0.0);
         let covariance = |target: &[(f64, f64, f64, f64)]| {
-            let (mut slam, _, last, k) =
-                target_and_candidate(target, &FEATURES, at, at, GraphParams::default());
+            let p = GraphParams {
+                closure_map_covariance: true,
+                ..GraphParams::default()
+            };
+            let (mut slam, _, last, k) = target_and_candidate(target, &FEATURES, at, at, p);
             slam.fill_world(0, last);
             slam.overlap(k, 0, last, &at);
             let scan_only = ScanConstraint::from_points(
