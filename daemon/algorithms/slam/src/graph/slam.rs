@@ -587,20 +587,18 @@ impl GraphSlam {
             min = (min.0.min(x), min.1.min(y));
             max = (max.0.max(x), max.1.max(y));
         };
-        for n in lo..=hi {
-            let x = poses[n];
-            let sensor = x.compose(&self.nodes[n].sensor);
+        for (x, node) in poses[lo..=hi].iter().zip(&self.nodes[lo..=hi]) {
+            let sensor = x.compose(&node.sensor);
             grow(sensor.x, sensor.y);
-            for b in &self.nodes[n].beams {
+            for b in &node.beams {
                 let e = x.compose(&Pose2::new(b.x, b.y, 0.0));
                 grow(e.x, e.y);
             }
         }
         self.observed.reset(OVERLAP_CELL_M, min, max);
-        for n in lo..=hi {
-            let x = poses[n];
-            let sensor = x.compose(&self.nodes[n].sensor);
-            for b in &self.nodes[n].beams {
+        for (x, node) in poses[lo..=hi].iter().zip(&self.nodes[lo..=hi]) {
+            let sensor = x.compose(&node.sensor);
+            for b in &node.beams {
                 let e = x.compose(&Pose2::new(b.x, b.y, 0.0));
                 self.observed.insert_ray((sensor.x, sensor.y), (e.x, e.y));
             }
