@@ -131,6 +131,12 @@ impl ScanConstraint {
             info += j * j.transpose();
             normals += 1;
         }
+        Self::from_information(info, normals)
+    }
+
+    /// From an information matrix already summed (e.g. over several scans'
+    /// points, rescaled), and the number of endpoints with a normal it counts.
+    pub fn from_information(info: Matrix3<f64>, normals: usize) -> Self {
         let eig = SymmetricEigen::new(info);
         // Ascending order.
         let mut order = [0usize, 1, 2];

@@ -655,13 +655,14 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         let s = g.stats();
         let _ = writeln!(
             report,
-            "graph              {} nodes, {} edges; loop closures: {} tried, {} accepted, {} below the score threshold, {} ambiguous, {} inconsistent; {} optimisations ({} failed)",
+            "graph              {} nodes, {} edges; loop closures: {} tried, {} accepted, {} below the score threshold, {} ambiguous, {} overlapping too little, {} inconsistent; {} optimisations ({} failed)",
             s.nodes,
             g.graph().edges().len(),
             s.closures_tried,
             s.closures_accepted,
             s.closures_low_score,
             s.closures_ambiguous,
+            s.closures_low_overlap,
             s.closures_inconsistent,
             s.optimizations,
             s.optimization_failures
