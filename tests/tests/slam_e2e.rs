@@ -94,6 +94,34 @@ fn pose_for(
     }
 }
 
+/// Replays the first `n` records of the CSAIL prefix onto `bus` in lock step
+/// (each scan's pose back before the next scan goes out) and returns the
+/// poses at the log's own stamps.
+fn replay_in_lock_step(
+    bus: &smokenav_platform_bus::Bus,
+    n: usize,
+) -> anyhow::Result<Vec<StampedPose>> {
+    let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
+    let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
+    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
+    let waiter = Waiter::new()?;
+    let _g = waiter.attach(&poses)?;
+    let records = log_records();
+    let base_ns = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    let mut estimate = Vec::new();
+    for rec in records.iter().take(n) {
+        let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
+        publish(&mut odom, &mut scans, rec, stamp)?;
+        let (p, _) = pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
+        estimate.push(StampedPose::from_ns(
+            rec.ipc_timestamp_ns,
+            &Pose2::new(p.x, p.y, p.theta),
+        ));
+    }
+    Ok(estimate)
+}
+
 /// The cells of the newest map on `topic`, waiting up to 10 s for one.
 fn newest_map(
     bus: &smokenav_platform_bus::Bus,
@@ -368,19 +396,7 @@ fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> a
     )?;
     slam.wait_for_line("fuzzy on laser/scan", Duration::from_secs(30))?;
     let bus = open_bus(&instance);
-    let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
-    let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
-    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
-    let waiter = Waiter::new()?;
-    let _g = waiter.attach(&poses)?;
-    let records = log_records();
-    let base_ns = MonotonicClock.now_ns();
-    let ipc0 = records[0].ipc_timestamp_ns;
-    for rec in records.iter().take(40) {
-        let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
-        publish(&mut odom, &mut scans, rec, stamp)?;
-        pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
-    }
+    replay_in_lock_step(&bus, 40)?;
     let live_fuzzy = newest_map(&bus, topics::SLAM_MAP_FUZZY)?;
     let live_nav = newest_map(&bus, topics::SLAM_MAP)?;
     assert_eq!(live_fuzzy.len(), live_nav.len());
@@ -496,24 +512,7 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     )?;
     slam.wait_for_line("localizing on", Duration::from_secs(30))?;
     let bus = open_bus(&instance);
-    let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
-    let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
-    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
-    let waiter = Waiter::new()?;
-    let _g = waiter.attach(&poses)?;
-    let records = log_records();
-    let base_ns = MonotonicClock.now_ns();
-    let ipc0 = records[0].ipc_timestamp_ns;
-    let mut estimate = Vec::new();
-    for rec in &records {
-        let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
-        publish(&mut odom, &mut scans, rec, stamp)?;
-        let (p, _) = pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
-        estimate.push(StampedPose::from_ns(
-            rec.ipc_timestamp_ns,
-            &Pose2::new(p.x, p.y, p.theta),
-        ));
-    }
+    let estimate = replay_in_lock_step(&bus, usize::MAX)?;
     slam.terminate(Duration::from_secs(10))?;
     let reference = smokenav_algorithms_eval::load_trajectory(
         &workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"),
