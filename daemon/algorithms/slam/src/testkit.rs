@@ -44,6 +44,16 @@ pub fn cast_in(walls: &[(f64, f64, f64, f64)], x: f64, y: f64, a: f64) -> Option
 }
 
 pub fn scan_at(truth: &Pose2, stamp_ns: u64) -> RangeScan {
+    scan_in(&WALLS, f64::INFINITY, truth, stamp_ns)
+}
+
+/// A 180°, 0.5° laser scan at `truth` of `walls`, no return beyond `max_range`.
+pub fn scan_in(
+    walls: &[(f64, f64, f64, f64)],
+    max_range: f64,
+    truth: &Pose2,
+    stamp_ns: u64,
+) -> RangeScan {
     let mut s = RangeScan {
         stamp_ns,
         laser_noise_factor: 1.0,
@@ -53,7 +63,9 @@ pub fn scan_at(truth: &Pose2, stamp_ns: u64) -> RangeScan {
         let a = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 360.0;
         s.beams.push(Beam {
             angle: a as f32,
-            range: cast(truth.x, truth.y, truth.theta + a).map(|r| r as f32),
+            range: cast_in(walls, truth.x, truth.y, truth.theta + a)
+                .filter(|&r| r < max_range)
+                .map(|r| r as f32),
             kind: BeamKind::Laser,
         });
     }

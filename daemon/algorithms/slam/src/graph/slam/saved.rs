@@ -675,8 +675,7 @@ impl SlamBackend for ResumedGraph {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scan::{Beam, BeamKind};
-    use crate::testkit::cast_in;
+    use crate::testkit::scan_in;
 
     /// A 12 m × 7 m hall round a 6 m × 2 m block, with pillars and alcoves
     /// so every leg of the loop sees more than two parallel walls.
@@ -702,22 +701,7 @@ mod tests {
     };
 
     fn scan_at(truth: &Pose2, stamp_ns: u64) -> RangeScan {
-        let mut s = RangeScan {
-            stamp_ns,
-            laser_noise_factor: 1.0,
-            ..Default::default()
-        };
-        for i in 0..361 {
-            let a = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 360.0;
-            s.beams.push(Beam {
-                angle: a as f32,
-                range: cast_in(&HALL, truth.x, truth.y, truth.theta + a)
-                    .filter(|&r| r < 5.6)
-                    .map(|r| r as f32),
-                kind: BeamKind::Laser,
-            });
-        }
-        s
+        scan_in(&HALL, 5.6, truth, stamp_ns)
     }
 
     /// Two laps round the block (0.2 m a scan, corners in five steps) with
