@@ -33,6 +33,7 @@ fn main() -> anyhow::Result<()> {
         &cfg,
         BackendOptions {
             keep_trajectory: true,
+            online: false,
         },
     );
     let mut n = 0;

@@ -26,6 +26,7 @@ fn run(backend: SlamBackendKind, particles: usize) -> (Vec<StampedPose>, Vec<(u6
         &profile.slam,
         BackendOptions {
             keep_trajectory: true,
+            online: false,
         },
     )
     .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()));

@@ -8,7 +8,10 @@
 //! Environment: `CSAIL_DIR` (the folder of the log; required), `CSAIL_DRIFT=SEED` (run on the
 //! corrected log's scans with seeded drifted odometry instead, see `drift`), `BACKENDS` (`rbpf,graph` by default; `fuzzy` too), `CSAIL_LOG` / `CSAIL_REFERENCE`
 //! (other log and reference files in that folder), `SLAM_TOML` (`[slam]` keys), `CSAIL_OUT` (folder for
-//! each back-end's map PNG and trajectory).
+//! each back-end's map PNG and trajectory), `GRAPH_ONLINE=1` (the graph's loop closures on their
+//! own thread, as the SLAM process runs them: the per-scan figures are then the scan path's alone,
+//! the total adds the worker's CPU), `CSAIL_RATE=R` (feed the scans at R × the log's own pace
+//! instead of as fast as they are processed: online, a faster feed leaves the worker fewer nodes).
 
 use smokenav_algorithms_eval::{
     StampedPose as EvalPose, TrajectoryOptions, evaluate_trajectories, format_trajectory,
@@ -24,10 +27,19 @@ use smokenav_platform_config::SlamSection;
 use std::io::BufReader;
 use std::path::PathBuf;
 
-fn thread_cpu_ns() -> u64 {
-    nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID)
+fn cpu_ns(clock: nix::time::ClockId) -> u64 {
+    nix::time::clock_gettime(clock)
         .map(|t| t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64)
         .unwrap_or(0)
+}
+
+fn thread_cpu_ns() -> u64 {
+    cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID)
+}
+
+/// The whole process's CPU time (online, the closure worker's too).
+fn process_cpu_ns() -> u64 {
+    cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID)
 }
 
 /// `GRAPH_PARAMS="closure_search_m=6;closure_min_score=0.5"` overrides graph parameters.
@@ -129,10 +141,18 @@ fn main() {
         }
         Err(_) => SlamSection::default(),
     };
+    let online = std::env::var("GRAPH_ONLINE").is_ok_and(|v| v == "1");
+    let rate: Option<f64> = std::env::var("CSAIL_RATE")
+        .ok()
+        .map(|v| v.parse().expect("CSAIL_RATE is a number"));
     for name in which.split(',') {
         let backend: Box<dyn SlamBackend> = match name {
             "rbpf" => Box::new(Rbpf::new(RbpfParams::from_config(&cfg), true)),
-            "graph" => Box::new(GraphSlam::new(&cfg, graph_params())),
+            "graph" => {
+                let mut g = GraphSlam::new(&cfg, graph_params());
+                g.set_online(online);
+                Box::new(g)
+            }
             "fuzzy" => Box::new(FuzzySlam::new(&cfg, true)),
             other => panic!("unknown back-end {other}"),
         };
@@ -140,13 +160,24 @@ fn main() {
         let mut scans = LogScans::new(BufReader::new(std::fs::File::open(dir.join(&log)).unwrap()));
         let mut times = Vec::new();
         let start = thread_cpu_ns();
+        let process_start = process_cpu_ns();
+        let mut paced: Option<(std::time::Instant, u64)> = None;
         while let Some((scan, odom)) = scans.next_scan() {
+            if let Some(r) = rate {
+                let (t0, s0) = *paced.get_or_insert((std::time::Instant::now(), scan.stamp_ns));
+                let due = t0
+                    + std::time::Duration::from_secs_f64(
+                        scan.stamp_ns.saturating_sub(s0) as f64 / 1e9 / r,
+                    );
+                std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
+            }
             let t0 = thread_cpu_ns();
             slam.process(scan, &odom);
             times.push(thread_cpu_ns() - t0);
         }
         let traj = slam.trajectory();
         let total = (thread_cpu_ns() - start) as f64 / 1e9;
+        let process_total = (process_cpu_ns() - process_start) as f64 / 1e9;
         let map = slam.map();
         times.sort_unstable();
         let pct = |q: f64| {
@@ -169,6 +200,12 @@ fn main() {
         );
         if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
             println!("backends {log} graph: {:?}", g.stats());
+            if g.is_online() {
+                let (max, p99) = g.closure_latency_ms();
+                println!(
+                    "backends {log} graph online: process total {process_total:.2} CPU-s (scan path and closure worker), closure job to applied p99 {p99:.0} ms max {max:.0} ms"
+                );
+            }
         }
         if let Some(f) = slam.backend().as_any().downcast_ref::<FuzzySlam>() {
             println!("backends {log} fuzzy: {:?}", f.stats());

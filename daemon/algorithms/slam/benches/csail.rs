@@ -80,6 +80,7 @@ fn main() {
         &cfg,
         BackendOptions {
             keep_trajectory: true,
+            online: false,
         },
     );
     if let Some(t) = std::env::var("CSAIL_THETA0")

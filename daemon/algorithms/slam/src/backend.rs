@@ -108,6 +108,12 @@ pub struct BackendOptions {
     /// Keep the whole trajectory for [`SlamBackend::trajectory`] (offline
     /// runs; memory grows with the number of scans).
     pub keep_trajectory: bool,
+    /// Online (the SLAM process): work that may take long runs beside the
+    /// scan path, which never waits for it — the graph's loop-closure search
+    /// and optimisation run on a thread of their own, and their correction
+    /// is applied at a later scan. Off (offline runs, benches, tests): the
+    /// same work runs inline on the scan that calls for it, deterministic.
+    pub online: bool,
 }
 
 /// The back-end `[slam] backend` names, with its parameters from the section.
@@ -117,7 +123,11 @@ pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Box<dyn SlamBacke
             RbpfParams::from_config(cfg),
             opts.keep_trajectory,
         )),
-        SlamBackendKind::Graph => Box::new(GraphSlam::new(cfg, GraphParams::default())),
+        SlamBackendKind::Graph => {
+            let mut g = GraphSlam::new(cfg, GraphParams::default());
+            g.set_online(opts.online);
+            Box::new(g)
+        }
         SlamBackendKind::Fuzzy => Box::new(FuzzySlam::new(cfg, opts.keep_trajectory)),
         // A thread that cannot be spawned is the machine's failure, not the
         // input's (as `std::thread::spawn` itself treats it).

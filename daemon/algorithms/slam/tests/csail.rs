@@ -38,6 +38,7 @@ fn run(log: &Path, cfg: &SlamSection) -> Run {
         cfg,
         BackendOptions {
             keep_trajectory: true,
+            online: false,
         },
     );
     let mut online = Vec::new();

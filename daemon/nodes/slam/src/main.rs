@@ -274,7 +274,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         let vote = VoteSlam::new(&cfg, BackendOptions::default(), fault)
             .context("cannot start the vote's member threads")?;
         SlamPipeline::new(&cfg, Box::new(vote))
-    } else if let Some(run) = resumed {
+    } else if let Some(mut run) = resumed {
+        // Localisation adds no node: no closure to run beside it.
+        run.slam.set_online(cfg.mode == SlamMode::Mapping);
         SlamPipeline::new(
             &cfg,
             Box::new(ResumedGraph::new(
@@ -284,7 +286,14 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             )),
         )
     } else {
-        SlamPipeline::from_config(&cfg, BackendOptions::default())
+        // The scan path never waits for the graph's loop closures.
+        SlamPipeline::from_config(
+            &cfg,
+            BackendOptions {
+                online: true,
+                ..BackendOptions::default()
+            },
+        )
     }
     .with_sensor_pose(mount);
     let mut member_maps = Vec::new();

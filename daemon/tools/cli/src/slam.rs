@@ -508,6 +508,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             &cfg,
             BackendOptions {
                 keep_trajectory: true,
+                online: false,
             },
         ),
     };

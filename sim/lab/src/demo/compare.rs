@@ -230,6 +230,7 @@ pub(crate) fn replay_slam(
         &profile.slam,
         BackendOptions {
             keep_trajectory: true,
+            online: false,
         },
     )
     .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()));

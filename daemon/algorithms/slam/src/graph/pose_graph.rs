@@ -299,6 +299,18 @@ impl PoseGraph {
         }
     }
 
+    /// A copy of the vertices and edges without the cached factorisation
+    /// (a copy handed to another thread adds edges, which invalidates it).
+    pub fn snapshot(&self) -> PoseGraph {
+        PoseGraph {
+            poses: self.poses.clone(),
+            ids: self.ids.clone(),
+            fixed: self.fixed.clone(),
+            edges: self.edges.clone(),
+            structure: None,
+        }
+    }
+
     pub fn ids(&self) -> &[u64] {
         &self.ids
     }

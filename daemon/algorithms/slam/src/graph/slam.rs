@@ -41,8 +41,12 @@ use nalgebra::{Matrix3, Vector3};
 use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
+use std::sync::Arc;
+use std::time::Duration;
+use worker::{ClosureWorker, Job, Outcome};
 
 pub mod saved;
+mod worker;
 
 /// Parameters of the graph back-end.
 #[derive(Debug, Clone, PartialEq)]
@@ -161,6 +165,28 @@ pub struct GraphStats {
     pub optimizations: u64,
     /// Optimisations that failed (the previous poses were kept).
     pub optimization_failures: u64,
+    /// Online: closure searches handed to the worker, and their outcomes applied.
+    pub closure_jobs: u64,
+    pub closure_outcomes_applied: u64,
+    /// Online: nodes whose closure search never started (a newer node took
+    /// their place while the worker was busy).
+    pub closure_nodes_skipped: u64,
+    /// Online: nodes added while a job ran, moved by its correction.
+    pub closure_nodes_carried: u64,
+}
+
+impl GraphStats {
+    /// Adds the closure search's counters of `o` (a worker's job).
+    fn add_search(&mut self, o: &GraphStats) {
+        self.closures_tried += o.closures_tried;
+        self.closures_low_score += o.closures_low_score;
+        self.closures_inconsistent += o.closures_inconsistent;
+        self.closures_ambiguous += o.closures_ambiguous;
+        self.closures_low_overlap += o.closures_low_overlap;
+        self.closures_accepted += o.closures_accepted;
+        self.optimizations += o.optimizations;
+        self.optimization_failures += o.optimization_failures;
+    }
 }
 
 struct Node {
@@ -172,6 +198,8 @@ struct Node {
 }
 
 pub struct GraphSlam {
+    /// What it was built from (the closure worker's own back-end is built the same).
+    cfg: SlamSection,
     p: GraphParams,
     mp: MatchParams,
     model: LogOddsModel,
@@ -182,7 +210,8 @@ pub struct GraphSlam {
     closer: FrontEnd,
     prepared: PreparedScan,
     graph: PoseGraph,
-    nodes: Vec<Node>,
+    /// Shared with the closure worker's snapshots (a node never changes once made).
+    nodes: Vec<Arc<Node>>,
     /// Front-end pose of the last node.
     last_node_tracked: Pose2,
     /// Every scan: stamp, node and offset from it.
@@ -211,6 +240,10 @@ pub struct GraphSlam {
     observed: CellSet,
     near_scan: CellSet,
     map_points: Vec<(f64, f64)>,
+    /// Online: the thread the closure search and optimisation run on (inline when `None`).
+    worker: Option<ClosureWorker>,
+    /// Online: the newest node waiting for the worker.
+    pending_closure: Option<usize>,
 }
 
 /// Covariance of `a ⊕ b` from those of `a` (`ca`) and of `b` in `a`'s frame (`cb`).
@@ -337,6 +370,7 @@ impl GraphSlam {
             (cfg.frontend_window_m, cfg.frontend_window_rad)
         };
         Self {
+            cfg: cfg.clone(),
             p,
             mp: MatchParams::from_config(cfg),
             model: LogOddsModel::new(cfg.hit_logodds, cfg.miss_logodds, cfg.max_logodds),
@@ -367,7 +401,127 @@ impl GraphSlam {
             observed: CellSet::default(),
             near_scan: CellSet::default(),
             map_points: Vec::new(),
+            worker: None,
+            pending_closure: None,
         }
+    }
+
+    /// Runs the loop-closure search and optimisation of each new node on a
+    /// thread of its own (the SLAM process), or inline (`false`: offline
+    /// runs, deterministic). If the thread cannot be started it stays inline.
+    pub fn set_online(&mut self, online: bool) {
+        self.set_online_gated(online, None);
+    }
+
+    fn set_online_gated(&mut self, online: bool, gate: Option<std::sync::mpsc::Receiver<()>>) {
+        if !online {
+            self.worker = None;
+            self.pending_closure = None;
+            return;
+        }
+        if self.worker.is_some() {
+            return;
+        }
+        // The same settings as this back-end, its own scratch and matcher.
+        let search = GraphSlam::new(&self.cfg, self.p.clone());
+        match ClosureWorker::start(search, gate) {
+            Ok(w) => self.worker = Some(w),
+            Err(e) => tracing::warn!("loop closures stay inline: cannot start their thread: {e}"),
+        }
+    }
+
+    pub fn is_online(&self) -> bool {
+        self.worker.is_some()
+    }
+
+    /// Online: the time from handing a closure job to the worker to applying
+    /// its outcome, ms: the largest and the p99 of the last jobs.
+    pub fn closure_latency_ms(&self) -> (f64, f64) {
+        self.worker
+            .as_ref()
+            .map_or((0.0, 0.0), ClosureWorker::latency_ms)
+    }
+
+    /// Online: waits for the job in flight and any node waiting for the
+    /// worker, and applies their outcomes (the end of a run, tests).
+    pub fn finish_closures(&mut self) {
+        loop {
+            self.apply_closure_outcome(Some(Duration::from_secs(600)));
+            let idle = self.worker.as_ref().is_none_or(ClosureWorker::idle);
+            if idle && !self.start_pending_closure() {
+                break;
+            }
+        }
+    }
+
+    /// Online: applies the outcome of the job in flight if it is done
+    /// (waiting up to `wait`): adds its closure edges, sets the optimised
+    /// poses of the snapshot's nodes 0..=m and carries every node added
+    /// since by the same correction (new_m ⊕ old_m⁻¹ ⊕ old_i).
+    fn apply_closure_outcome(&mut self, wait: Option<Duration>) {
+        let Some(w) = &mut self.worker else { return };
+        let outcome = match w.finished(wait) {
+            Ok(Some(o)) => o,
+            Ok(None) => return,
+            Err(()) => {
+                tracing::error!(
+                    "the loop-closure thread died: loop closures run inline from now on"
+                );
+                self.worker = None;
+                return;
+            }
+        };
+        self.apply_outcome(outcome);
+    }
+
+    fn apply_outcome(&mut self, outcome: Outcome) {
+        self.stats.add_search(&outcome.stats);
+        self.stats.closure_outcomes_applied += 1;
+        let Some(poses) = outcome.poses else { return };
+        let Some(m) = poses.len().checked_sub(1).filter(|&m| m < self.graph.len()) else {
+            return;
+        };
+        for e in outcome.edges {
+            self.graph.add_edge(e);
+        }
+        let (old_m, new_m) = (self.graph.poses()[m], poses[m]);
+        for (i, p) in poses.into_iter().enumerate() {
+            self.graph.set_pose(i, p);
+        }
+        for i in m + 1..self.graph.len() {
+            let carried = new_m.compose(&old_m.between(&self.graph.poses()[i]));
+            self.graph.set_pose(i, carried);
+            self.stats.closure_nodes_carried += 1;
+        }
+        self.revision += 1;
+    }
+
+    /// Online: hands the waiting node to the worker if it is idle; true if a job started.
+    fn start_pending_closure(&mut self) -> bool {
+        let Some(w) = &mut self.worker else {
+            return false;
+        };
+        if !w.idle() {
+            return false;
+        }
+        let Some(node) = self.pending_closure.take() else {
+            return false;
+        };
+        let job = Job {
+            node,
+            graph: self.graph.snapshot(),
+            nodes: self.nodes.clone(),
+        };
+        if !w.submit(job) {
+            tracing::error!(
+                "the loop-closure thread is gone: loop closures run inline from now on"
+            );
+            self.worker = None;
+            self.close_loops(node);
+            return false;
+        }
+        self.stats.closure_jobs += 1;
+        true
     }
 
     pub fn stats(&self) -> GraphStats {
@@ -386,11 +540,11 @@ impl GraphSlam {
             .filter(|p| p.from_laser)
             .map(|p| (p.hx as f32, p.hy as f32))
             .collect();
-        self.nodes.push(Node {
+        self.nodes.push(Arc::new(Node {
             points,
             beams: self.prepared.beams.clone(),
             sensor: self.prepared.sensor,
-        });
+        }));
         self.stats.nodes += 1;
         self.revision += 1;
         let id = self.graph.len() as u64;
@@ -692,6 +846,8 @@ impl SlamBackend for GraphSlam {
     }
 
     fn predict(&mut self, stamp_ns: u64, odom: &Pose2) -> SlamUpdate {
+        self.apply_closure_outcome(None);
+        self.start_pending_closure();
         let (Some(last_odom), Some(&(_, node, _))) = (self.last_odom, self.scans.last()) else {
             return self.update(stamp_ns, self.initial, false);
         };
@@ -755,6 +911,11 @@ impl SlamBackend for GraphSlam {
             "graph_optimization_failures",
             s.optimization_failures as f64,
         );
+        // Online only (a health report holds 24 metrics: the p99 is in the stats of benches).
+        if self.worker.is_some() {
+            emit("loop_closure_nodes_skipped", s.closure_nodes_skipped as f64);
+            emit("loop_closure_latency_max_ms", self.closure_latency_ms().0);
+        }
     }
 
     fn as_any(&self) -> &dyn std::any::Any {
@@ -763,6 +924,9 @@ impl SlamBackend for GraphSlam {
 
     fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
         self.stats.scans += 1;
+        // A finished closure moves the nodes before this scan is placed on them.
+        self.apply_closure_outcome(None);
+        self.start_pending_closure();
         let stamp_ns = scan.stamp_ns;
         self.prepared.prepare(scan, &self.mp);
         let odom = if odom.is_finite() {
@@ -838,7 +1002,14 @@ impl SlamBackend for GraphSlam {
         self.last_node_tracked = tracked;
         self.scans.push((stamp_ns, k, Pose2::default()));
         if k.is_multiple_of(self.p.closure_every.max(1)) {
-            self.close_loops(k);
+            if self.worker.is_some() {
+                if self.pending_closure.replace(k).is_some() {
+                    self.stats.closure_nodes_skipped += 1;
+                }
+                self.start_pending_closure();
+            } else {
+                self.close_loops(k);
+            }
         }
         self.update(stamp_ns, self.graph.poses()[k], true)
     }
@@ -950,7 +1121,24 @@ mod tests {
     /// [`drive`] over the given legs, blind on the legs in `blind`; the
     /// worst error is that of the last leg.
     fn drive_legs(p: GraphParams, legs: &[f64], blind: &[usize]) -> (GraphSlam, f64) {
-        let mut slam = GraphSlam::new(&SlamSection::default(), p);
+        let (slam, worst, _) = drive_legs_with(
+            GraphSlam::new(&SlamSection::default(), p),
+            legs,
+            blind,
+            &mut |_| {},
+        );
+        (slam, worst)
+    }
+
+    /// [`drive_legs`] with a given back-end, calling `after_scan` after each
+    /// scan; also returns the truth of every scan (in the frame of the first).
+    fn drive_legs_with(
+        mut slam: GraphSlam,
+        legs: &[f64],
+        blind: &[usize],
+        after_scan: &mut dyn FnMut(&GraphSlam),
+    ) -> (GraphSlam, f64, Vec<Pose2>) {
+        let mut truths = Vec::new();
         let start = Pose2::new(-5.0, -3.0, 0.0);
         let mut truth = start;
         let mut odom = Pose2::new(3.0, -1.0, 0.4);
@@ -966,6 +1154,8 @@ mod tests {
                     scan.beams.iter_mut().for_each(|b| b.range = None);
                 }
                 let u = slam.process(&scan, &odom);
+                after_scan(&slam);
+                truths.push(start.between(&truth));
                 if leg + 1 == legs.len() && step.x > 0.0 {
                     let t = start.between(&truth);
                     worst = worst.max((u.pose.x - t.x).hypot(u.pose.y - t.y));
@@ -975,7 +1165,7 @@ mod tests {
                 k += 1;
             }
         }
-        (slam, worst)
+        (slam, worst, truths)
     }
 
     /// Node edges of a straight drive in `walls` (0.1 m per scan, range
@@ -1089,6 +1279,111 @@ mod tests {
         // The trajectory has a pose per scan and the map is finite.
         assert_eq!(slam.trajectory().len() as u64, stats.scans);
         assert!(slam.map().is_some());
+    }
+
+    /// The lap of [`drive`] with the closure search on its own thread, each
+    /// job's outcome held back until three scans after the job started: the
+    /// closure is found as inline, and the nodes the scan path added while
+    /// the job ran are moved with the correction, not left at the drifted end.
+    #[test]
+    fn the_threaded_closure_search_repairs_the_lap_and_carries_the_nodes_added_meanwhile() {
+        let p = GraphParams {
+            closure_every: 2,
+            ..GraphParams::default()
+        };
+        let (gate, held) = std::sync::mpsc::channel();
+        let mut slam = GraphSlam::new(&SlamSection::default(), p);
+        slam.set_online_gated(true, Some(held));
+        assert!(slam.is_online());
+        let (mut scan, mut released) = (0usize, 0usize);
+        let mut started_at: Vec<usize> = Vec::new();
+        let (mut slam, _, truths) =
+            drive_legs_with(slam, &[10.0, 6.0, 10.0, 6.0, 8.0], &[1, 2, 3], &mut |s| {
+                scan += 1;
+                while (started_at.len() as u64) < s.stats().closure_jobs {
+                    started_at.push(scan);
+                }
+                while released < started_at.len() && started_at[released] + 3 <= scan {
+                    gate.send(()).unwrap();
+                    released += 1;
+                }
+            });
+        // From here on the worker does not wait for the gate.
+        drop(gate);
+        slam.finish_closures();
+        let stats = slam.stats();
+        assert!(stats.closure_jobs >= 1, "{stats:?}");
+        assert_eq!(stats.closure_outcomes_applied, stats.closure_jobs);
+        assert!(stats.closures_accepted >= 1, "{stats:?}");
+        assert!(stats.closure_nodes_carried >= 1, "{stats:?}");
+        // The last leg, where the robot sees the start again (the trajectory
+        // after the last correction): as close to the truth as inline.
+        let traj = slam.trajectory();
+        assert_eq!(traj.len(), truths.len());
+        let last_leg = (8.0 / 0.25) as usize + 5;
+        let worst = traj[traj.len() - last_leg..traj.len() - 5]
+            .iter()
+            .zip(&truths[truths.len() - last_leg..])
+            .map(|(e, t)| (e.pose.x - t.x).hypot(e.pose.y - t.y))
+            .fold(0.0f64, f64::max);
+        eprintln!("last leg after the threaded closures: {worst:.3} m; {stats:?}");
+        assert!(worst < 0.2, "with threaded closures: {worst} m");
+    }
+
+    /// An outcome for nodes 0..=m applied after the scan path added nodes
+    /// m+1..: those keep their pose relative to node m.
+    #[test]
+    fn an_outcome_moves_the_nodes_added_after_its_snapshot_with_node_m() {
+        let mut slam = GraphSlam::new(&SlamSection::default(), GraphParams::default());
+        for n in 0..8 {
+            slam.prepared
+                .prepare(&scan_at(&Pose2::new(0.3 * n as f64, 0.0, 0.0), 0), &slam.mp);
+            slam.add_node(Pose2::new(0.3 * n as f64, 0.05 * n as f64, 0.01 * n as f64));
+        }
+        let before = slam.graph.poses().to_vec();
+        let revision = slam.revision;
+        // The worker's snapshot had nodes 0..=4; its optimisation moved node 4 and turned it.
+        let m = 4;
+        let poses: Vec<Pose2> = before[..=m]
+            .iter()
+            .map(|p| Pose2::new(p.x - 0.2, p.y + 0.1, p.theta + 0.05))
+            .collect();
+        let edge = Edge {
+            from: 0,
+            to: m,
+            measurement: poses[0].between(&poses[m]),
+            information: diagonal(0.1, 0.04),
+            robust: true,
+        };
+        let edges = slam.graph.edges().len();
+        slam.apply_outcome(Outcome {
+            edges: vec![edge],
+            poses: Some(poses.clone()),
+            stats: GraphStats {
+                closures_accepted: 1,
+                ..GraphStats::default()
+            },
+        });
+        let after = slam.graph.poses();
+        assert_eq!(&after[..=m], &poses[..]);
+        for i in m + 1..after.len() {
+            let (was, is) = (before[m].between(&before[i]), after[m].between(&after[i]));
+            assert!(
+                (was.x - is.x).abs() < 1e-9
+                    && (was.y - is.y).abs() < 1e-9
+                    && (was.theta - is.theta).abs() < 1e-9,
+                "node {i}: {was:?} from node {m} before, {is:?} after"
+            );
+            assert!(
+                (after[i].x - before[i].x).abs() > 0.1,
+                "node {i} was not moved"
+            );
+        }
+        assert_eq!(slam.graph.edges().len(), edges + 1);
+        assert!(slam.revision > revision);
+        let stats = slam.stats();
+        assert_eq!(stats.closures_accepted, 1);
+        assert_eq!(stats.closure_nodes_carried, 3);
     }
 
     /// A corridor between racks whose uprights repeat every 1.2 m, driven

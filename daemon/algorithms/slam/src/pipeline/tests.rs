@@ -8,7 +8,13 @@ use crate::testkit::scan_at;
 use smokenav_shared_types::{BeamReading, Header, SectionSource};
 
 fn pipeline(c: &SlamSection, keep_trajectory: bool) -> SlamPipeline {
-    SlamPipeline::from_config(c, BackendOptions { keep_trajectory })
+    SlamPipeline::from_config(
+        c,
+        BackendOptions {
+            keep_trajectory,
+            online: false,
+        },
+    )
 }
 
 fn rbpf(p: &SlamPipeline) -> &Rbpf {

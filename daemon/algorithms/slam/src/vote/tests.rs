@@ -53,6 +53,7 @@ fn three_members_vote_in_lockstep_and_align_to_the_reference() {
         &cfg(&[K::Rbpf, K::Graph, K::Fuzzy], true),
         BackendOptions {
             keep_trajectory: true,
+            online: false,
         },
         None,
     )

@@ -48,6 +48,7 @@ use smokenav_shared_types::Pose2;
 use std::fmt::Write as _;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Version of the `.scans` format this code writes and reads.
 pub const SCANS_VERSION: u32 = 1;
@@ -378,7 +379,7 @@ pub fn load(
     }
     let mut slam = GraphSlam::new(cfg, params);
     slam.stats.nodes = saved.nodes.len() as u64;
-    slam.nodes = saved.nodes;
+    slam.nodes = saved.nodes.into_iter().map(Arc::new).collect();
     slam.graph = graph;
     slam.revision = 1;
     // Where the run ended, also for a save of the graph before any new scan.
