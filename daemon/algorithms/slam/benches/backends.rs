@@ -64,6 +64,8 @@ fn graph_params() -> GraphParams {
             "closure_min_score" => p.closure_min_score = v,
             "closure_max_chi2" => p.closure_max_chi2 = v,
             "closure_every" => p.closure_every = v as usize,
+            "closure_min_overlap" => p.closure_min_overlap = v,
+            "closure_map_covariance" => p.closure_map_covariance = v != 0.0,
             "edge_sigma_t0" => p.edge_sigma_t.0 = v,
             "edge_sigma_t1" => p.edge_sigma_t.1 = v,
             "edge_sigma_r0" => p.edge_sigma_r.0 = v,
