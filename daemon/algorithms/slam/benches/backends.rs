@@ -19,7 +19,7 @@ use smokenav_algorithms_eval::{
 };
 use smokenav_algorithms_slam::drift;
 use smokenav_algorithms_slam::fuzzy::FuzzySlam;
-use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam};
+use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam, RobustKernel};
 use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::rbpf::RbpfParams;
 use smokenav_algorithms_slam::{Rbpf, SlamBackend, SlamPipeline, StampedPose};
@@ -72,6 +72,16 @@ fn graph_params() -> GraphParams {
             "edge_sigma_r1" => p.edge_sigma_r.1 = v,
             "closure_sigma_t" => p.closure_sigma.0 = v,
             "closure_sigma_r" => p.closure_sigma.1 = v,
+            "closure_point_sigma_m" => p.closure_point_sigma_m = v,
+            "closure_min_overlap" => p.closure_min_overlap = v,
+            "closure_map_covariance" => p.closure_map_covariance = v != 0.0,
+            "closure_rival_m" => p.closure_rival_m = v,
+            "closure_rival_ratio" => p.closure_rival_ratio = v,
+            "tracker_window_m" => p.tracker_window_m = v,
+            "tracker_window_rad" => p.tracker_window_rad = v,
+            "sonar_edge_widening" => p.sonar_edge_widening = v,
+            "cauchy" => p.optimize.kernel = RobustKernel::Cauchy(v),
+            "relative_tolerance" => p.optimize.relative_tolerance = v,
             other => panic!("unknown graph parameter {other}"),
         }
     }
