@@ -47,7 +47,7 @@ use crate::geom::{Pose2, Position, Vec2};
 use crate::laser::LaserParams;
 use crate::mq303a::Mq303aParams;
 use crate::robot::{DriveParams, OdometryErrors};
-use crate::smoke::{Pulse, SmokeParams, SmokeSource};
+use crate::smoke::{Pulse, SmokeField, SmokeParams, SmokeSource};
 use crate::sonar::SonarParams;
 use serde::Deserialize;
 use smokenav_platform_config::{
@@ -319,6 +319,22 @@ pub struct Scenario {
 }
 
 impl Scenario {
+    /// The scenario's smoke field at time 0: its sources and patches, before
+    /// any [`SmokeField::advance`]. The world starts from this; so can
+    /// anything that needs the smoke's history without the whole simulation.
+    pub fn smoke_field(&self) -> Result<SmokeField, SimError> {
+        let mut smoke = SmokeField::new(&self.arena, self.smoke.clone(), self.sources.clone())
+            .map_err(|i| SimError::Invalid {
+                file: self.file.clone(),
+                key: format!("smoke.source[{i}].position"),
+                reason: "is inside a wall or outside the arena".into(),
+            })?;
+        for p in &self.patches {
+            smoke.add_patch(p.center, p.radius_m, p.density_gpm3);
+        }
+        Ok(smoke)
+    }
+
     /// Reads and checks a scenario file.
     pub fn load(path: &Path) -> Result<Self, SimError> {
         let text = std::fs::read_to_string(path).map_err(|e| SimError::Io {

@@ -190,19 +190,7 @@ pub struct World {
 impl World {
     pub fn new(scenario: Scenario) -> Result<Self, SimError> {
         let seed = scenario.seed;
-        let mut smoke = SmokeField::new(
-            &scenario.arena,
-            scenario.smoke.clone(),
-            scenario.sources.clone(),
-        )
-        .map_err(|i| SimError::Invalid {
-            file: scenario.file.clone(),
-            key: format!("smoke.source[{i}].position"),
-            reason: "is inside a wall or outside the arena".into(),
-        })?;
-        for p in &scenario.patches {
-            smoke.add_patch(p.center, p.radius_m, p.density_gpm3);
-        }
+        let smoke = scenario.smoke_field()?;
         let robot = Robot::new(
             scenario.drive.clone(),
             scenario.odometry.clone(),

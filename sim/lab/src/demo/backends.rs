@@ -48,6 +48,7 @@ pub fn run(
     profile: &RobotConfig,
     truth: &TruthTrack,
     truth_map: &OccupancyGrid,
+    smoke: Option<&OccupancyGrid>,
     threads: usize,
     seeds: usize,
 ) -> anyhow::Result<Vec<BackendRun>> {
@@ -56,7 +57,7 @@ pub fn run(
         let mut p = profile.clone();
         p.slam.backend = backend;
         let seeds = seeds_of(backend, seeds);
-        let results = compare::run_all(log, &p, truth, truth_map, threads, seeds)?;
+        let results = compare::run_all(log, &p, truth, truth_map, smoke, threads, seeds)?;
         out.push(BackendRun {
             backend,
             seeds,

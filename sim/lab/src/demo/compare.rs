@@ -34,6 +34,8 @@ pub struct MethodResult {
     pub confidence_map: Option<OccupancyGrid>,
     /// What that map says of the true walls, by who painted them.
     pub fuzzy_walls: Option<FuzzyWalls>,
+    /// That map's confident phantom cells, where they are (truth frame).
+    pub fuzzy_phantoms: Vec<Phantom>,
     /// The best particle's (smoothed) trajectory, of the median run.
     pub trajectory: Vec<StampedPose>,
     pub series: Vec<SeriesPoint>,
@@ -51,7 +53,8 @@ pub struct MethodResult {
 
 /// The fuzzy map against the truth: the mean eq. 7 confidence on true wall
 /// cells that only sonar-painted beams ended at, beside those a laser beam
-/// ended at, and the confident cells (≥ 0.65) nowhere near a true wall.
+/// ended at, and the confident cells (≥ 0.65) nowhere near a true wall —
+/// over the whole map and inside the region where the smoke was.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct FuzzyWalls {
     pub laser_wall_confidence: f64,
@@ -60,18 +63,72 @@ pub struct FuzzyWalls {
     pub sonar_only_wall_cells: usize,
     /// Cells at ≥ 0.65 confidence more than 0.3 m from every true wall.
     pub confident_phantom_cells: usize,
+    /// Of those, the ones inside the smoke region ([`super::smoke_region`];
+    /// `None` without smoke).
+    pub confident_phantom_cells_in_smoke: Option<usize>,
+    /// Of those in the smoke, the ones 0.3–0.6 m from a wall (a wall drawn
+    /// a little off, rather than a wall where there is none).
+    pub in_smoke_near_wall: Option<usize>,
+    /// Where the others are (every confident phantom cell is in exactly one):
+    /// outside the smoke, 0.3–0.6 m from a true wall (registration error) …
+    pub clear_air_near_wall: usize,
+    /// … outside the smoke, further from every wall, outside the arena's walls …
+    pub clear_air_outside_arena: usize,
+    /// … and outside the smoke, further from every wall, inside the arena.
+    pub clear_air_open_space: usize,
+    /// Size of the smoke region, m² (`None` without smoke).
+    pub smoke_region_m2: Option<f64>,
+}
+
+/// Where a confident phantom cell lies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PhantomPlace {
+    /// In the smoke region, 0.3–0.6 m from a true wall.
+    SmokeNearWall,
+    /// In the smoke region, further from every wall.
+    Smoke,
+    /// Clear air, 0.3–0.6 m from a true wall.
+    NearWall,
+    /// Clear air, further from every wall, outside the walls' bounding box.
+    OutsideArena,
+    /// Clear air, further from every wall, inside the arena.
+    OpenSpace,
+}
+
+impl PhantomPlace {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PhantomPlace::SmokeNearWall => "smoke-near-wall",
+            PhantomPlace::Smoke => "smoke",
+            PhantomPlace::NearWall => "near-wall",
+            PhantomPlace::OutsideArena => "outside-arena",
+            PhantomPlace::OpenSpace => "open-space",
+        }
+    }
+}
+
+/// One confident phantom cell: its centre in the truth frame, its eq. 7 confidence (0–100).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Phantom {
+    pub x: f64,
+    pub y: f64,
+    pub confidence: i8,
+    pub place: PhantomPlace,
 }
 
 /// [`FuzzyWalls`] of one run: its beams' end points at its own poses, in its
-/// map; the truth reached through the k-NN alignment.
+/// map; the truth reached through the k-NN alignment; `smoke` the smoke
+/// region on the truth map's grid. Also every confident phantom cell.
 pub fn fuzzy_walls(
     fused: &[Emitted],
     trajectory: &[StampedPose],
     conf: &OccupancyGrid,
     align: &smokenav_algorithms_eval::Alignment,
     truth_map: &OccupancyGrid,
+    smoke: Option<&OccupancyGrid>,
     mount: Pose2,
-) -> FuzzyWalls {
+) -> (FuzzyWalls, Vec<Phantom>) {
     use smokenav_shared_types::{BeamReading, SectionSource};
     let poses: std::collections::HashMap<u64, Pose2> =
         trajectory.iter().map(|p| (p.stamp_ns, p.pose)).collect();
@@ -115,8 +172,18 @@ pub fn fuzzy_walls(
             })
         })
     };
+    let in_smoke = |x: f64, y: f64| {
+        smoke.is_some_and(|m| {
+            m.world_to_cell(x, y)
+                .and_then(|(cx, cy)| m.get(cx, cy))
+                .is_some_and(|v| v > 0)
+        })
+    };
+    let walls = wall_bounds(truth_map);
     let far = (0.3 / truth_map.resolution).round() as i64;
-    let (mut lsum, mut ln, mut ssum, mut sn, mut phantom) = (0.0, 0, 0.0, 0, 0);
+    let farther = (0.6 / truth_map.resolution).round() as i64;
+    let (mut lsum, mut ln, mut ssum, mut sn) = (0.0, 0, 0.0, 0);
+    let mut phantoms = Vec::new();
     for (i, &v) in conf.cells.iter().enumerate() {
         let (x, y) = (
             conf.origin[0] + ((i % conf.width) as f64 + 0.5) * conf.resolution,
@@ -124,7 +191,24 @@ pub fn fuzzy_walls(
         );
         let (tx, ty) = to_truth(x, y);
         if v >= 65 && !wall_within(tx, ty, far) {
-            phantom += 1;
+            let near = wall_within(tx, ty, farther);
+            let place = match (in_smoke(tx, ty), near) {
+                (true, true) => PhantomPlace::SmokeNearWall,
+                (true, false) => PhantomPlace::Smoke,
+                (false, true) => PhantomPlace::NearWall,
+                (false, false) => match walls {
+                    Some((x0, y0, x1, y1)) if tx < x0 || tx > x1 || ty < y0 || ty > y1 => {
+                        PhantomPlace::OutsideArena
+                    }
+                    _ => PhantomPlace::OpenSpace,
+                },
+            };
+            phantoms.push(Phantom {
+                x: tx,
+                y: ty,
+                confidence: v,
+                place,
+            });
         }
         if painted[i] == 0 || !wall_within(tx, ty, 1) {
             continue;
@@ -136,13 +220,44 @@ pub fn fuzzy_walls(
             (ssum, sn) = (ssum + v, sn + 1);
         }
     }
-    FuzzyWalls {
+    let count = |p: &[PhantomPlace]| phantoms.iter().filter(|f| p.contains(&f.place)).count();
+    let smoky = smoke.is_some();
+    let walls = FuzzyWalls {
         laser_wall_confidence: lsum / f64::from(ln.max(1)),
         laser_wall_cells: ln as usize,
         sonar_only_wall_confidence: ssum / f64::from(sn.max(1)),
         sonar_only_wall_cells: sn as usize,
-        confident_phantom_cells: phantom,
+        confident_phantom_cells: phantoms.len(),
+        confident_phantom_cells_in_smoke: smoky
+            .then(|| count(&[PhantomPlace::Smoke, PhantomPlace::SmokeNearWall])),
+        in_smoke_near_wall: smoky.then(|| count(&[PhantomPlace::SmokeNearWall])),
+        clear_air_near_wall: count(&[PhantomPlace::NearWall]),
+        clear_air_outside_arena: count(&[PhantomPlace::OutsideArena]),
+        clear_air_open_space: count(&[PhantomPlace::OpenSpace]),
+        smoke_region_m2: smoke.map(|m| {
+            m.cells.iter().filter(|&&v| v > 0).count() as f64 * m.resolution * m.resolution
+        }),
+    };
+    (walls, phantoms)
+}
+
+/// The bounding box of the true walls (truth frame), cell centres.
+fn wall_bounds(truth_map: &OccupancyGrid) -> Option<(f64, f64, f64, f64)> {
+    let mut b: Option<(f64, f64, f64, f64)> = None;
+    for (i, &v) in truth_map.cells.iter().enumerate() {
+        if v != smokenav_platform_map::OCCUPIED {
+            continue;
+        }
+        let (x, y) = (
+            truth_map.origin[0] + ((i % truth_map.width) as f64 + 0.5) * truth_map.resolution,
+            truth_map.origin[1] + ((i / truth_map.width) as f64 + 0.5) * truth_map.resolution,
+        );
+        b = Some(match b {
+            None => (x, y, x, y),
+            Some((x0, y0, x1, y1)) => (x0.min(x), y0.min(y), x1.max(x), y1.max(y)),
+        });
     }
+    b
 }
 
 fn mean(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
@@ -328,12 +443,14 @@ fn median_run(runs: &[(Option<f64>, Option<f64>)]) -> usize {
 /// runs once per distinct sequence of fused scans (in clean air v1 and v2
 /// usually hand SLAM the very same scans, and SLAM is deterministic) and per
 /// random seed (`seeds` runs: the profile's `[slam] seed`, +1, …), up to
-/// `threads` at a time.
+/// `threads` at a time. `smoke`: where the smoke was, on the truth map's
+/// grid ([`super::smoke_region`]), for the fuzzy map's phantom count.
 pub fn run_all(
     log: &SensorLog,
     profile: &RobotConfig,
     truth: &TruthTrack,
     truth_map: &OccupancyGrid,
+    smoke: Option<&OccupancyGrid>,
     threads: usize,
     seeds: usize,
 ) -> anyhow::Result<Vec<MethodResult>> {
@@ -411,22 +528,26 @@ pub fn run_all(
             .flatten()
             .ok_or_else(|| anyhow::anyhow!("the {} SLAM run did not finish", m.as_str()))?;
         let (f, usage) = &fused[i];
+        let (walls, phantoms) = match (&o.confidence_map, &o.map_report) {
+            (Some(conf), Ok(rep)) => {
+                let mt = profile.laser.mount;
+                let (w, p) = fuzzy_walls(
+                    &fused[i].0,
+                    &o.trajectory,
+                    conf,
+                    &rep.alignment,
+                    truth_map,
+                    smoke,
+                    Pose2::new(mt.x, mt.y, mt.yaw_rad()),
+                );
+                (Some(w), p)
+            }
+            _ => (None, Vec::new()),
+        };
         results.push(MethodResult {
             method: m,
-            fuzzy_walls: match (&o.confidence_map, &o.map_report) {
-                (Some(conf), Ok(rep)) => {
-                    let mt = profile.laser.mount;
-                    Some(fuzzy_walls(
-                        &fused[i].0,
-                        &o.trajectory,
-                        conf,
-                        &rep.alignment,
-                        truth_map,
-                        Pose2::new(mt.x, mt.y, mt.yaw_rad()),
-                    ))
-                }
-                _ => None,
-            },
+            fuzzy_walls: walls,
+            fuzzy_phantoms: phantoms,
             map: o.map,
             confidence_map: o.confidence_map,
             trajectory: o.trajectory,

@@ -25,6 +25,7 @@ mod live;
 mod pictures;
 mod recording;
 mod report;
+mod smoke_region;
 mod vote;
 
 use anyhow::{Context, bail};
@@ -182,6 +183,8 @@ pub(crate) struct Comparison {
     pub backend: smokenav_platform_config::SlamBackendKind,
     /// The other back-ends over the same fused scans ([`backends`]).
     pub other_backends: Vec<backends::BackendRun>,
+    /// Where the smoke was, on the truth map's grid ([`smoke_region`]; `None` without smoke).
+    pub smoke_region: Option<OccupancyGrid>,
 }
 
 /// The profile the drivers (and the offline runs) use for `scenario`.
@@ -294,7 +297,21 @@ fn compare_recording(
         },
         log.lasers.len()
     ));
-    let results = compare::run_all(&log, profile, &truth, &truth_map, threads(), seeds)?;
+    let smoke = smoke_region::smoke_region(
+        scenario,
+        &truth,
+        &truth_map,
+        f64::from(smokenav_sim_world::laser::URG_DMAX_MM) * 1e-3,
+    )?;
+    let results = compare::run_all(
+        &log,
+        profile,
+        &truth,
+        &truth_map,
+        smoke.as_ref(),
+        threads(),
+        seeds,
+    )?;
     say.line(&format!("  done in {:.1} s", t.elapsed().as_secs_f64()));
     let other_backends = if other_backends {
         let names: Vec<&str> = backends::others(profile)
@@ -306,7 +323,15 @@ fn compare_recording(
             "  the same fused scans through SLAM back-end {} …",
             names.join(", ")
         ));
-        let runs = backends::run(&log, profile, &truth, &truth_map, threads(), seeds)?;
+        let runs = backends::run(
+            &log,
+            profile,
+            &truth,
+            &truth_map,
+            smoke.as_ref(),
+            threads(),
+            seeds,
+        )?;
         say.line(&format!("  done in {:.1} s", t.elapsed().as_secs_f64()));
         runs
     } else {
@@ -334,6 +359,7 @@ fn compare_recording(
         laser_damage: Vec::new(),
         backend: profile.slam.backend,
         other_backends,
+        smoke_region: smoke,
     };
     report::write_files(&c, dir)?;
     Ok(c)

@@ -2,7 +2,7 @@
 //! smoke level vs laser spread vs sonar usage over time.
 
 use super::Comparison;
-use super::compare::{MethodResult, SeriesPoint};
+use super::compare::{MethodResult, PhantomPlace, SeriesPoint};
 use super::draw::{BLACK, Canvas, Color, GREY, LIGHT, WHITE, line_height, text_width};
 use anyhow::Context;
 use image::Rgb;
@@ -131,7 +131,21 @@ pub fn fuzzy_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
     let head = l + 8;
     let panels = cmp.results.len() as i64;
     let width = gap + panels * (i64::from(view.w) + gap);
-    let height = 2 * (head + i64::from(view.h)) + 2 * gap;
+    let legend = [
+        (
+            PHANTOM_SMOKE,
+            "confident cell > 0.6 m off walls, in the smoke",
+        ),
+        (PHANTOM_SMOKE_NEAR, "the same 0.3-0.6 m off a wall"),
+        (PHANTOM_NEAR, "clear air, 0.3-0.6 m off a wall"),
+        (
+            PHANTOM_ELSEWHERE,
+            "clear air, further (open space or outside)",
+        ),
+        (SMOKE, "edge of the smoke region"),
+    ];
+    let foot = legend.len() as i64 * (l + 4) + gap;
+    let height = 2 * (head + i64::from(view.h)) + 2 * gap + foot;
     let mut c = Canvas::new(width as u32, height as u32, WHITE);
     let mut x = gap;
     for r in &cmp.results {
@@ -149,6 +163,15 @@ pub fn fuzzy_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
                 Some(m) => c.paste(&render_map(&view, m, align.as_ref()), x, y + head),
                 None => c.fill_rect(x, y + head, i64::from(view.w), i64::from(view.h), LIGHT),
             }
+            if k == 1 {
+                if let Some(region) = &cmp.smoke_region {
+                    draw_region_edge(&mut c, &view, x, y + head, region);
+                }
+                for p in &r.fuzzy_phantoms {
+                    let (px, py) = view.px(p.x, p.y);
+                    c.dot(x + px, y + head + py, 2, phantom_color(p.place));
+                }
+            }
             c.text(x, y + 4, label, BLACK, scale);
             c.rect(
                 x - 1,
@@ -160,9 +183,51 @@ pub fn fuzzy_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
         }
         x += i64::from(view.w) + gap;
     }
+    let mut y = 2 * (head + i64::from(view.h)) + 2 * gap;
+    for (color, text) in legend {
+        c.dot(gap + 4, y + l / 2, 4, color);
+        c.text(gap + 16, y, text, BLACK, scale);
+        y += l + 4;
+    }
     c.img
         .save(path)
         .with_context(|| format!("cannot write {}", path.display()))
+}
+
+const PHANTOM_SMOKE: Color = Rgb([215, 40, 40]);
+const PHANTOM_SMOKE_NEAR: Color = Rgb([200, 40, 200]);
+const PHANTOM_NEAR: Color = Rgb([40, 90, 200]);
+const PHANTOM_ELSEWHERE: Color = Rgb([0, 150, 60]);
+
+fn phantom_color(p: PhantomPlace) -> Color {
+    match p {
+        PhantomPlace::Smoke => PHANTOM_SMOKE,
+        PhantomPlace::SmokeNearWall => PHANTOM_SMOKE_NEAR,
+        PhantomPlace::NearWall => PHANTOM_NEAR,
+        PhantomPlace::OutsideArena | PhantomPlace::OpenSpace => PHANTOM_ELSEWHERE,
+    }
+}
+
+/// The cells of the smoke region (truth frame) with a neighbour outside it.
+fn draw_region_edge(c: &mut Canvas, view: &View, ox: i64, oy: i64, region: &OccupancyGrid) {
+    let inside = |x: i64, y: i64| {
+        x >= 0 && y >= 0 && region.get(x as usize, y as usize).is_some_and(|v| v > 0)
+    };
+    for y in 0..region.height as i64 {
+        for x in 0..region.width as i64 {
+            if !inside(x, y)
+                || (inside(x - 1, y) && inside(x + 1, y) && inside(x, y - 1) && inside(x, y + 1))
+            {
+                continue;
+            }
+            let (wx, wy) = (
+                region.origin[0] + (x as f64 + 0.5) * region.resolution,
+                region.origin[1] + (y as f64 + 0.5) * region.resolution,
+            );
+            let (px, py) = view.px(wx, wy);
+            c.dot(ox + px, oy + py, 1, SMOKE);
+        }
+    }
 }
 
 pub fn maps_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {

@@ -170,22 +170,51 @@ fn table_rows(s: &mut String, c: &Comparison) {
     }
 }
 
-/// With the fuzzy back-end: its confidence on true walls by who painted them.
+/// With the fuzzy back-end: its confidence on true walls by who painted them,
+/// and its confident cells away from every true wall, by where they are.
 fn fuzzy_rows(s: &mut String, c: &Comparison) {
     for r in &c.results {
         if let Some(w) = &r.fuzzy_walls {
+            let smoke = match (w.confident_phantom_cells_in_smoke, w.in_smoke_near_wall) {
+                (Some(n), Some(near)) => format!(
+                    "{n} in the smoke ({near} of them 0.3–0.6 m off a wall; smoke region {:.1} m²)",
+                    w.smoke_region_m2.unwrap_or(0.0)
+                ),
+                _ => "no smoke".into(),
+            };
             let _ = writeln!(
                 s,
-                "  {:<11} fuzzy map on true walls: laser-seen {:.2} ({} cells), sonar-only {:.2} ({} cells); confident cells ≥ 0.3 m from any wall: {}",
+                "  {:<11} fuzzy map on true walls: laser-seen {:.2} ({} cells), sonar-only {:.2} ({} cells); confident cells ≥ 0.3 m from any wall: {}: {smoke}; in clear air {} 0.3–0.6 m off a wall, {} outside the walls, {} in open space",
                 method_label(r),
                 w.laser_wall_confidence,
                 w.laser_wall_cells,
                 w.sonar_only_wall_confidence,
                 w.sonar_only_wall_cells,
-                w.confident_phantom_cells
+                w.confident_phantom_cells,
+                w.clear_air_near_wall,
+                w.clear_air_outside_arena,
+                w.clear_air_open_space
             );
         }
     }
+}
+
+/// `x y confidence place` of every confident phantom cell (truth frame).
+fn phantoms_csv(r: &MethodResult) -> String {
+    let mut s = String::from(
+        "# confident (>= 0.65) fuzzy-map cells more than 0.3 m from every true wall\n# x_m y_m (truth frame) confidence place\n",
+    );
+    for p in &r.fuzzy_phantoms {
+        let _ = writeln!(
+            s,
+            "{:.3} {:.3} {:.2} {}",
+            p.x,
+            p.y,
+            f64::from(p.confidence) / 100.0,
+            p.place.as_str()
+        );
+    }
+    s
 }
 
 /// The paper's comparison for people.
@@ -240,6 +269,9 @@ pub fn write_files(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
                 smokenav_platform_map::MapMode::Raw,
             )
             .with_context(|| format!("cannot write the {stem} map to {}", maps.display()))?;
+        }
+        if r.fuzzy_walls.is_some() {
+            write(&maps.join(format!("{name}-phantoms.txt")), &phantoms_csv(r))?;
         }
         write(
             &trajectories.join(format!("{name}.txt")),
