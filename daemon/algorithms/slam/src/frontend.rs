@@ -40,13 +40,14 @@ const BLUR_SIGMA_CELLS: f64 = 1.5;
 const BLUR_RADIUS: i32 = 3;
 /// Points further than this from the robot are not matched by the front end, m.
 const MAX_POINT_RANGE: f64 = 10.0;
-/// The local map keeps points this much further than the matched ones, m:
+/// The local map keeps points this much further than the matched ones, m
+/// (the graph back-end's default, [`FrontEndParams::map_range_margin_m`]):
 /// cut at the same range, a corridor's side walls in the new scan would run
 /// past the end of the map ahead (the map's scans were taken further back),
 /// and pulling the scan back onto it would score better, so every match
 /// along a corridor slid back a little and the corridor shrank (0.3 % on
 /// MIT CSAIL, 1 % on its drifted input).
-const MAP_RANGE_MARGIN: f64 = 2.0;
+pub const MAP_RANGE_MARGIN: f64 = 2.0;
 /// Odometry repeated for longer than this is treated as "stopped", s.
 const MAX_EXTRAPOLATION_S: f64 = 1.5;
 /// Prior around the prediction: a deviation of one standard deviation costs
@@ -73,6 +74,9 @@ pub struct FrontEndParams {
     pub window_m: f64,
     pub window_rad: f64,
     pub max_scans: usize,
+    /// How much further than the matched points the local map reaches, m
+    /// (see `MAP_RANGE_MARGIN`).
+    pub map_range_margin_m: f64,
 }
 
 /// What the front end made of one scan.
@@ -121,8 +125,6 @@ pub struct FrontEnd {
     points: Vec<(f64, f64)>,
     /// Endpoints beyond `MAX_POINT_RANGE` (up to the margin): map only.
     far_points: Vec<(f64, f64)>,
-    /// `MAP_RANGE_MARGIN` (a field so a test can compare without it).
-    map_range_margin: f64,
     tables: Vec<Vec<u8>>,
     table_x0: i32,
     table_y0: i32,
@@ -174,7 +176,6 @@ impl FrontEnd {
             fresh_before: None,
             points: Vec::new(),
             far_points: Vec::new(),
-            map_range_margin: MAP_RANGE_MARGIN,
             tables: vec![Vec::new(); LEVELS + 1],
             table_x0: 0,
             table_y0: 0,
@@ -389,7 +390,8 @@ impl FrontEnd {
         let min_d2 = (1.5 * self.p.resolution).powi(2);
         for (x, y) in endpoints {
             let r = x.hypot(y);
-            if !(x.is_finite() && y.is_finite()) || r > MAX_POINT_RANGE + self.map_range_margin {
+            if !(x.is_finite() && y.is_finite()) || r > MAX_POINT_RANGE + self.p.map_range_margin_m
+            {
                 continue;
             }
             let kept = if r > MAX_POINT_RANGE {
@@ -827,6 +829,7 @@ mod tests {
             window_m: 1.0,
             window_rad: 0.4,
             max_scans: 10,
+            map_range_margin_m: MAP_RANGE_MARGIN,
         }
     }
 
@@ -950,8 +953,10 @@ mod tests {
         // of the local map (they did, by ~1 % of the distance, while the map
         // was cut at the matched range too).
         let drive = |margin: f64| {
-            let mut fe = FrontEnd::new(params());
-            fe.map_range_margin = margin;
+            let mut fe = FrontEnd::new(FrontEndParams {
+                map_range_margin_m: margin,
+                ..params()
+            });
             let mut last = Pose2::default();
             for k in 0..120u64 {
                 let truth = Pose2::new(0.1 * k as f64, 0.0, 0.0);

@@ -33,6 +33,9 @@ pub struct RangeScan {
     /// Multiplier of the laser endpoint noise for the obscurant the scan was
     /// taken in (1 in clear air; see [`crate::noise`]).
     pub laser_noise_factor: f64,
+    /// Share (0–1) of the scan's beams the fusion did not leave to the laser
+    /// (sections it painted from the sonar or dropped as smoke); 0 for a laser scan.
+    pub withheld_share: f64,
 }
 
 /// Which beams' endpoints the scan matchers use.
@@ -113,6 +116,7 @@ impl RangeScan {
     pub fn clear(&mut self) {
         self.beams.clear();
         self.laser_noise_factor = 1.0;
+        self.withheld_share = 0.0;
         self.sensor_pose = Pose2::default();
         self.stamp_ns = 0;
     }
@@ -166,13 +170,21 @@ impl RangeScan {
         } else {
             1.0
         };
+        let mut withheld = 0usize;
         for (i, beam) in self.beams.iter_mut().enumerate() {
             match fused.beam_source(i) {
-                SectionSource::Sonar => beam.kind = BeamKind::Sonar,
-                SectionSource::Neither => beam.range = None,
+                SectionSource::Sonar => {
+                    beam.kind = BeamKind::Sonar;
+                    withheld += 1;
+                }
+                SectionSource::Neither => {
+                    beam.range = None;
+                    withheld += 1;
+                }
                 SectionSource::Laser | SectionSource::Both => {}
             }
         }
+        self.withheld_share = withheld as f64 / self.beams.len().max(1) as f64;
     }
 }
 
@@ -222,5 +234,12 @@ mod tests {
         assert_eq!(r.beams[1].kind, BeamKind::Sonar);
         assert_eq!(r.beams[2].range, None);
         assert_eq!(r.laser_noise_factor, 1.3);
+        assert!(
+            (r.withheld_share - 2.0 / 3.0).abs() < 1e-12,
+            "{}",
+            r.withheld_share
+        );
+        r.clear();
+        assert_eq!(r.withheld_share, 0.0);
     }
 }

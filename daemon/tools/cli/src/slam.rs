@@ -649,8 +649,8 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     }
     let _ = writeln!(
         report,
-        "pipeline           {} held back by the motion filter, {} front-end fallbacks, {} scans without ranges",
-        stats.held_back, stats.frontend_fallbacks, stats.empty_scans
+        "pipeline           {} held back by the motion filter, {} front-end fallbacks ({} of them scans mostly withheld from the laser), {} scans without ranges",
+        stats.held_back, stats.frontend_fallbacks, stats.frontend_withheld, stats.empty_scans
     );
     if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
         let s = g.stats();

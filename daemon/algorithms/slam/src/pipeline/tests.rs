@@ -347,3 +347,40 @@ fn fused_scans_carry_the_smoke_noise_and_the_beam_sources() {
     assert_eq!(s.beams[2].range, None);
     assert_eq!(s.beams[0].kind, BeamKind::Laser);
 }
+
+/// Scans down the room with odometry 10 % long, from the 11th on marked as
+/// mostly withheld from the laser (smoke) with share `withheld`: returns the
+/// front end's motion over those ten scans and the stats.
+fn front_end_through_withheld_scans(withheld: f64) -> (f64, PipelineStats) {
+    let mut slam = pipeline(&cfg(2), false);
+    let mut truth = Pose2::new(-3.5, -1.5, 0.0);
+    let mut odom = Pose2::new(10.0, 20.0, 1.0);
+    let mut before = Pose2::default();
+    for k in 0..20u64 {
+        let mut scan = scan_at(&truth, k * 100_000_000);
+        if k >= 10 {
+            scan.withheld_share = withheld;
+        }
+        slam.process(&scan, &odom);
+        if k == 9 {
+            before = slam.frontend_pose().unwrap();
+        }
+        truth = truth.compose(&Pose2::new(0.1, 0.0, 0.0));
+        odom = odom.compose(&Pose2::new(0.11, 0.0, 0.0));
+    }
+    let after = slam.frontend_pose().unwrap();
+    (before.between(&after).translation_norm(), slam.stats())
+}
+
+#[test]
+fn scans_mostly_withheld_from_the_laser_are_left_to_odometry() {
+    // Matched, the front end follows the room: 1 m over the last ten steps.
+    let (matched, stats) = front_end_through_withheld_scans(MAX_WITHHELD_TO_MATCH);
+    assert!((matched - 1.0).abs() < 0.03, "{matched} m");
+    assert_eq!(stats.frontend_withheld, 0);
+    // Withheld, it follows the odometry's 1.1 m.
+    let (odometry, stats) = front_end_through_withheld_scans(0.5);
+    assert!((odometry - 1.1).abs() < 1e-6, "{odometry} m");
+    assert_eq!(stats.frontend_withheld, 10);
+    assert!(stats.frontend_fallbacks >= 10, "{stats:?}");
+}

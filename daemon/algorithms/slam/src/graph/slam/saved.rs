@@ -295,6 +295,7 @@ fn read_scans<R: BufRead>(input: R, file: &Path) -> Result<SavedScans, SavedGrap
             points,
             beams,
             sensor,
+            withheld_share: 0.0,
         });
     }
     if l.next()?.is_some() {
@@ -514,7 +515,7 @@ impl ResumedGraph {
         g.shared = None;
         g.stats.scans += 1;
         let pose = matched.map_or(start, |m| m.0);
-        let k = g.add_node(pose);
+        let k = g.add_node(pose, 0.0);
         if k > 0 {
             let last = k - 1;
             // A matched start is as sure as a loop closure; an unmatched one is a guess.
