@@ -33,7 +33,7 @@ use crate::motion_filter::{MotionFilter, MotionFilterParams};
 use crate::noise::LaserNoiseModel;
 use crate::odom_buffer::{OdomAt, OdomBuffer};
 use crate::scan::{BeamKind, Endpoint, EndpointLimits, RangeScan};
-use smokenav_platform_config::{SlamBackendKind, SlamSection};
+use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
 use smokenav_shared_types::{FusedScan, LaserScan, Odometry, OdometryFlags};
@@ -135,7 +135,7 @@ impl SlamPipeline {
                     // corridors their length (0.3 % short without), but the
                     // RBPF fed by it ended 0.148 m from the reference
                     // instead of 0.087 m, so the RBPF keeps the cut map.
-                    map_range_margin_m: if cfg.backend == SlamBackendKind::Rbpf {
+                    map_range_margin_m: if backend.name() == "rbpf" {
                         0.0
                     } else {
                         MAP_RANGE_MARGIN
