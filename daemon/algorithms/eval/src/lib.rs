@@ -1,14 +1,17 @@
 //! Accuracy of maps and trajectories against ground truth (the simulator's,
 //! or a surveyed one): the k-nearest-neighbour map error of SmokeNav (Santos et
 //! al. 2015) in both directions, the pixel error of SLAMfusion (Fernandes &
-//! Alexandre), and ATE/RPE for trajectories.
+//! Alexandre), ATE/RPE for trajectories, and, with no reference at all, how
+//! well scans placed at a trajectory's poses agree with each other.
 //! Pure functions over loaded data plus loaders whose errors name the file;
 //! `smokenav eval` is the command-line front end.
 
+pub mod consistency;
 pub mod map;
 pub mod nn;
 pub mod trajectory;
 
+pub use consistency::{ConsistencyOptions, ScanConsistency, scan_consistency};
 pub use map::{Alignment, DistanceStats, MapMetricError, MapOptions, MapReport, evaluate_maps};
 pub use trajectory::{
     ErrorStats, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryFormat,

@@ -77,14 +77,33 @@ impl PointIndex {
 
     /// Distance from `(x, y)` to the nearest indexed point (∞ when empty).
     pub fn nearest_distance(&self, x: f64, y: f64) -> f64 {
+        self.nearest_where(x, y, f64::INFINITY, |_| true)
+            .unwrap_or(f64::INFINITY)
+    }
+
+    /// Distance from `(x, y)` to the nearest indexed point whose index (its
+    /// place in the `points` given to [`Self::new`]) `keep` accepts, if one
+    /// lies within `max_m`.
+    pub fn nearest_where(
+        &self,
+        x: f64,
+        y: f64,
+        max_m: f64,
+        keep: impl Fn(usize) -> bool,
+    ) -> Option<f64> {
         if self.points.is_empty() {
-            return f64::INFINITY;
+            return None;
         }
         let fx = ((x - self.min.0) / self.cell).floor();
         let fy = ((y - self.min.1) / self.cell).floor();
         let cx = fx.clamp(-1.0, self.cols as f64) as i64;
         let cy = fy.clamp(-1.0, self.rows as f64) as i64;
-        let mut best2 = f64::INFINITY;
+        let mut best2 = if max_m.is_finite() {
+            max_m * max_m
+        } else {
+            f64::INFINITY
+        };
+        let mut found = false;
         let max_ring = self.cols.max(self.rows) as i64 + 2;
         for ring in 0..=max_ring {
             // Every point in ring r is at least (r − 1)·cell away: stop once that beats the best.
@@ -106,8 +125,9 @@ impl PointIndex {
                         for &i in &self.items[self.start[b] as usize..self.start[b + 1] as usize] {
                             let (px, py) = self.points[i as usize];
                             let d2 = (px - x) * (px - x) + (py - y) * (py - y);
-                            if d2 < best2 {
+                            if d2 <= best2 && keep(i as usize) {
                                 best2 = d2;
+                                found = true;
                             }
                         }
                     }
@@ -120,7 +140,7 @@ impl PointIndex {
                 }
             }
         }
-        best2.sqrt()
+        found.then(|| best2.sqrt())
     }
 }
 

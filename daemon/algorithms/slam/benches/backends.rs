@@ -2,7 +2,12 @@
 //! through the one SLAM pipeline (as the SLAM process and `smokenav slam` run
 //! them): total thread CPU time, per-scan CPU p50/p99/max and ATE of the final
 //! trajectory against GMapping's corrected poses (after the best rigid
-//! alignment), plus the graph's loop-closure counters.
+//! alignment), plus the graph's loop-closure counters. Beside ATE, the
+//! consistency of the reference's scans placed at each back-end's poses and at
+//! the reference's own (cells at 5 cm holding an endpoint, and the distance of
+//! each endpoint to the nearest one of another pass; see
+//! `smokenav_algorithms_eval::consistency`): the reference is GMapping's
+//! estimate, and a trajectory farther from it can still be the crisper one.
 //!
 //! `cargo bench -p smokenav-algorithms-slam --bench backends`
 //! Environment: `CSAIL_DIR` (the folder of the log; required), `CSAIL_DRIFT=SEED` (run on the
@@ -14,8 +19,8 @@
 //! instead of as fast as they are processed: online, a faster feed leaves the worker fewer nodes).
 
 use smokenav_algorithms_eval::{
-    StampedPose as EvalPose, TrajectoryOptions, evaluate_trajectories, format_trajectory,
-    load_trajectory,
+    ConsistencyOptions, ScanConsistency, StampedPose as EvalPose, TrajectoryOptions,
+    evaluate_trajectories, format_trajectory, load_trajectory, scan_consistency,
 };
 use smokenav_algorithms_slam::drift;
 use smokenav_algorithms_slam::fuzzy::FuzzySlam;
@@ -24,6 +29,7 @@ use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::rbpf::RbpfParams;
 use smokenav_algorithms_slam::{Rbpf, SlamBackend, SlamPipeline, StampedPose};
 use smokenav_platform_config::SlamSection;
+use smokenav_shared_types::Pose2;
 use std::io::BufReader;
 use std::path::PathBuf;
 
@@ -85,6 +91,52 @@ fn graph_params() -> GraphParams {
         }
     }
     p
+}
+
+/// Robot-frame endpoints of the log's scans at the reference's stamps (within 1 ms), by stamp.
+type ReferenceScans = std::collections::BTreeMap<u64, Vec<(f64, f64)>>;
+
+fn endpoints_of(scan: &smokenav_algorithms_slam::RangeScan, max_range: f64) -> Vec<(f64, f64)> {
+    let s = scan.sensor_pose;
+    let (sn, cs) = s.theta.sin_cos();
+    scan.beams
+        .iter()
+        .filter_map(|b| {
+            let r = b.range.filter(|&r| (r as f64) < max_range)? as f64;
+            let (x, y) = (r * (b.angle as f64).cos(), r * (b.angle as f64).sin());
+            Some((s.x + cs * x - sn * y, s.y + sn * x + cs * y))
+        })
+        .collect()
+}
+
+/// The reference scans placed at `poses` (looked up by stamp; a scan with no pose is left out).
+fn consistency_at(scans: &ReferenceScans, poses: &[(u64, Pose2)]) -> ScanConsistency {
+    let placed: Vec<Vec<(f64, f64)>> = scans
+        .iter()
+        .filter_map(|(stamp, points)| {
+            let i = poses.partition_point(|(t, _)| *t < stamp.saturating_sub(1_000_000));
+            let &(t, p) = poses.get(i)?;
+            (t.abs_diff(*stamp) <= 1_000_000).then(|| {
+                let (sn, cs) = p.theta.sin_cos();
+                points
+                    .iter()
+                    .map(|&(x, y)| (p.x + cs * x - sn * y, p.y + sn * x + cs * y))
+                    .collect()
+            })
+        })
+        .collect();
+    scan_consistency(&placed, &ConsistencyOptions::default())
+}
+
+fn consistency_line(c: &ScanConsistency) -> String {
+    format!(
+        "{} scans, {} cells at 5 cm, endpoint to another pass median {:.1} mm mean {:.1} mm ({:.0} % seen again)",
+        c.scans,
+        c.cells,
+        c.nearest.median_m * 1e3,
+        c.nearest.mean_m * 1e3,
+        c.seen_again * 100.0
+    )
 }
 
 fn main() {
@@ -152,6 +204,16 @@ fn main() {
         }
         Err(_) => SlamSection::default(),
     };
+    let reference_stamps: Vec<u64> = reference
+        .iter()
+        .map(|r| (r.t * 1e6).round() as u64 * 1000)
+        .collect();
+    let reference_poses: Vec<(u64, Pose2)> = reference
+        .iter()
+        .zip(&reference_stamps)
+        .map(|(r, &t)| (t, Pose2::new(r.x, r.y, r.theta)))
+        .collect();
+    let mut reference_scans = ReferenceScans::new();
     let online = std::env::var("GRAPH_ONLINE").is_ok_and(|v| v == "1");
     let rate: Option<f64> = std::env::var("CSAIL_RATE")
         .ok()
@@ -182,6 +244,16 @@ fn main() {
                     );
                 std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
             }
+            let i =
+                reference_stamps.partition_point(|&t| t < scan.stamp_ns.saturating_sub(1_000_000));
+            if reference_stamps
+                .get(i)
+                .is_some_and(|&t| t.abs_diff(scan.stamp_ns) <= 1_000_000)
+            {
+                reference_scans
+                    .entry(reference_stamps[i])
+                    .or_insert_with(|| endpoints_of(scan, cfg.max_range_m));
+            }
             let t0 = thread_cpu_ns();
             slam.process(scan, &odom);
             times.push(thread_cpu_ns() - t0);
@@ -209,6 +281,11 @@ fn main() {
             ate.as_ref().map(|a| a.ate_m.max).unwrap_or(f64::NAN),
             ate.as_ref().map(|a| a.pairs).unwrap_or(0),
         );
+        let poses: Vec<(u64, Pose2)> = traj.iter().map(|p| (p.stamp_ns, p.pose)).collect();
+        println!(
+            "backends {log} {name:>5} consistency: {}",
+            consistency_line(&consistency_at(&reference_scans, &poses))
+        );
         if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
             println!("backends {log} graph: {:?}", g.stats());
             if g.is_online() {
@@ -230,4 +307,8 @@ fn main() {
             }
         }
     }
+    println!(
+        "backends {log} reference poses consistency: {}",
+        consistency_line(&consistency_at(&reference_scans, &reference_poses))
+    );
 }
