@@ -7,6 +7,12 @@
 //! sees the start hall again. From the bus only: the health report of
 //! `smokenav-slam` must count an accepted loop closure, and the pose on
 //! `slam/pose` must be closer to the world's truth within a second of it.
+//!
+//! The wheels' scale errors alone cancel on a closed loop (every leg out is
+//! driven back), and the front end holds the heading against the aisle
+//! walls, so the drift at the start hall is the random slip's. With
+//! `SLAM_LOOP_DUMP=FILE` the test writes the poses against the truth there
+//! (and `FILE.health`, the accepted closures over time).
 
 use smokenav_platform_bus::{Subscriber, Waiter, topics};
 use smokenav_shared_types::{Health, HealthState, PoseEstimate};
@@ -40,7 +46,7 @@ waypoints = [[24.4, 1.4], [24.4, 6.1], [1.6, 6.1], [1.6, 1.4], [6.0, 1.4]]
 scale_left = 0.03
 scale_right = 0.01
 track_error = 0.02
-slip_per_sqrt_m = 0.03
+slip_per_sqrt_m = 0.1
 "#;
 
 /// Sim seconds per host second (the graph takes nodes 0.3 m apart: 0.1 m per scan is plenty).
@@ -79,7 +85,7 @@ fn drain<T: smokenav_platform_bus::Message>(sub: &Subscriber<T>, into: &mut Vec<
 }
 
 #[test]
-#[ignore = "finds a bug: false closures in the start hall moved slam/pose 1.0-1.4 m in 4 of 5 debug runs; with the ambiguity check 1 of 3 runs still takes one (0.95 m), the others accept a closure that does not help or none; run with --ignored"]
+#[ignore = "finds a bug: the one closure accepted in the start hall (0.36 m of drift there) is false and moves slam/pose 0.7 m along the aisle, to 1.0 m off; 30 of 54 tried are below the score threshold, 20 ambiguous; run with --ignored"]
 fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
     let dir = tempfile::tempdir().unwrap();
     let scenario = Scenario::parse(SCENARIO, std::path::Path::new("aisles-loop.toml")).unwrap();
@@ -189,6 +195,35 @@ fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
         Some((x - t.x).hypot(y - t.y))
     };
 
+    if let Ok(path) = std::env::var("SLAM_LOOP_DUMP") {
+        let mut out = String::new();
+        for (at, p) in &poses {
+            if let Some(t) = truth_at(&truth, p.header.stamp_ns) {
+                let (dx, dy) = (p.x - first.x, p.y - first.y);
+                out += &format!(
+                    "{:.3} {:.3} {:.3} {:.3} {:.3} {:.4} {:.4} {}\n",
+                    at.duration_since(poses[0].0).as_secs_f64(),
+                    t0.x + c * dx - s * dy,
+                    t0.y + s * dx + c * dy,
+                    t.x,
+                    t.y,
+                    p.theta + rot,
+                    t.th,
+                    p.header.stamp_ns
+                );
+            }
+        }
+        let mut h = String::new();
+        for (at, r) in &health {
+            h += &format!(
+                "{:.3} {}\n",
+                at.duration_since(poses[0].0).as_secs_f64(),
+                r.metric("loop_closures_accepted").unwrap_or(f64::NAN)
+            );
+        }
+        std::fs::write(&path, out).unwrap();
+        std::fs::write(format!("{path}.health"), h).unwrap();
+    }
     // Where the error lies at the end (world frame): which way a closure pulled.
     let (_, last_pose) = poses.last().unwrap();
     if let Some(t) = truth_at(&truth, last_pose.header.stamp_ns) {

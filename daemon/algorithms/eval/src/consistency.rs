@@ -92,7 +92,11 @@ mod tests {
     /// A wall along y = 0 seen by `n` passes, pass k shifted across it by `offset(k)`.
     fn passes(n: usize, offset: impl Fn(usize) -> f64) -> Vec<Vec<(f64, f64)>> {
         (0..n)
-            .map(|k| (0..100).map(|i| (i as f64 * 0.05 + 0.025, offset(k) + 0.01)).collect())
+            .map(|k| {
+                (0..100)
+                    .map(|i| (i as f64 * 0.05 + 0.025, offset(k) + 0.01))
+                    .collect()
+            })
             .collect()
     }
 

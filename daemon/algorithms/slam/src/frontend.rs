@@ -144,6 +144,8 @@ pub struct FrontEnd {
     degeneracy: DegeneracyParams,
     /// Scans whose match had at least one direction replaced by the prediction.
     degenerate_matches: u64,
+    /// The local map holds only a scan tracked by heading (see [`Self::track_heading`]).
+    bootstrap_map: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -191,6 +193,7 @@ impl FrontEnd {
             pool: Vec::new(),
             degeneracy: DegeneracyParams::default(),
             degenerate_matches: 0,
+            bootstrap_map: false,
         }
     }
 
@@ -211,11 +214,46 @@ impl FrontEnd {
         odom: &Pose2,
         stamp_ns: u64,
     ) -> Tracked {
+        self.track_as(endpoints, odom, stamp_ns, false)
+    }
+
+    /// Tracks a scan the laser saw only part of (the fusion withheld the
+    /// rest): the match corrects the heading only and the odometry carries
+    /// the position. What the laser still sees past smoke is often one wall
+    /// or part of a room, perhaps with phantoms: matched in full it slid the
+    /// pose along that wall, but any wall says how the robot is turned, and
+    /// odometry's heading is what drifts fastest (a wheel 2 % off turns a
+    /// Pioneer ~3° per metre). The scan stays out of the local map, unless
+    /// the map is empty: a robot that starts with its smoke sensor warming
+    /// up (v2 then assumes smoke) needs a first map to hold its heading
+    /// against. That map is dropped at the first scan matched in full, which
+    /// starts the map afresh rather than matching against a view metres back.
+    pub fn track_heading(
+        &mut self,
+        endpoints: impl Iterator<Item = (f64, f64)>,
+        odom: &Pose2,
+        stamp_ns: u64,
+    ) -> Tracked {
+        self.track_as(endpoints, odom, stamp_ns, true)
+    }
+
+    fn track_as(
+        &mut self,
+        endpoints: impl Iterator<Item = (f64, f64)>,
+        odom: &Pose2,
+        stamp_ns: u64,
+        heading_only: bool,
+    ) -> Tracked {
+        if !heading_only && self.bootstrap_map {
+            self.history.clear();
+            self.bootstrap_map = false;
+        }
         self.decimate(endpoints);
         let stale = self.last_odom.is_some_and(|o| o == *odom);
         let Some(last_pose) = self.last_pose else {
             let pose = *odom;
-            self.accept(pose, odom, stamp_ns, false);
+            self.bootstrap_map = heading_only;
+            self.accept(pose, odom, stamp_ns, false, true);
             return Tracked {
                 pose,
                 score: None,
@@ -244,6 +282,16 @@ impl FrontEnd {
             sigma_r * sigma_r,
         ));
         let (pose, score, degenerate, covariance) = match self.search(&prediction) {
+            Some((matched, score)) if heading_only => {
+                let c = ScanConstraint::from_points(&self.points);
+                let sigma = POINT_SIGMA_CELLS * self.p.resolution;
+                let share = PREDICTION_SIGMA_SHARE * PREDICTION_SIGMA_SHARE;
+                let matched_cov = c.covariance(sigma * sigma, &pred_cov, share, &self.degeneracy);
+                let mut cov = pred_cov * share;
+                cov[(2, 2)] = matched_cov[(2, 2)].min(cov[(2, 2)]);
+                let pose = Pose2::new(prediction.x, prediction.y, matched.theta);
+                (pose, Some(score), 2, cov)
+            }
             Some((matched, score)) => {
                 let c = ScanConstraint::from_points(&self.points);
                 let degenerate = c.degenerate_directions(&self.degeneracy, Some(&pred_cov)) as u8;
@@ -261,7 +309,11 @@ impl FrontEnd {
                 pred_cov * PREDICTION_SIGMA_SHARE * PREDICTION_SIGMA_SHARE,
             ),
         };
-        self.accept(pose, odom, stamp_ns, stale);
+        let into_map = !heading_only || self.history.is_empty();
+        if heading_only && self.history.is_empty() {
+            self.bootstrap_map = true;
+        }
+        self.accept(pose, odom, stamp_ns, stale, into_map);
         Tracked {
             pose,
             score,
@@ -350,7 +402,8 @@ impl FrontEnd {
         last_pose.compose(&Pose2::new(v.x * k, v.y * k, v.theta * k))
     }
 
-    fn accept(&mut self, pose: Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) {
+    /// Takes `pose` as the scan's; `into_map`: its points join the local map.
+    fn accept(&mut self, pose: Pose2, odom: &Pose2, stamp_ns: u64, stale: bool, into_map: bool) {
         if !stale {
             self.fresh_before = self.fresh;
             self.fresh = Some(Fresh {
@@ -362,7 +415,7 @@ impl FrontEnd {
         self.last_pose = Some(pose);
         self.last_odom = Some(*odom);
         self.last_stamp_ns = stamp_ns;
-        if self.points.len() >= MIN_POINTS {
+        if into_map && self.points.len() >= MIN_POINTS {
             let (s, c) = pose.theta.sin_cos();
             // Reuse the buffer of the scan that leaves the history.
             let mut world = if self.history.len() >= self.p.max_scans.max(1) {

@@ -17,9 +17,9 @@
 //!    [`OdomPolicy::max_gap_ns`] old, and the last odometry used (counted)
 //!    beyond that;
 //! 4. the front end corrects the odometry by correlative matching against the
-//!    last scans ([`FrontEnd`]), unless the fusion withheld more than
-//!    [`MAX_WITHHELD_TO_MATCH`] of the scan from the laser: then the
-//!    odometry carries the pose;
+//!    last scans ([`FrontEnd`]); where the fusion withheld more than
+//!    [`MAX_WITHHELD_TO_MATCH`] of the scan from the laser, the match
+//!    corrects the heading only and the odometry carries the position;
 //! 5. the motion filter decides whether the scan is used
 //!    ([`SlamBackend::process`]) or only moves the estimate
 //!    ([`SlamBackend::predict`]).
@@ -39,12 +39,14 @@ use smokenav_shared_types::Pose2;
 use smokenav_shared_types::{FusedScan, LaserScan, Odometry, OdometryFlags};
 
 /// A scan the fusion withheld more than this share of beams from the laser
-/// (painted from the sonar or dropped as smoke) is not matched by the front
-/// end: what is left is the laser's view past the edge of the smoke, often
-/// one wall or a partial room, and matching it slid the pose along that wall
-/// (on the dense-smoke trial it made the graph's map error 0.17 m against
-/// 0.09 m with odometry through the smoke). Such scans also stay out of the
-/// front end's local map.
+/// (painted from the sonar or dropped as smoke) corrects only the heading in
+/// the front end ([`FrontEnd::track_heading`]): what is left is the laser's
+/// view past the edge of the smoke, often one wall or a partial room, and
+/// matching it in full slid the pose along that wall (on the dense-smoke
+/// trial the graph's map error was 0.17 m, against 0.09 m with odometry
+/// through the smoke), but left to odometry entirely the heading drifted
+/// (a Pioneer with a wheel 2 % off turned 16° in its first metre while the
+/// smoke sensor warmed up). Such scans stay out of the front end's local map.
 pub const MAX_WITHHELD_TO_MATCH: f64 = 0.1;
 
 /// How long a scan waits for its odometry, and how much odometry is kept.
@@ -88,9 +90,10 @@ pub struct PipelineStats {
     pub empty_scans: u64,
     /// Scans whose front-end match was not trusted (its prediction was used).
     pub frontend_fallbacks: u64,
-    /// Scans left to odometry because the fusion withheld more than
-    /// [`MAX_WITHHELD_TO_MATCH`] of them from the laser (also counted in
-    /// `frontend_fallbacks`).
+    /// Scans whose position was left to odometry (their heading matched)
+    /// because the fusion withheld more than [`MAX_WITHHELD_TO_MATCH`] of
+    /// them from the laser (counted in `frontend_fallbacks` too when even
+    /// the heading could not be matched).
     pub frontend_withheld: u64,
 }
 
@@ -281,9 +284,13 @@ impl SlamPipeline {
                 let laser = self
                     .endpoints
                     .iter()
-                    .filter(|e| trusted && e.kind == BeamKind::Laser)
+                    .filter(|e| e.kind == BeamKind::Laser)
                     .map(|e| (e.x, e.y));
-                let tracked = fe.track(laser, &odom, scan.stamp_ns);
+                let tracked = if trusted {
+                    fe.track(laser, &odom, scan.stamp_ns)
+                } else {
+                    fe.track_heading(laser, &odom, scan.stamp_ns)
+                };
                 if tracked.score.is_none() && self.last_corrected.is_some() {
                     self.stats.frontend_fallbacks += 1;
                 }

@@ -649,7 +649,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     }
     let _ = writeln!(
         report,
-        "pipeline           {} held back by the motion filter, {} front-end fallbacks ({} of them scans mostly withheld from the laser), {} scans without ranges",
+        "pipeline           {} held back by the motion filter, {} front-end fallbacks to odometry, {} scans mostly withheld from the laser (heading matched, position by odometry), {} scans without ranges",
         stats.held_back, stats.frontend_fallbacks, stats.frontend_withheld, stats.empty_scans
     );
     if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {

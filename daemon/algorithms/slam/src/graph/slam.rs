@@ -317,8 +317,9 @@ impl CellSet {
     }
 
     fn index(&self, x: f64, y: f64) -> Option<usize> {
-        let ix = (x / self.cell).floor() as i32 - self.x0;
-        let iy = (y / self.cell).floor() as i32 - self.y0;
+        // Saturating: a point far off (or a set never sized) is outside, not an overflow.
+        let ix = ((x / self.cell).floor() as i32).saturating_sub(self.x0);
+        let iy = ((y / self.cell).floor() as i32).saturating_sub(self.y0);
         ((0..self.w).contains(&ix) && (0..self.h).contains(&iy))
             .then(|| (iy * self.w + ix) as usize)
     }
@@ -331,7 +332,12 @@ impl CellSet {
 
     /// Every cell the segment a–b passes through (sampled at half a cell).
     fn insert_ray(&mut self, a: (f64, f64), b: (f64, f64)) {
-        let n = ((b.0 - a.0).hypot(b.1 - a.1) / (0.5 * self.cell)).ceil() as usize;
+        let n = ((b.0 - a.0).hypot(b.1 - a.1) / (0.5 * self.cell)).ceil();
+        // A beam is at most tens of metres: more samples than that is a bad input.
+        if !(n.is_finite() && n <= 1e6) {
+            return;
+        }
+        let n = n as usize;
         for i in 0..=n {
             let t = i as f64 / n.max(1) as f64;
             self.insert(a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
@@ -341,11 +347,11 @@ impl CellSet {
     /// The cell of (x, y) or one of its 8 neighbours is in the set (a match
     /// is good to about a cell; an endpoint a cell behind a seen wall counts).
     fn near(&self, x: f64, y: f64) -> bool {
-        let ix = (x / self.cell).floor() as i32 - self.x0;
-        let iy = (y / self.cell).floor() as i32 - self.y0;
+        let ix = ((x / self.cell).floor() as i32).saturating_sub(self.x0);
+        let iy = ((y / self.cell).floor() as i32).saturating_sub(self.y0);
         (-1..=1).any(|dy| {
             (-1..=1).any(|dx| {
-                let (cx, cy) = (ix + dx, iy + dy);
+                let (cx, cy) = (ix.saturating_add(dx), iy.saturating_add(dy));
                 (0..self.w).contains(&cx)
                     && (0..self.h).contains(&cy)
                     && self.on[(cy * self.w + cx) as usize]
@@ -693,7 +699,8 @@ impl GraphSlam {
             self.stats.closures_ambiguous += 1;
             return None;
         }
-        if self.p.closure_min_overlap > 0.0
+        // The map covariance reads the scan's cells the overlap test leaves.
+        if (self.p.closure_min_overlap > 0.0 || self.p.closure_map_covariance)
             && self.overlap(k, lo, hi, &matched) < self.p.closure_min_overlap
         {
             self.stats.closures_low_overlap += 1;
@@ -1579,6 +1586,26 @@ mod tests {
         (2.0, 1.3, 2.0, 0.9),
         (-1.5, -1.2, -1.5, -0.8),
     ];
+
+    /// The map covariance reads the cells the overlap test leaves; with the
+    /// overlap threshold off (the default) that test was skipped, and the
+    /// closure search read a cell set never sized: an overflow in a debug
+    /// build (the SLAM process died), in a release one a closure as wide as
+    /// the search window in every direction.
+    #[test]
+    fn the_map_covariance_works_with_the_overlap_threshold_off() {
+        let at = Pose2::new(3.0, 0.0, 0.0);
+        let p = GraphParams {
+            closure_map_covariance: true,
+            closure_min_overlap: 0.0,
+            ..GraphParams::default()
+        };
+        let (mut slam, j, last, k) = target_and_candidate(&FEATURES, &FEATURES, at, at, p);
+        let edge = slam.verify_closure(j, k, last).expect("a closure");
+        // Nodes that saw the cross wall and the pillars fix it in x and y.
+        let (ix, iy) = (edge.information[0][0], edge.information[1][1]);
+        assert!(ix > 50.0 && iy > 50.0, "information x {ix}, y {iy}");
+    }
 
     #[test]
     fn a_scan_that_sees_past_what_the_target_nodes_saw_is_refused_for_low_overlap() {

@@ -348,39 +348,61 @@ fn fused_scans_carry_the_smoke_noise_and_the_beam_sources() {
     assert_eq!(s.beams[0].kind, BeamKind::Laser);
 }
 
-/// Scans down the room with odometry 10 % long, from the 11th on marked as
-/// mostly withheld from the laser (smoke) with share `withheld`: returns the
-/// front end's motion over those ten scans and the stats.
-fn front_end_through_withheld_scans(withheld: f64) -> (f64, PipelineStats) {
+/// Scans down the room with odometry 10 % long and turning 0.01 rad a step
+/// the robot does not turn, from scan `from` on marked as mostly withheld
+/// from the laser (smoke) with share `withheld`: returns the front end's motion
+/// over those ten scans, its heading error at the end and the stats.
+fn front_end_through_withheld_scans(withheld: f64, from: u64) -> (f64, f64, PipelineStats) {
     let mut slam = pipeline(&cfg(2), false);
     let mut truth = Pose2::new(-3.5, -1.5, 0.0);
     let mut odom = Pose2::new(10.0, 20.0, 1.0);
     let mut before = Pose2::default();
+    let mut first = None;
     for k in 0..20u64 {
         let mut scan = scan_at(&truth, k * 100_000_000);
-        if k >= 10 {
+        if k >= from {
             scan.withheld_share = withheld;
         }
         slam.process(&scan, &odom);
+        first.get_or_insert(slam.frontend_pose().unwrap());
         if k == 9 {
             before = slam.frontend_pose().unwrap();
         }
         truth = truth.compose(&Pose2::new(0.1, 0.0, 0.0));
-        odom = odom.compose(&Pose2::new(0.11, 0.0, 0.0));
+        odom = odom.compose(&Pose2::new(0.11, 0.0, 0.01));
     }
     let after = slam.frontend_pose().unwrap();
-    (before.between(&after).translation_norm(), slam.stats())
+    // The robot never turned: the heading should stay the first scan's.
+    let heading_error =
+        smokenav_shared_types::odom::normalize_angle(after.theta - first.unwrap().theta);
+    (
+        before.between(&after).translation_norm(),
+        heading_error.abs(),
+        slam.stats(),
+    )
 }
 
 #[test]
-fn scans_mostly_withheld_from_the_laser_are_left_to_odometry() {
-    // Matched, the front end follows the room: 1 m over the last ten steps.
-    let (matched, stats) = front_end_through_withheld_scans(MAX_WITHHELD_TO_MATCH);
+fn scans_mostly_withheld_from_the_laser_keep_the_heading_and_follow_odometry_in_position() {
+    // Matched, the front end follows the room: 1 m over the last ten steps, heading held.
+    let (matched, heading, stats) = front_end_through_withheld_scans(MAX_WITHHELD_TO_MATCH, 10);
     assert!((matched - 1.0).abs() < 0.03, "{matched} m");
+    assert!(heading < 0.02, "{heading} rad");
     assert_eq!(stats.frontend_withheld, 0);
-    // Withheld, it follows the odometry's 1.1 m.
-    let (odometry, stats) = front_end_through_withheld_scans(0.5);
-    assert!((odometry - 1.1).abs() < 1e-6, "{odometry} m");
+    // Withheld, the position follows the odometry's 1.1 m, but the match
+    // still holds the heading the odometry turned by 0.1 rad.
+    let (odometry, heading, stats) = front_end_through_withheld_scans(0.5, 10);
+    assert!((odometry - 1.1).abs() < 0.02, "{odometry} m");
+    assert!(heading < 0.02, "{heading} rad");
     assert_eq!(stats.frontend_withheld, 10);
-    assert!(stats.frontend_fallbacks >= 10, "{stats:?}");
+}
+
+#[test]
+fn a_robot_whose_scans_are_withheld_from_the_start_still_holds_its_heading() {
+    // The smoke sensor warming up: v2 assumes smoke from the first scan. The
+    // first withheld scan becomes the local map the others hold the heading against.
+    let (odometry, heading, stats) = front_end_through_withheld_scans(0.5, 0);
+    assert!((odometry - 1.1).abs() < 0.02, "{odometry} m");
+    assert!(heading < 0.02, "{heading} rad");
+    assert_eq!(stats.frontend_withheld, 20);
 }
