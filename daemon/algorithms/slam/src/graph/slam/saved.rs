@@ -291,12 +291,7 @@ fn read_scans<R: BufRead>(input: R, file: &Path) -> Result<SavedScans, SavedGrap
                 })
             })
             .collect::<Result<Vec<_>, SavedGraphError>>()?;
-        nodes.push(Node {
-            points,
-            beams,
-            sensor,
-            withheld_share: 0.0,
-        });
+        nodes.push(Node::new(points, beams, sensor, 0.0));
     }
     if l.next()?.is_some() {
         return Err(l.err(format!("more records after the {n} nodes NODES announced")));
