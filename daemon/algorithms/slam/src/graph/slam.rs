@@ -235,12 +235,17 @@ impl Node {
         }
     }
 
-    /// The node, at `pose`, saw the point `(x, y)` (map frame): one of its
-    /// beams within `tolerance_m` of it sideways reached at least as far,
-    /// less `tolerance_m` (it passed through the point or ended there).
-    fn saw(&self, pose: &Pose2, x: f64, y: f64, tolerance_m: f64) -> bool {
-        let sensor = pose.compose(&self.sensor);
-        let p = sensor.inverse().compose(&Pose2::new(x, y, 0.0));
+    /// The transform from the map frame into the node's sensor frame, the node at `pose`.
+    fn sensor_from_map(&self, pose: &Pose2) -> Pose2 {
+        pose.compose(&self.sensor).inverse()
+    }
+
+    /// The node saw the point `(x, y)` (map frame; `from_map` from
+    /// [`Self::sensor_from_map`]): one of its beams within `tolerance_m` of
+    /// it sideways reached at least as far, less `tolerance_m` (it passed
+    /// through the point or ended there).
+    fn saw(&self, from_map: &Pose2, x: f64, y: f64, tolerance_m: f64) -> bool {
+        let p = from_map.compose(&Pose2::new(x, y, 0.0));
         let d = p.x.hypot(p.y);
         if !d.is_finite() {
             return false;
@@ -299,6 +304,8 @@ pub struct GraphSlam {
     /// the match, and map points in the new node's frame.
     near_scan: CellSet,
     map_points: Vec<(f64, f64)>,
+    /// Scratch of the overlap test: each target node's sensor frame.
+    sensor_frames: Vec<Pose2>,
     /// Online: the thread the closure search and optimisation run on (inline when `None`).
     worker: Option<ClosureWorker>,
     /// Online: the newest node waiting for the worker.
@@ -456,6 +463,7 @@ impl GraphSlam {
             shared: None,
             near_scan: CellSet::default(),
             map_points: Vec::new(),
+            sensor_frames: Vec::new(),
             worker: None,
             pending_closure: None,
         }
@@ -810,13 +818,22 @@ impl GraphSlam {
             max = (max.0.max(x), max.1.max(y));
         }
         self.near_scan.reset(OVERLAP_CELL_M, min, max);
+        // Each target node's sensor frame once, not once per endpoint.
+        self.sensor_frames.clear();
+        self.sensor_frames.extend(
+            poses[lo..=hi]
+                .iter()
+                .zip(&self.nodes[lo..=hi])
+                .map(|(pose, node)| node.sensor_from_map(pose)),
+        );
         let mut inside = 0usize;
         for (x, y) in points.iter().map(world) {
             self.near_scan.insert(x, y);
-            let seen = poses[lo..=hi]
+            let seen = self
+                .sensor_frames
                 .iter()
                 .zip(&self.nodes[lo..=hi])
-                .any(|(pose, node)| node.saw(pose, x, y, OVERLAP_TOLERANCE_M));
+                .any(|(from_map, node)| node.saw(from_map, x, y, OVERLAP_TOLERANCE_M));
             inside += usize::from(seen);
         }
         inside as f64 / points.len().max(1) as f64
@@ -1648,7 +1665,7 @@ mod tests {
             },
         ];
         let node = Node::new(Vec::new(), beams, Pose2::new(0.2, 0.0, 0.0), 0.0);
-        let pose = Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2);
+        let pose = node.sensor_from_map(&Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2));
         // Ahead is +y in the map; the sensor is at (1, 0.2).
         assert!(node.saw(&pose, 1.0, 2.2, 0.15), "on the first beam");
         assert!(node.saw(&pose, 1.0, 4.2, 0.15), "at its end");
