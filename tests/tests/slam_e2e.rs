@@ -463,11 +463,24 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
         ])
         .args(["--save-graph", graph.to_str().unwrap()])
         .args(["--out", dir.path().join("offline").to_str().unwrap()])
+        .arg("--reference")
+        .arg(workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"))
         .output()?;
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
+    );
+    // The report scores the run against the reference: ATE, RPE and the
+    // relations metric (Kümmerle et al. 2009) over the 30 reference poses.
+    let report = String::from_utf8_lossy(&out.stdout);
+    let line = report
+        .lines()
+        .find(|l| l.starts_with("ATE trajectory"))
+        .unwrap_or_else(|| panic!("no ATE line in:\n{report}"));
+    assert!(
+        line.contains("30 poses matched") && line.contains("relations ") && line.contains("(29)"),
+        "{line}"
     );
 
     let cfg = profile(dir.path(), "pioneer-3dx.toml", |c| {

@@ -54,6 +54,12 @@ pub struct FuzzySection {
     pub laser_range_error_frac: f64,
     /// Peak laser confidence where the paper's K(r) fit falls below it (past ~3.65 m).
     pub laser_k_min: f64,
+    /// A laser return in smoke is worth less: what it says of the obstacle
+    /// and of the free space before it is divided by the smoke's noise factor
+    /// (the σ multiplier of `[slam]`'s `laser_variance_*` / `smoke_level_*`
+    /// model, up to 1.66 in fog), so nothing the laser saw in dense smoke
+    /// reaches the combined map's 0.65. Off: the paper's clear-air model.
+    pub laser_smoke_discount: bool,
     /// Peak confidence K of a sonar return.
     pub sonar_k: f64,
     /// Sonar range error bound δr, m …
@@ -104,6 +110,7 @@ impl Default for FuzzySection {
             laser_range_error_m: 0.01,
             laser_range_error_frac: 0.01,
             laser_k_min: 0.2,
+            laser_smoke_discount: true,
             sonar_k: 0.5,
             sonar_range_error_m: 0.02,
             sonar_range_error_frac: 0.01,

@@ -8,7 +8,8 @@
 //! backend = "vote"
 //! [slam.vote]
 //! members = ["rbpf", "graph", "fuzzy"]   # the first is the reference frame
-//! rule = "majority"                      # or "weighted"
+//! rule = "majority"                      # or "weighted", "consensus"
+//! agree_radius_m = 0.1                   # consensus: walls this close are one wall
 //! max_residual_m = 0.15                  # alignment residual above it: flagged, left out
 //! ```
 
@@ -34,6 +35,11 @@ pub enum VoteRule {
     /// is worth (the fuzzy member in smoke carries the vote).
     #[serde(rename = "weighted")]
     Weighted,
+    /// The paper's majority over walls within `agree_radius_m` of each other,
+    /// on the geometry of the member whose walls the others confirm most: a
+    /// wall copied a cell or two apart by two members is one wall, not two.
+    #[serde(rename = "consensus")]
+    Consensus,
 }
 
 impl VoteRule {
@@ -41,7 +47,16 @@ impl VoteRule {
         match self {
             VoteRule::Majority => "majority",
             VoteRule::Weighted => "weighted",
+            VoteRule::Consensus => "consensus",
         }
+    }
+
+    /// Every rule, the configured default first.
+    pub const ALL: [VoteRule; 3] = [VoteRule::Majority, VoteRule::Weighted, VoteRule::Consensus];
+
+    /// The rule named `name` (`majority`, `weighted`, `consensus`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|r| r.as_str() == name)
     }
 }
 
@@ -52,8 +67,11 @@ pub struct VoteSection {
     /// The back-ends that vote (2–3 distinct, not `vote`); the first one's map
     /// is the frame the others are aligned to and the fused map's geometry.
     pub members: Vec<SlamBackendKind>,
-    /// `majority` (the paper's, default) or `weighted`.
+    /// `majority` (the paper's, default), `weighted` or `consensus`.
     pub rule: VoteRule,
+    /// `consensus`: two members' walls this close (a square window) are the
+    /// same wall, m.
+    pub agree_radius_m: f64,
     /// A member whose alignment residual (RMS distance of the nearest 80 % of
     /// its wall cells to the reference's walls, truncated at
     /// `align_truncation_m`) is above this is flagged in health and left out
@@ -89,6 +107,7 @@ impl Default for VoteSection {
                 SlamBackendKind::Fuzzy,
             ],
             rule: VoteRule::Majority,
+            agree_radius_m: 0.1,
             max_residual_m: 0.15,
             align_window_m: 0.5,
             align_window_rad: 0.1,
@@ -118,6 +137,7 @@ impl Validate for VoteSection {
                 v.fail(k("members"), format!("{} is named twice", m.as_str()));
             }
         }
+        v.within(&k("agree_radius_m"), self.agree_radius_m, 0.0, 1.0);
         v.within(&k("max_residual_m"), self.max_residual_m, 0.001, 10.0);
         v.within(&k("align_window_m"), self.align_window_m, 0.0, 10.0);
         v.within(&k("align_window_rad"), self.align_window_rad, 0.0, 3.2);

@@ -19,7 +19,9 @@ use smokenav_algorithms_slam::offline::LogScans;
 use smokenav_algorithms_slam::scan::{EndpointLimits, RangeScan};
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, SlamUpdate, StampedPose};
-use smokenav_platform_config::{RobotConfig, SlamBackendKind, SlamMode, SlamSection, parse_toml};
+use smokenav_platform_config::{
+    RobotConfig, SlamBackendKind, SlamMode, SlamSection, VoteRule, parse_toml,
+};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_recording::bag::{Bag, RoleMap};
 use smokenav_shared_types::{AnyMessage, FusedScan, Pose2};
@@ -702,14 +704,19 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
                 Ok(r) => {
                     let _ = writeln!(
                         report,
-                        "ATE {name:<14} RMS {:.3} m, max {:.3} m (at {:.6}), {} poses matched; RPE {:.3} m, {:.2}° per {} s",
+                        "ATE {name:<14} RMS {:.3} m, max {:.3} m (at {:.6}), {} poses matched; RPE {:.3} m, {:.2}° per {} s; relations {:.4} ± {:.4} m, {:.3} ± {:.3}° ({})",
                         r.ate_m.rmse,
                         r.ate_m.max,
                         r.ate_max_at_s,
                         r.pairs,
                         r.rpe_translation_m.rmse,
                         r.rpe_rotation_deg.rmse,
-                        r.rpe_delta_s
+                        r.rpe_delta_s,
+                        r.relations_translation_m.mean,
+                        r.relations_translation_m.std,
+                        r.relations_rotation_deg.mean,
+                        r.relations_rotation_deg.std,
+                        r.relations
                     );
                 }
                 Err(e) => {
@@ -847,7 +854,24 @@ fn vote_report(
         let _ = writeln!(report, "{line}");
     }
     if let (Some(t), Some(f)) = (truth, fused) {
-        let _ = writeln!(report, "  vote map error    {}", map_error(t, f));
+        let own = vote.params().section.rule;
+        let _ = writeln!(
+            report,
+            "  vote map error    {} ({}, the configured rule)",
+            map_error(t, f),
+            own.as_str()
+        );
+        // The other rules over the same aligned member maps, for comparison.
+        for rule in VoteRule::ALL.into_iter().filter(|&r| r != own) {
+            if let Some(m) = vote.map_with_rule(rule) {
+                let _ = writeln!(
+                    report,
+                    "  vote map error    {} ({})",
+                    map_error(t, &m),
+                    rule.as_str()
+                );
+            }
+        }
         smokenav_platform_map::save_map_server(t, out, "truth")?;
     }
     Ok(())

@@ -2,8 +2,8 @@
 //! recording through SmokeNav v2 fusion, then one SLAM run with
 //! `backend = "vote"` in lockstep (every member sees every scan, as offline
 //! `smokenav slam --backend vote`), each member's map and the fused one
-//! scored against the ground truth. Both rules are scored on the same run:
-//! the other rule re-votes the same aligned member maps.
+//! scored against the ground truth. Every rule is scored on the same run:
+//! the other rules re-vote the same aligned member maps.
 
 use super::compare::{self, Emitted};
 use super::recording::SensorLog;
@@ -68,11 +68,11 @@ pub fn run(
         .downcast_ref::<VoteSlam>()
         .ok_or_else(|| anyhow::anyhow!("backend = \"vote\" did not make a vote"))?;
     let rule = p.slam.vote.rule;
-    let other = match rule {
-        VoteRule::Weighted => VoteRule::Majority,
-        VoteRule::Majority => VoteRule::Weighted,
-    };
-    let other_map = vote.map_with_rule(other);
+    let others: Vec<(VoteRule, Option<OccupancyGrid>)> = VoteRule::ALL
+        .into_iter()
+        .filter(|&r| r != rule)
+        .map(|r| (r, vote.map_with_rule(r)))
+        .collect();
     let st = vote.status();
     let err =
         |m: Option<&OccupancyGrid>| compare::score_map(truth_map, m).ok().map(|r| r.knn_error_m);
@@ -102,13 +102,15 @@ pub fn run(
         residual_m: None,
         health: format!("pose from {}", st.pose_member.unwrap_or("-")),
     });
-    rows.push(VoteRow {
-        name: format!("vote ({})", other.as_str()),
-        map_error_m: err(other_map.as_ref()),
-        ate_m: ate,
-        residual_m: None,
-        health: "same members, other rule".into(),
-    });
+    for (other, map) in &others {
+        rows.push(VoteRow {
+            name: format!("vote ({})", other.as_str()),
+            map_error_m: err(map.as_ref()),
+            ate_m: ate,
+            residual_m: None,
+            health: "same members, other rule".into(),
+        });
+    }
     Ok(VoteComparison {
         scenario: scenario.to_string(),
         rule: rule.as_str().to_string(),

@@ -66,6 +66,7 @@ pub struct ConfidenceModel {
     pub laser_dr_m: f64,
     pub laser_dr_frac: f64,
     pub laser_k_min: f64,
+    pub laser_smoke_discount: bool,
     pub sonar_k: f64,
     pub sonar_dr_m: f64,
     pub sonar_dr_frac: f64,
@@ -87,11 +88,26 @@ impl ConfidenceModel {
             laser_dr_m: c.laser_range_error_m,
             laser_dr_frac: c.laser_range_error_frac,
             laser_k_min: c.laser_k_min,
+            laser_smoke_discount: c.laser_smoke_discount,
             sonar_k: c.sonar_k,
             sonar_dr_m: c.sonar_range_error_m,
             sonar_dr_frac: c.sonar_range_error_frac,
             sonar_half_cone: (c.sonar_cone() / 2.0).to_radians(),
             unknown: c.unknown_level,
+        }
+    }
+
+    /// What a laser return is worth at the scan's smoke noise factor `f` (the
+    /// σ multiplier of `[slam]`'s smoke model, ≥ 1): 1 ÷ f, scaling both its
+    /// obstacle and its free-space confidence; 1 with the discount off.
+    /// Both, so the share of a cell's evidence that says "obstacle" (the
+    /// navigation map) is the same, while the combined map of eq. 7 is
+    /// less sure of what a laser saw in smoke: a phantom there stays weak.
+    pub fn laser_worth(&self, noise_factor: f64) -> f64 {
+        if self.laser_smoke_discount && noise_factor.is_finite() {
+            1.0 / noise_factor.max(1.0)
+        } else {
+            1.0
         }
     }
 

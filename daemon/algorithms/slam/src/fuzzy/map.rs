@@ -28,6 +28,10 @@ pub struct FuzzyBeam {
     pub dtheta: f64,
     /// Lateral confidence of this beam inside its sonar cone (1 for a laser beam).
     pub lateral: f64,
+    /// What the reading is worth at all, scaling both what it says of the
+    /// obstacle and of the free space before it: 1, or 1 ÷ the smoke's noise
+    /// factor for a laser return in smoke ([`ConfidenceModel::laser_worth`]).
+    pub worth: f64,
     pub kind: BeamKind,
 }
 
@@ -54,6 +58,7 @@ pub fn fuzzy_beams(
     } else {
         model.laser_dtheta
     };
+    let laser_worth = model.laser_worth(scan.laser_noise_factor);
     let mut i = 0;
     while i < beams.len() {
         let b = &beams[i];
@@ -75,6 +80,7 @@ pub fn fuzzy_beams(
                     dr: model.range_error(BeamKind::Laser, r),
                     dtheta: model.laser_dtheta,
                     lateral: 1.0,
+                    worth: laser_worth,
                     kind: BeamKind::Laser,
                 });
                 i += 1;
@@ -104,6 +110,7 @@ pub fn fuzzy_beams(
                         dr: model.range_error(BeamKind::Sonar, r),
                         dtheta: spacing.max(model.laser_dtheta),
                         lateral: confidence::parabola(a - centre, bound),
+                        worth: 1.0,
                         kind: BeamKind::Sonar,
                     });
                 }
@@ -284,7 +291,8 @@ impl FuzzyGrid {
                 let (rx, ry) = (cx - sensor.x, cy - sensor.y);
                 let rc = rx.hypot(ry);
                 let tc = ry.atan2(rx);
-                let p = b.lateral
+                let p = b.worth
+                    * b.lateral
                     * confidence::free(
                         rc,
                         a + normalize_angle(tc - a),
@@ -315,7 +323,9 @@ impl FuzzyGrid {
                     let (rx, ry) = (cx - sensor.x, cy - sensor.y);
                     let rc = rx.hypot(ry);
                     let tc = a + normalize_angle(ry.atan2(rx) - a);
-                    let o = b.lateral * confidence::occupied(b.k, rc, tc, b.range, a, dr, dth(rc));
+                    let o = b.worth
+                        * b.lateral
+                        * confidence::occupied(b.k, rc, tc, b.range, a, dr, dth(rc));
                     if o as f32 > self.mo[i] {
                         self.mo[i] = o as f32;
                     }
@@ -493,6 +503,46 @@ mod tests {
         let edge = g.mo[g.index(2.0 * c, 2.0 * s).unwrap()];
         assert!(axis <= 0.5 && axis > 0.3, "{axis}");
         assert!(edge < axis / 2.0, "{edge} vs {axis}");
+    }
+
+    #[test]
+    fn a_laser_return_in_smoke_never_reaches_a_confident_wall_and_keeps_its_evidence_share() {
+        // A phantom of smoke 0.3 m ahead: the URG's K there is about 0.75, a
+        // confident cell (≥ 0.65) in clear air.
+        // The beam ends on the centre of cell (0.325, 0.025).
+        let (angle, range) = (0.025f32.atan2(0.325), 0.325f32.hypot(0.025));
+        let paint = |model: &ConfidenceModel, factor: f64| {
+            let mut s = scan(&[(angle, range, BeamKind::Laser)]);
+            s.laser_noise_factor = factor;
+            let mut beams = Vec::new();
+            fuzzy_beams(&s, model, 80.0, 8.0, &mut beams);
+            let mut g = FuzzyGrid::square(0.05, 3.0);
+            g.paint(&Pose2::default(), &beams, 8.0);
+            let end = g.index(0.325, 0.025).unwrap();
+            let before = g.index(0.13, 0.01).unwrap();
+            (g.combined(end, 0.3), g.mo[end], g.ms[before], g)
+        };
+        let m = ConfidenceModel::default();
+        let (clear, mo_clear, ms_clear, _) = paint(&m, 1.0);
+        assert!(clear >= 0.65, "clear air: {clear}");
+        // Fog: σ × 1.658 (Sevcik & Oh's 13.75 vs 5 mm²), the most `[slam]`'s model gives.
+        let fog = (13.75f64 / 5.0).sqrt();
+        let (smoky, mo_smoke, ms_smoke, g) = paint(&m, fog);
+        assert!(smoky < 0.65 && smoky > 0.3, "dense smoke: {smoky}");
+        assert!((f64::from(mo_smoke) - f64::from(mo_clear) / fog).abs() < 1e-6);
+        assert!((f64::from(ms_smoke) - f64::from(ms_clear) / fog).abs() < 1e-6);
+        // Both halves of the evidence scaled alike: the navigation map is unchanged.
+        let (_, _, _, g_clear) = paint(&m, 1.0);
+        assert_eq!(g.to_evidence_grid().cells, g_clear.to_evidence_grid().cells);
+        // The paper's clear-air model when the discount is off.
+        let off = ConfidenceModel {
+            laser_smoke_discount: false,
+            ..Default::default()
+        };
+        assert_eq!(paint(&off, fog).0, clear);
+        // A factor below 1 or not a number never makes a reading worth more.
+        assert_eq!(paint(&m, 0.5).0, clear);
+        assert_eq!(paint(&m, f64::NAN).0, clear);
     }
 
     #[test]

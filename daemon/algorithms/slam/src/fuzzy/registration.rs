@@ -75,7 +75,8 @@ pub fn occupied_points(g: &FuzzyGrid, max: usize, out: &mut Vec<FuzzyPoint>) {
 /// while the robot drives on (the dense-smoke trial lost the robot so).
 pub fn reading_points(sensor: &Pose2, beams: &[FuzzyBeam], max: usize, out: &mut Vec<FuzzyPoint>) {
     out.clear();
-    let matched = |b: &&FuzzyBeam| b.hit && b.kind == BeamKind::Laser && b.k * b.lateral > 0.0;
+    let matched =
+        |b: &&FuzzyBeam| b.hit && b.kind == BeamKind::Laser && b.k * b.lateral * b.worth > 0.0;
     let n = beams.iter().filter(matched).count();
     let stride = n.div_ceil(max.max(1)).max(1);
     for (k, b) in beams.iter().filter(matched).enumerate() {
@@ -84,7 +85,7 @@ pub fn reading_points(sensor: &Pose2, beams: &[FuzzyBeam], max: usize, out: &mut
             out.push(FuzzyPoint {
                 x: (sensor.x + c * b.range) as f32,
                 y: (sensor.y + s * b.range) as f32,
-                w: (b.k * b.lateral) as f32,
+                w: (b.k * b.lateral * b.worth) as f32,
             });
         }
     }

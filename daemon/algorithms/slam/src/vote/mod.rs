@@ -49,7 +49,7 @@ use crate::scan::{BeamKind, RangeScan};
 use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
 use nalgebra::Matrix3;
-use rule::{CellState, WeightedVote, majority, weighted};
+use rule::{CellState, Consensus, WeightedVote, majority, weighted};
 use smokenav_platform_config::{SlamSection, VoteRule, VoteSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
@@ -194,6 +194,11 @@ struct Fuser {
     out: FusedOut,
     votes: Vec<CellState>,
     wvotes: Vec<WeightedVote>,
+    /// Member-major resampled cells, their states and the fused states (scratch).
+    values: Vec<i8>,
+    states: Vec<CellState>,
+    fused_states: Vec<CellState>,
+    consensus: Consensus,
 }
 
 impl Fuser {
@@ -213,6 +218,10 @@ impl Fuser {
             },
             votes: Vec::with_capacity(members),
             wvotes: Vec::with_capacity(members),
+            values: Vec::new(),
+            states: Vec::new(),
+            fused_states: Vec::new(),
+            consensus: Consensus::default(),
         }
     }
 
@@ -329,55 +338,70 @@ impl Fuser {
                 (i, g, a, wgt)
             })
             .collect();
-        let mut values = vec![-1i8; maps.len()];
-        let block = &mut (None::<(i32, i32)>, 0.0f64);
-        for y in 0..h {
-            let fy = y as f64;
-            for x in 0..w {
-                let fx = x as f64;
-                for (k, (_, g, a, _)) in maps.iter().enumerate() {
+        // Every member's cell for every reference cell, member-major, then the vote.
+        let (n, k_n) = (w * h, maps.len());
+        self.values.clear();
+        self.values.resize(k_n * n, -1);
+        for (k, (_, g, a, _)) in maps.iter().enumerate() {
+            let layer = &mut self.values[k * n..(k + 1) * n];
+            for y in 0..h {
+                let fy = y as f64;
+                for x in 0..w {
+                    let fx = x as f64;
                     let mx = a[0] * fx + a[1] * fy + a[2];
                     let my = a[3] * fx + a[4] * fy + a[5];
-                    values[k] = if mx >= 0.0
-                        && my >= 0.0
-                        && (mx as usize) < g.width
-                        && (my as usize) < g.height
+                    if mx >= 0.0 && my >= 0.0 && (mx as usize) < g.width && (my as usize) < g.height
                     {
-                        g.cells[my as usize * g.width + mx as usize]
-                    } else {
-                        -1
-                    };
+                        layer[y * w + x] = g.cells[my as usize * g.width + mx as usize];
+                    }
                 }
-                let state = match rule {
-                    VoteRule::Majority => {
-                        self.votes.clear();
-                        self.votes.extend(values.iter().map(|&v| CellState::of(v)));
-                        majority(&self.votes)
+            }
+        }
+        self.states.clear();
+        self.states
+            .extend(self.values.iter().map(|&v| CellState::of(v)));
+        self.fused_states.clear();
+        self.fused_states.resize(n, CellState::Unknown);
+        match rule {
+            VoteRule::Majority => {
+                for i in 0..n {
+                    self.votes.clear();
+                    self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
+                    self.fused_states[i] = majority(&self.votes);
+                }
+            }
+            VoteRule::Weighted => {
+                let block = &mut (None::<(i32, i32)>, 0.0f64);
+                for i in 0..n {
+                    self.wvotes.clear();
+                    self.wvotes.extend((0..k_n).map(|k| WeightedVote {
+                        value: self.values[k * n + i],
+                        weight: maps[k].3,
+                    }));
+                    // The share is per 1 m block: looked up when the block changes.
+                    let (fx, fy) = ((i % w) as f64, (i / w) as f64);
+                    let (cx, cy) = (ox + (fx + 0.5) * res, oy + (fy + 0.5) * res);
+                    let key = (cx.floor() as i32, cy.floor() as i32);
+                    if block.0 != Some(key) {
+                        *block = (Some(key), sonar.share(cx, cy));
                     }
-                    VoteRule::Weighted => {
-                        self.wvotes.clear();
-                        self.wvotes
-                            .extend(values.iter().zip(&maps).map(|(&v, m)| WeightedVote {
-                                value: v,
-                                weight: m.3,
-                            }));
-                        // The share is per 1 m block: looked up when the block changes.
-                        let (cx, cy) = (ox + (fx + 0.5) * res, oy + (fy + 0.5) * res);
-                        let key = (cx.floor() as i32, cy.floor() as i32);
-                        if block.0 != Some(key) {
-                            *block = (Some(key), sonar.share(cx, cy));
-                        }
-                        weighted(&self.wvotes, block.1)
-                    }
-                };
-                fused.cells[y * w + x] = state.value();
-                for (k, &v) in values.iter().enumerate() {
-                    let sv = CellState::of(v);
-                    if sv != CellState::Unknown {
-                        let e = &mut agree[maps[k].0];
-                        e.1 += 1;
-                        e.0 += u64::from(sv == state);
-                    }
+                    self.fused_states[i] = weighted(&self.wvotes, block.1);
+                }
+            }
+            VoteRule::Consensus => {
+                let radius = (s.agree_radius_m / res).round().max(0.0) as usize;
+                self.consensus
+                    .vote(&self.states, k_n, w, h, radius, &mut self.fused_states);
+            }
+        }
+        for (i, state) in self.fused_states.iter().enumerate() {
+            fused.cells[i] = state.value();
+            for (k, m) in maps.iter().enumerate() {
+                let sv = self.states[k * n + i];
+                if sv != CellState::Unknown {
+                    let e = &mut agree[m.0];
+                    e.1 += 1;
+                    e.0 += u64::from(sv == *state);
                 }
             }
         }

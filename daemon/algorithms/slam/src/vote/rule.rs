@@ -17,6 +17,18 @@
 //!   region was mapped mostly from sonar beams (wide cones in smoke:
 //!   weaker evidence than the laser's). The heaviest state wins; a tie
 //!   goes to occupied, as in the paper.
+//! - [`Consensus`]: the paper's majority, but over walls within a tolerance
+//!   and on one member's geometry. Members that map the same wall a cell or
+//!   two apart (their poses differ by a few centimetres where alignment is
+//!   rigid and the maps are not) make the cell-exact majority draw both
+//!   copies: a split (occupied / free / unknown) is occupied. Here a member
+//!   agrees with a wall when it has a wall within `radius` cells, the walls
+//!   are those of the *base* member (the one whose walls the others confirm
+//!   most, counted in walls that stand: a share would favour a member that
+//!   maps little), a base wall the members who looked there mostly see as free is
+//!   dropped (ties stay occupied, as in the paper), and where the base has
+//!   no wall nearby a member's wall is added if a majority has one within
+//!   the radius.
 
 use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
 
@@ -116,6 +128,152 @@ pub fn weighted(votes: &[WeightedVote], sonar_share: f64) -> CellState {
     }
 }
 
+/// Scratch and result of the consensus rule, kept between updates.
+#[derive(Debug, Default)]
+pub struct Consensus {
+    /// Per member, per cell: a wall within the radius.
+    near: Vec<bool>,
+    /// One row or column of running counts.
+    line: Vec<u32>,
+    /// Share of each member's walls the others confirm (at the last vote).
+    pub confirmed: Vec<Option<f64>>,
+    /// Per member: its walls that would stand less those that would go.
+    pub standing: Vec<i64>,
+    /// The member whose walls the fused map keeps.
+    pub base: Option<usize>,
+}
+
+impl Consensus {
+    /// Votes `states` (member-major: member `k`'s cell `i` at `k·n + i`, `n =
+    /// width·height`) into `out` (`n` cells).
+    pub fn vote(
+        &mut self,
+        states: &[CellState],
+        members: usize,
+        width: usize,
+        height: usize,
+        radius: usize,
+        out: &mut [CellState],
+    ) {
+        let n = width * height;
+        debug_assert_eq!(states.len(), members * n);
+        debug_assert_eq!(out.len(), n);
+        self.near.clear();
+        self.near.resize(members * n, false);
+        for k in 0..members {
+            dilate(
+                &states[k * n..(k + 1) * n],
+                &mut self.near[k * n..(k + 1) * n],
+                width,
+                height,
+                radius,
+                &mut self.line,
+            );
+        }
+        // The base: the member with the most walls that would stand, less
+        // those that would go (a wall stands when the members with an opinion
+        // there confirm it at least as often as they see free space). A share
+        // would favour a member that maps little; a count does not.
+        self.confirmed.clear();
+        self.standing.clear();
+        for b in 0..members {
+            let (mut yes, mut asked, mut standing) = (0u64, 0u64, 0i64);
+            for i in 0..n {
+                if states[b * n + i] != CellState::Occupied {
+                    continue;
+                }
+                let (mut y, mut a) = (0u64, 0u64);
+                for k in (0..members).filter(|&k| k != b) {
+                    if self.near[k * n + i] {
+                        y += 1;
+                        a += 1;
+                    } else if states[k * n + i] == CellState::Free {
+                        a += 1;
+                    }
+                }
+                standing += if 2 * y >= a { 1 } else { -1 };
+                yes += y;
+                asked += a;
+            }
+            self.confirmed
+                .push((asked > 0).then(|| yes as f64 / asked as f64));
+            self.standing.push(standing);
+        }
+        let base =
+            (0..members).max_by(|&a, &b| self.standing[a].cmp(&self.standing[b]).then(b.cmp(&a)));
+        self.base = base;
+        let Some(b) = base else {
+            out.fill(CellState::Unknown);
+            return;
+        };
+        for (i, o) in out.iter_mut().enumerate() {
+            let (mut near, mut free_there, mut walls, mut free) = (0usize, 0usize, 0usize, 0usize);
+            for k in 0..members {
+                let s = states[k * n + i];
+                if self.near[k * n + i] {
+                    near += 1;
+                } else if s == CellState::Free {
+                    free_there += 1;
+                }
+                walls += usize::from(s == CellState::Occupied);
+                free += usize::from(s == CellState::Free);
+            }
+            let own = states[b * n + i];
+            *o = if own == CellState::Occupied {
+                if near >= free_there {
+                    CellState::Occupied
+                } else {
+                    CellState::Free
+                }
+            } else if !self.near[b * n + i] && walls > 0 && 2 * near > members {
+                CellState::Occupied
+            } else if 2 * free > members || own == CellState::Free {
+                CellState::Free
+            } else {
+                CellState::Unknown
+            };
+        }
+    }
+}
+
+/// `near[i]`: a wall of `states` within `radius` cells of `i` (a square
+/// window), by running counts along rows, then along columns.
+fn dilate(
+    states: &[CellState],
+    near: &mut [bool],
+    width: usize,
+    height: usize,
+    radius: usize,
+    line: &mut Vec<u32>,
+) {
+    // Rows: near[i] ← a wall within the radius along the row.
+    line.clear();
+    line.resize(width + 1, 0);
+    for y in 0..height {
+        let row = &states[y * width..(y + 1) * width];
+        for x in 0..width {
+            line[x + 1] = line[x] + u32::from(row[x] == CellState::Occupied);
+        }
+        for x in 0..width {
+            let (lo, hi) = (x.saturating_sub(radius), (x + radius + 1).min(width));
+            near[y * width + x] = line[hi] > line[lo];
+        }
+    }
+    // Columns, over the row result.
+    line.clear();
+    line.resize(height + 1, 0);
+    for x in 0..width {
+        // The whole column's counts first, so the column can be overwritten.
+        for y in 0..height {
+            line[y + 1] = line[y] + u32::from(near[y * width + x]);
+        }
+        for y in 0..height {
+            let (lo, hi) = (y.saturating_sub(radius), (y + radius + 1).min(height));
+            near[y * width + x] = line[hi] > line[lo];
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::CellState::{Free as F, Occupied as O, Unknown as U};
@@ -203,5 +361,113 @@ mod tests {
         assert_eq!(weighted(&[v(100), v(0), v(-1)], 0.0), O);
         assert_eq!(weighted(&[v(70), v(-1)], 1.0), U);
         assert_eq!(weighted(&[v(70), v(-1)], 0.0), O);
+    }
+
+    /// Member-major states from rows of `O` (occupied), `.` (free), `?` (unknown).
+    fn layers(members: &[&[&str]]) -> (Vec<CellState>, usize, usize) {
+        let (h, w) = (members[0].len(), members[0][0].len());
+        let mut out = Vec::new();
+        for m in members {
+            for row in m.iter().rev() {
+                out.extend(row.chars().map(|c| match c {
+                    'O' => O,
+                    '.' => F,
+                    _ => U,
+                }));
+            }
+        }
+        (out, w, h)
+    }
+
+    fn draw(states: &[CellState], w: usize) -> Vec<String> {
+        let mut rows: Vec<String> = states
+            .chunks(w)
+            .map(|r| {
+                r.iter()
+                    .map(|s| match s {
+                        O => 'O',
+                        F => '.',
+                        U => '?',
+                    })
+                    .collect()
+            })
+            .collect();
+        rows.reverse();
+        rows
+    }
+
+    fn consensus_of(members: &[&[&str]], radius: usize) -> (Vec<String>, Option<usize>) {
+        let (st, w, h) = layers(members);
+        let mut c = Consensus::default();
+        let mut out = vec![U; w * h];
+        c.vote(&st, members.len(), w, h, radius, &mut out);
+        (draw(&out, w), c.base)
+    }
+
+    #[test]
+    fn a_wall_two_members_draw_a_cell_apart_is_one_wall() {
+        // Members 0 and 2 put the wall in row 2, member 1 one row up.
+        let a: &[&str] = &["......", "......", "OOOOOO", "......"];
+        let b: &[&str] = &["......", "OOOOOO", "......", "......"];
+        let c: &[&str] = &["......", "......", "OOOOOO", "......"];
+        let (got, base) = consensus_of(&[a, b, c], 1);
+        assert_eq!(got, ["......", "......", "OOOOOO", "......"]);
+        assert_eq!(base, Some(0), "ties go to the first of the best-confirmed");
+        // The cell-exact majority keeps the offset copy too: each of its cells
+        // is a three-way split or (row 1: O, F, F) free — here row 1 is free,
+        // but with the third member unknown there both copies are walls.
+        let c2: &[&str] = &["......", "??????", "OOOOOO", "......"];
+        let (st, w, h) = layers(&[a, b, c2]);
+        let n = w * h;
+        let maj: Vec<CellState> = (0..n)
+            .map(|i| majority(&[st[i], st[n + i], st[2 * n + i]]))
+            .collect();
+        assert_eq!(draw(&maj, w), ["......", "OOOOOO", "OOOOOO", "......"]);
+        let (got, _) = consensus_of(&[a, b, c2], 1);
+        assert_eq!(got, ["......", "......", "OOOOOO", "......"]);
+    }
+
+    #[test]
+    fn a_wall_only_one_member_saw_stays_unless_the_others_saw_free_there() {
+        let a: &[&str] = &["..O...", "......", "OOOOOO"];
+        let unseen: &[&str] = &["??????", "......", "OOOOOO"];
+        let seen_free: &[&str] = &["......", "......", "OOOOOO"];
+        // Nobody else looked there: nothing against it, the wall stays.
+        let (got, base) = consensus_of(&[a, unseen, unseen], 1);
+        assert_eq!((got[0].as_str(), base), ("..O...", Some(0)));
+        // Another member looked and saw free: that member's walls are all
+        // confirmed, a's are not, so the map is its: the lone wall goes.
+        let (got, base) = consensus_of(&[a, seen_free, unseen], 1);
+        assert_eq!((got[0].as_str(), base), ("......", Some(1)));
+        let (got, _) = consensus_of(&[a, seen_free, seen_free], 1);
+        assert_eq!(got[0], "......");
+    }
+
+    #[test]
+    fn a_wall_the_others_agree_on_and_the_base_missed_is_added() {
+        // Member 0 has the most standing walls (its wall two cells thick) but
+        // missed the post the other two agree on.
+        let a: &[&str] = &["......", "......", "OOOOOO", "OOOOOO"];
+        let b: &[&str] = &["...O..", "......", "......", "OOOOOO"];
+        let c: &[&str] = &["...O..", "......", "......", "OOOOO?"];
+        let (got, base) = consensus_of(&[a, b, c], 1);
+        assert_eq!(base, Some(0));
+        assert_eq!(got, ["...O..", "......", "OOOOOO", "OOOOOO"]);
+    }
+
+    #[test]
+    fn the_tolerance_is_a_square_window_of_the_radius() {
+        let (st, w, h) = layers(&[&["......", "......", "..O...", "......", "......"]]);
+        let mut near = vec![false; w * h];
+        let mut line = Vec::new();
+        dilate(&st, &mut near, w, h, 1, &mut line);
+        let drawn: Vec<String> = near
+            .chunks(w)
+            .rev()
+            .map(|r| r.iter().map(|&b| if b { 'x' } else { '.' }).collect())
+            .collect();
+        assert_eq!(drawn, ["......", ".xxx..", ".xxx..", ".xxx..", "......"]);
+        dilate(&st, &mut near, w, h, 0, &mut line);
+        assert_eq!(near.iter().filter(|&&b| b).count(), 1);
     }
 }
