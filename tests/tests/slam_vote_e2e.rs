@@ -248,3 +248,156 @@ fn a_stalled_member_is_named_and_the_vote_goes_on() {
     assert_eq!(later.metric("vote_out_rbpf"), Some(0.0));
     assert!(later.metric("vote_drops").is_some_and(|d| d > 0.0));
 }
+
+/// A room's walls drawn into a grid `shift` away, with an extra wall of its
+/// own (`stray`, a phantom only this map has), saved as map_server files.
+fn room_map(
+    dir: &std::path::Path,
+    name: &str,
+    shift: (f64, f64),
+    stray: Option<f64>,
+) -> std::path::PathBuf {
+    use smokenav_platform_map::{FREE, OCCUPIED, OccupancyGrid};
+    let res = 0.05;
+    let mut g = OccupancyGrid::new(160, 120, res, [-4.0, -3.0, 0.0]);
+    g.cells.fill(FREE);
+    let mut wall = |x0: f64, y0: f64, x1: f64, y1: f64| {
+        let n = ((x1 - x0).hypot(y1 - y0) / (res / 2.0)).ceil() as usize;
+        for i in 0..=n {
+            let t = i as f64 / n as f64;
+            let (x, y) = (x0 + t * (x1 - x0) + shift.0, y0 + t * (y1 - y0) + shift.1);
+            if let Some((cx, cy)) = g.world_to_cell(x, y) {
+                g.set(cx, cy, OCCUPIED);
+            }
+        }
+    };
+    wall(-3.0, -2.0, 3.0, -2.0);
+    wall(3.0, -2.0, 3.0, 2.0);
+    wall(3.0, 2.0, -3.0, 2.0);
+    wall(-3.0, 2.0, -3.0, -2.0);
+    wall(-1.0, -2.0, -1.0, 0.5);
+    if let Some(y) = stray {
+        wall(0.5, y, 2.0, y);
+    }
+    let out = dir.join(name);
+    smokenav_platform_map::save_map_server(&g, &out, "map").unwrap();
+    out.join("map.yaml")
+}
+
+/// `smokenav map vote`: three saved maps, two of them a cell or two off
+/// and each with a phantom wall of its own, are aligned to the first and
+/// voted; the vote keeps the room and drops every phantom, and is scored
+/// beside its members against the truth. Bad uses are refused by name.
+#[test]
+fn map_vote_aligns_saved_maps_and_votes_out_what_one_member_alone_drew() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = room_map(dir.path(), "truth", (0.0, 0.0), None);
+    let a = room_map(dir.path(), "a", (0.0, 0.0), Some(1.0));
+    // Whole cells: a drawn map moves by whole cells.
+    let b = room_map(dir.path(), "b", (0.10, -0.05), Some(-1.0));
+    let c = room_map(dir.path(), "c", (-0.05, 0.10), Some(0.0));
+    let out = dir.path().join("vote");
+    let run = std::process::Command::new(bin("smokenav"))
+        .args(["map", "vote"])
+        .args([&a, &b, &c])
+        .arg("--truth-map")
+        .arg(&truth)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    eprintln!("{text}");
+    // Each shifted member is aligned back (member → reference: minus its shift).
+    let aligned = |name: &str| -> (f64, f64) {
+        let line = text
+            .lines()
+            .find(|l| l.contains(name) && l.contains("aligned"))
+            .unwrap_or_else(|| panic!("no line for {name}: {text}"));
+        let inner = &line[line.find("aligned (").unwrap() + 9..line.find(") m").unwrap()];
+        let mut v = inner.split(',').map(|s| s.trim().parse::<f64>().unwrap());
+        (v.next().unwrap(), v.next().unwrap())
+    };
+    let (bx, by) = aligned("b/map.yaml");
+    // Within a cell: the walls are drawn into cells, so their shift is
+    // known to a cell at best.
+    assert!(
+        (bx + 0.10).abs() < 0.035 && (by - 0.05).abs() < 0.035,
+        "{bx} {by}"
+    );
+    let (cx, cy) = aligned("c/map.yaml");
+    assert!(
+        (cx - 0.05).abs() < 0.035 && (cy + 0.10).abs() < 0.035,
+        "{cx} {cy}"
+    );
+    // The vote has none of the phantoms: every member's k-NN error is above it.
+    let error = |prefix: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with(prefix))
+            .unwrap_or_else(|| panic!("no `{prefix}` line: {text}"));
+        let at = line.find("k-NN ").unwrap() + 5;
+        line[at..].split(' ').next().unwrap().parse().unwrap()
+    };
+    let vote = error("vote (majority, chosen)");
+    let members: Vec<f64> = text
+        .lines()
+        .filter(|l| l.trim_start().starts_with("member"))
+        .map(|l| {
+            let at = l.find("k-NN ").unwrap() + 5;
+            l[at..].split(' ').next().unwrap().parse().unwrap()
+        })
+        .collect();
+    assert_eq!(members.len(), 3);
+    assert!(
+        members.iter().all(|&m| m > vote),
+        "vote {vote} vs members {members:?}"
+    );
+    for rule in ["vote (weighted)", "vote (consensus)"] {
+        assert!(error(rule).is_finite());
+    }
+    let fused = smokenav_platform_map::load_map_server(&out.join("map.yaml")).unwrap();
+    let walls_at = |y: f64| {
+        (0..30)
+            .filter(|k| {
+                let x = 0.55 + 0.05 * *k as f64;
+                fused
+                    .world_to_cell(x, y)
+                    .and_then(|(cx, cy)| fused.get(cx, cy))
+                    .is_some_and(|v| v >= 65)
+            })
+            .count()
+    };
+    assert_eq!(walls_at(1.0), 0, "a's phantom voted out");
+    assert!(out.join("map.png").exists());
+
+    // Bad uses: one map, an unreadable one, an unknown rule.
+    let refused = |args: &[&std::ffi::OsStr], want: &str| {
+        let o = std::process::Command::new(bin("smokenav"))
+            .args(["map", "vote"])
+            .args(args)
+            .arg("--out")
+            .arg(dir.path().join("x"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(want), "{want}: {err}");
+    };
+    refused(&[a.as_os_str()], "2");
+    let missing = dir.path().join("nope.yaml");
+    refused(&[a.as_os_str(), missing.as_os_str()], "nope.yaml");
+    refused(
+        &[
+            a.as_os_str(),
+            b.as_os_str(),
+            "--rule".as_ref(),
+            "loudest".as_ref(),
+        ],
+        "unknown rule `loudest`",
+    );
+}

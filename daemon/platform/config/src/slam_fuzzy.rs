@@ -55,10 +55,11 @@ pub struct FuzzySection {
     /// Peak laser confidence where the paper's K(r) fit falls below it (past ~3.65 m).
     pub laser_k_min: f64,
     /// A laser return in smoke is worth less: what it says of the obstacle
-    /// and of the free space before it is divided by the smoke's noise factor
-    /// (the σ multiplier of `[slam]`'s `laser_variance_*` / `smoke_level_*`
-    /// model, up to 1.66 in fog), so nothing the laser saw in dense smoke
-    /// reaches the combined map's 0.65. Off: the paper's clear-air model.
+    /// and of the free space before it is divided by the smoke's variance
+    /// ratio (the square of the σ multiplier of `[slam]`'s
+    /// `laser_variance_*` / `smoke_level_*` model: 2.75 in fog), so nothing
+    /// the laser saw in smoke reaches the combined map's 0.65. Off: the
+    /// paper's clear-air model.
     pub laser_smoke_discount: bool,
     /// Peak confidence K of a sonar return.
     pub sonar_k: f64,

@@ -14,6 +14,7 @@ mod fuse;
 mod graph;
 mod info;
 mod mapsave;
+mod mapvote;
 mod play;
 mod record;
 mod scip;

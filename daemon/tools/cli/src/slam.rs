@@ -899,6 +899,32 @@ pub enum MapCommand {
         #[command(flatten)]
         bus: crate::topic::BusArgs,
     },
+    /// Vote over saved maps (SLAMfusion, as `[slam] backend = "vote"` does
+    /// online): align each to the first, vote every cell, write DIR/map.yaml.
+    Vote {
+        /// map_server YAMLs, 2–8; the first is the frame and grid of the vote.
+        #[arg(required = true, num_args = 2..)]
+        maps: Vec<PathBuf>,
+        /// `majority`, `weighted` or `consensus` [default: the profile's `[slam.vote] rule`].
+        #[arg(long, value_parser = parse_rule)]
+        rule: Option<VoteRule>,
+        /// Robot profile whose `[slam.vote]` keys (windows, residual threshold, radius) apply.
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// Score every map and every rule against this ground truth (map_server YAML).
+        #[arg(long, value_name = "GT.yaml")]
+        truth_map: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "vote")]
+        out: PathBuf,
+    },
+}
+
+fn parse_rule(s: &str) -> Result<VoteRule, String> {
+    VoteRule::from_name(s).ok_or_else(|| {
+        let names: Vec<&str> = VoteRule::ALL.iter().map(|r| r.as_str()).collect();
+        format!("unknown rule `{s}`; one of {}", names.join(", "))
+    })
 }
 
 /// The map_server modes `map save` writes.
@@ -958,13 +984,30 @@ pub(crate) fn grid_from_wire(
 }
 
 pub fn run_map(cmd: MapCommand) -> anyhow::Result<()> {
-    let MapCommand::Save {
-        dir,
-        mode,
-        timeout_s,
-        octree_dir,
-        bus,
-    } = cmd;
+    let (dir, mode, timeout_s, octree_dir, bus) = match cmd {
+        MapCommand::Save {
+            dir,
+            mode,
+            timeout_s,
+            octree_dir,
+            bus,
+        } => (dir, mode, timeout_s, octree_dir, bus),
+        MapCommand::Vote {
+            maps,
+            rule,
+            config,
+            truth_map,
+            out,
+        } => {
+            return crate::mapvote::run(crate::mapvote::VoteArgs {
+                maps,
+                rule,
+                config,
+                truth_map,
+                out,
+            });
+        }
+    };
     let octree_dir = crate::mapsave::octree_dir(octree_dir, bus.config.as_deref())?;
     let dir = dir.unwrap_or_else(|| PathBuf::from("maps"));
     // Scale and raw keep the probabilities; the thresholded map would lose them.

@@ -98,14 +98,17 @@ impl ConfidenceModel {
     }
 
     /// What a laser return is worth at the scan's smoke noise factor `f` (the
-    /// σ multiplier of `[slam]`'s smoke model, ≥ 1): 1 ÷ f, scaling both its
-    /// obstacle and its free-space confidence; 1 with the discount off.
-    /// Both, so the share of a cell's evidence that says "obstacle" (the
-    /// navigation map) is the same, while the combined map of eq. 7 is
-    /// less sure of what a laser saw in smoke: a phantom there stays weak.
+    /// σ multiplier of `[slam]`'s smoke model, ≥ 1): 1 ÷ f², the reading's
+    /// information relative to clear air (the inverse of its variance ratio:
+    /// 0.36 in fog), scaling both its obstacle and its free-space
+    /// confidence; 1 with the discount off. Both, so the share of one
+    /// reading's evidence that says "obstacle" is the same, while the
+    /// combined map of eq. 7 is less sure of what a laser saw in smoke: a
+    /// phantom there stays weak. (1 ÷ f, the σ ratio, left two confident
+    /// cells of light smoke on one of three recordings of the dense trial.)
     pub fn laser_worth(&self, noise_factor: f64) -> f64 {
         if self.laser_smoke_discount && noise_factor.is_finite() {
-            1.0 / noise_factor.max(1.0)
+            1.0 / noise_factor.max(1.0).powi(2)
         } else {
             1.0
         }

@@ -29,8 +29,8 @@ pub struct DistanceField {
     width: usize,
     height: usize,
     truncation: f32,
-    /// Squared distance, m², row-major.
-    d2: Vec<f32>,
+    /// Distance, m (truncated), row-major, at the cell centres.
+    d: Vec<f32>,
 }
 
 impl DistanceField {
@@ -97,19 +97,36 @@ impl DistanceField {
         }
         let res = grid.resolution as f32;
         let t = self.truncation;
-        self.d2.clear();
-        self.d2.extend(d.iter().map(|&c| (c * res).min(t).powi(2)));
+        self.d.clear();
+        self.d.extend(d.iter().map(|&c| (c * res).min(t)));
     }
 
-    /// Squared distance (m², truncated) at a point of the reference frame.
+    /// Squared distance (m², truncated) at a point of the reference frame,
+    /// the distance interpolated bilinearly between the four cell centres
+    /// around it: read off the nearest cell it is flat over a cell, and an
+    /// alignment could not tell shifts of less than a cell apart.
     #[inline]
     pub fn d2_at(&self, x: f64, y: f64) -> f32 {
-        let cx = ((x - self.origin.0) / self.resolution).floor();
-        let cy = ((y - self.origin.1) / self.resolution).floor();
-        if cx < 0.0 || cy < 0.0 || cx >= self.width as f64 || cy >= self.height as f64 {
-            return self.truncation * self.truncation;
+        let fx = (x - self.origin.0) / self.resolution - 0.5;
+        let fy = (y - self.origin.1) / self.resolution - 0.5;
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let far = self.truncation;
+        if !(x0 >= -1.0 && y0 >= -1.0 && x0 < self.width as f64 && y0 < self.height as f64) {
+            return far * far;
         }
-        self.d2[cy as usize * self.width + cx as usize]
+        let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let at = |cx: i64, cy: i64| {
+            if cx < 0 || cy < 0 || cx >= self.width as i64 || cy >= self.height as i64 {
+                far
+            } else {
+                self.d[cy as usize * self.width + cx as usize]
+            }
+        };
+        let bottom = at(x0, y0) * (1.0 - tx) + at(x0 + 1, y0) * tx;
+        let top = at(x0, y0 + 1) * (1.0 - tx) + at(x0 + 1, y0 + 1) * tx;
+        let d = bottom * (1.0 - ty) + top * ty;
+        d * d
     }
 
     pub fn resolution(&self) -> f64 {
@@ -117,7 +134,7 @@ impl DistanceField {
     }
 
     pub fn is_empty(&self) -> bool {
-        self.d2.is_empty()
+        self.d.is_empty()
     }
 }
 
@@ -497,10 +514,47 @@ mod tests {
     }
 
     #[test]
+    fn a_shift_of_less_than_a_cell_is_found() {
+        // The member's walls 2 cm and 0.3° off: read off the nearest cell, the
+        // score is flat over a cell and any shift within it is as good.
+        let reference = room(Pose2::default());
+        let field = DistanceField::new(&reference, 0.3);
+        let mut pts = Vec::new();
+        wall_points(&reference, 3000, &mut pts);
+        let moved: Vec<(f64, f64)> = {
+            let t = Pose2::new(0.02, -0.015, 0.3f64.to_radians());
+            let (s, c) = t.theta.sin_cos();
+            pts.iter()
+                .map(|&(x, y)| (c * x - s * y + t.x, s * x + c * y + t.y))
+                .collect()
+        };
+        let a = align(
+            &field,
+            &moved,
+            &SearchWindow {
+                center: Pose2::default(),
+                window_m: 0.2,
+                window_rad: 0.05,
+            },
+        );
+        // The inverse of the shift, to a few millimetres.
+        let back = a
+            .transform
+            .compose(&Pose2::new(0.02, -0.015, 0.3f64.to_radians()));
+        assert!(
+            back.x.abs() < 0.006 && back.y.abs() < 0.006 && back.theta.abs() < 0.1f64.to_radians(),
+            "{:?} → {back:?}",
+            a.transform
+        );
+    }
+
+    #[test]
     fn distance_field_is_truncated_and_zero_on_walls() {
         let g = room(Pose2::default());
         let f = DistanceField::new(&g, 0.3);
-        assert_eq!(f.d2_at(-3.0, 0.0), 0.0);
+        // On a wall cell's centre; half a cell off it, half a cell.
+        assert_eq!(f.d2_at(-2.975, 0.025), 0.0);
+        assert!((f.d2_at(-2.95, 0.025).sqrt() - 0.025).abs() < 1e-6);
         assert!(
             (f.d2_at(-2.0, 0.0) - 0.09).abs() < 1e-6,
             "{}",
