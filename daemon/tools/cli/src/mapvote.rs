@@ -25,20 +25,6 @@ fn load(path: &Path) -> anyhow::Result<OccupancyGrid> {
         .with_context(|| format!("cannot read the map {}", path.display()))
 }
 
-/// One vote of `maps` under `rule`: the fused map and each member's alignment.
-fn vote(
-    section: &VoteSection,
-    rule: VoteRule,
-    maps: &[Arc<OccupancyGrid>],
-) -> (Option<OccupancyGrid>, MapVote) {
-    let mut s = section.clone();
-    s.rule = rule;
-    let mut v = MapVote::new(&s, maps.len());
-    let input: Vec<(Arc<OccupancyGrid>, u64)> = maps.iter().map(|m| (Arc::clone(m), 1)).collect();
-    let fused = v.update(&input).map(|m| (*m).clone());
-    (fused, v)
-}
-
 pub fn run(a: VoteArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
         (2..=8).contains(&a.maps.len()),
@@ -61,8 +47,14 @@ pub fn run(a: VoteArgs) -> anyhow::Result<()> {
         .map(|p| load(p).map(Arc::new))
         .collect::<anyhow::Result<_>>()?;
     let truth = a.truth_map.as_deref().map(load).transpose()?;
-    let (fused, v) = vote(&section, rule, &maps);
-    let fused = fused.context("no map to vote: the reference (first) map has no walls")?;
+    let mut s = section.clone();
+    s.rule = rule;
+    let mut v = MapVote::new(&s, maps.len());
+    // One revision each: re-votes under the other rules reuse the alignment.
+    let input: Vec<(Arc<OccupancyGrid>, u64)> = maps.iter().map(|m| (Arc::clone(m), 1)).collect();
+    let fused = v
+        .update(&input)
+        .context("no map to vote: the reference (first) map has no walls")?;
     let name = |p: &Path| p.display().to_string();
     println!(
         "vote ({}) of {} maps on the grid of {} ({}×{} at {} m), {:.1} ms",
@@ -115,7 +107,8 @@ pub fn run(a: VoteArgs) -> anyhow::Result<()> {
     if let Some(s) = score(&fused) {
         println!("  vote ({}, chosen){s}", rule.as_str());
         for other in VoteRule::ALL.into_iter().filter(|&r| r != rule) {
-            if let (Some(m), _) = vote(&section, other, &maps) {
+            v.set_rule(other);
+            if let Some(m) = v.update(&input) {
                 println!(
                     "  vote ({}){}",
                     other.as_str(),

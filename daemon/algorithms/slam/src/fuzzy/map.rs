@@ -29,8 +29,8 @@ pub struct FuzzyBeam {
     /// Lateral confidence of this beam inside its sonar cone (1 for a laser beam).
     pub lateral: f64,
     /// What the reading is worth at all, scaling both what it says of the
-    /// obstacle and of the free space before it: 1, or 1 ÷ the smoke's noise
-    /// factor for a laser return in smoke ([`ConfidenceModel::laser_worth`]).
+    /// obstacle and of the free space before it: 1, or less for a laser
+    /// return in smoke ([`ConfidenceModel::laser_worth`]).
     pub worth: f64,
     pub kind: BeamKind,
 }
@@ -131,8 +131,9 @@ pub struct FuzzyGrid {
     pub mo: Vec<f32>,
     pub ms: Vec<f32>,
     /// Per cell, the sums over every reading of its obstacle and free-space
-    /// confidence (the navigation map's evidence, [`Self::to_evidence_grid`]).
-    pub sums: Vec<[f32; 2]>,
+    /// confidence (the navigation map's evidence, [`Self::to_evidence_grid`]);
+    /// `None` on a grid that is never drawn as a map ([`Self::without_sums`]).
+    pub sums: Option<Vec<[f32; 2]>>,
 }
 
 /// Least `Mo + Ms` a cell needs to be known in [`FuzzyGrid::to_evidence_grid`]:
@@ -154,7 +155,7 @@ impl FuzzyGrid {
             height: n,
             mo: vec![0.0; n * n],
             ms: vec![0.0; n * n],
-            sums: vec![[0.0; 2]; n * n],
+            sums: Some(vec![[0.0; 2]; n * n]),
         }
     }
 
@@ -167,14 +168,23 @@ impl FuzzyGrid {
             height: 0,
             mo: Vec::new(),
             ms: Vec::new(),
-            sums: Vec::new(),
+            sums: Some(Vec::new()),
         }
+    }
+
+    /// The same grid keeping no sums: a scan's local map, matched and
+    /// cropped by `Mo` / `Ms` alone, is never drawn as a navigation map.
+    pub fn without_sums(mut self) -> Self {
+        self.sums = None;
+        self
     }
 
     pub fn clear(&mut self) {
         self.mo.fill(0.0);
         self.ms.fill(0.0);
-        self.sums.fill([0.0; 2]);
+        if let Some(s) = &mut self.sums {
+            s.fill([0.0; 2]);
+        }
     }
 
     /// Index of the cell holding (x, y), if inside.
@@ -247,13 +257,15 @@ impl FuzzyGrid {
         );
         let mut mo = vec![0.0; w * h];
         let mut ms = vec![0.0; w * h];
-        let mut sums = vec![[0.0; 2]; w * h];
+        let mut sums = self.sums.as_ref().map(|_| vec![[0.0; 2]; w * h]);
         for row in 0..self.height {
             let src = row * self.width..(row + 1) * self.width;
             let dst = (row + dy) * w + dx;
             mo[dst..dst + self.width].copy_from_slice(&self.mo[src.clone()]);
             ms[dst..dst + self.width].copy_from_slice(&self.ms[src.clone()]);
-            sums[dst..dst + self.width].copy_from_slice(&self.sums[src]);
+            if let (Some(to), Some(from)) = (&mut sums, &self.sums) {
+                to[dst..dst + self.width].copy_from_slice(&from[src]);
+            }
         }
         *self = Self {
             resolution: res,
@@ -294,7 +306,9 @@ impl FuzzyGrid {
                 let Some(i) = self.index(sensor.x + cos * d, sensor.y + sin * d) else {
                     continue;
                 };
-                if i == last {
+                // Without sums a cell already wholly free gains nothing.
+                if i == last || (self.sums.is_none() && self.ms[i] >= 1.0) {
+                    last = i;
                     continue;
                 }
                 last = i;
@@ -315,7 +329,9 @@ impl FuzzyGrid {
                 if p as f32 > self.ms[i] {
                     self.ms[i] = p as f32;
                 }
-                self.sums[i][1] += p as f32;
+                if let Some(s) = &mut self.sums {
+                    s[i][1] += p as f32;
+                }
             }
             if !b.hit {
                 continue;
@@ -341,7 +357,9 @@ impl FuzzyGrid {
                     if o as f32 > self.mo[i] {
                         self.mo[i] = o as f32;
                     }
-                    self.sums[i][0] += o as f32;
+                    if let Some(s) = &mut self.sums {
+                        s[i][0] += o as f32;
+                    }
                 }
             }
         }
@@ -350,7 +368,8 @@ impl FuzzyGrid {
     /// The map for navigation (`slam/map`, saved maps, map error): the share
     /// of a cell's evidence that says "obstacle", ΣMo / (ΣMo + ΣMs) over
     /// every reading (`sums`), scaled 0–100; unknown (-1) with less than
-    /// [`MIN_EVIDENCE`] of either.
+    /// [`MIN_EVIDENCE`] of either. All unknown on a grid
+    /// [`Self::without_sums`].
     ///
     /// Not eq. 7 thresholded: `Mo` is a reading's *confidence*, which the
     /// URG-04LX fit lowers with range (0.5 at 2 m, 0.2 past 3.65 m), and a
@@ -374,7 +393,8 @@ impl FuzzyGrid {
             self.resolution,
             [self.origin.0, self.origin.1, 0.0],
         );
-        for (cell, &[mo, ms]) in g.cells.iter_mut().zip(&self.sums) {
+        let sums = self.sums.as_deref().unwrap_or_default();
+        for (cell, &[mo, ms]) in g.cells.iter_mut().zip(sums) {
             let sum = mo + ms;
             *cell = if sum < MIN_EVIDENCE {
                 UNKNOWN
@@ -419,7 +439,8 @@ mod tests {
         let cells = [(0.15f32, 0.0f32), (0.0, 0.9), (0.6, 0.2), (0.02, 0.0)];
         for (i, (mo, ms)) in cells.into_iter().enumerate() {
             // One reading each: its union and its sum are the same.
-            (g.mo[i], g.ms[i], g.sums[i]) = (mo, ms, [mo, ms]);
+            (g.mo[i], g.ms[i]) = (mo, ms);
+            g.sums.as_mut().unwrap()[i] = [mo, ms];
         }
         let eq7 = g.to_occupancy_grid(0.3);
         let nav = g.to_evidence_grid();

@@ -90,7 +90,7 @@ impl FuzzySlam {
     pub fn new(cfg: &SlamSection, keep_trajectory: bool) -> Self {
         let p = cfg.fuzzy.clone();
         let local = || Local {
-            grid: FuzzyGrid::square(cfg.resolution_m, p.local_radius_m),
+            grid: FuzzyGrid::square(cfg.resolution_m, p.local_radius_m).without_sums(),
             points: Vec::new(),
         };
         Self {
@@ -318,7 +318,7 @@ impl SlamBackend for FuzzySlam {
             },
         ));
         self.next = old.unwrap_or_else(|| Local {
-            grid: FuzzyGrid::square(self.global.resolution, radius),
+            grid: FuzzyGrid::square(self.global.resolution, radius).without_sums(),
             points: Vec::new(),
         });
         self.anchor = Some((pose, odom));

@@ -462,6 +462,13 @@ impl MapVote {
         self.fuser.out.map.clone()
     }
 
+    /// Votes with `rule` from the next update on; maps whose revisions did
+    /// not change keep their alignment (a re-vote of the same maps is the
+    /// vote alone).
+    pub fn set_rule(&mut self, rule: VoteRule) {
+        self.fuser.p.section.rule = rule;
+    }
+
     pub fn alignments(&self) -> &[Option<Alignment>] {
         &self.fuser.out.alignments
     }

@@ -135,10 +135,8 @@ pub struct Consensus {
     near: Vec<bool>,
     /// One row or column of running counts.
     line: Vec<u32>,
-    /// Share of each member's walls the others confirm (at the last vote).
-    pub confirmed: Vec<Option<f64>>,
     /// Per member: its walls that would stand less those that would go.
-    pub standing: Vec<i64>,
+    standing: Vec<i64>,
     /// The member whose walls the fused map keeps.
     pub base: Option<usize>,
 }
@@ -174,10 +172,9 @@ impl Consensus {
         // those that would go (a wall stands when the members with an opinion
         // there confirm it at least as often as they see free space). A share
         // would favour a member that maps little; a count does not.
-        self.confirmed.clear();
         self.standing.clear();
         for b in 0..members {
-            let (mut yes, mut asked, mut standing) = (0u64, 0u64, 0i64);
+            let mut standing = 0i64;
             for i in 0..n {
                 if states[b * n + i] != CellState::Occupied {
                     continue;
@@ -192,11 +189,7 @@ impl Consensus {
                     }
                 }
                 standing += if 2 * y >= a { 1 } else { -1 };
-                yes += y;
-                asked += a;
             }
-            self.confirmed
-                .push((asked > 0).then(|| yes as f64 / asked as f64));
             self.standing.push(standing);
         }
         let base =
