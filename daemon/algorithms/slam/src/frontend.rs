@@ -224,10 +224,11 @@ impl FrontEnd {
     /// pose along that wall, but any wall says how the robot is turned, and
     /// odometry's heading is what drifts fastest (a wheel 2 % off turns a
     /// Pioneer ~3° per metre). The scan stays out of the local map, unless
-    /// the map is empty: a robot that starts with its smoke sensor warming
-    /// up (v2 then assumes smoke) needs a first map to hold its heading
-    /// against. That map is dropped at the first scan matched in full, which
-    /// starts the map afresh rather than matching against a view metres back.
+    /// the map holds no scan matched in full: a robot that starts with its
+    /// smoke sensor warming up (v2 then assumes smoke) needs a map of such
+    /// scans to hold its heading against. That map is dropped at the first
+    /// scan matched in full, which starts the map afresh rather than
+    /// matching against a view metres back.
     pub fn track_heading(
         &mut self,
         endpoints: impl Iterator<Item = (f64, f64)>,
@@ -309,7 +310,11 @@ impl FrontEnd {
                 pred_cov * PREDICTION_SIGMA_SHARE * PREDICTION_SIGMA_SHARE,
             ),
         };
-        let into_map = !heading_only || self.history.is_empty();
+        // A map of heading-tracked scans only (no scan matched in full yet)
+        // takes each of them: turning on the spot while the smoke sensor
+        // warms up, the laser's few kept sections move from scan to scan and
+        // soon share nothing with the first one.
+        let into_map = !heading_only || self.history.is_empty() || self.bootstrap_map;
         if heading_only && self.history.is_empty() {
             self.bootstrap_map = true;
         }
