@@ -596,6 +596,31 @@ impl Arena {
         climb_m > 0.0 && self.nearest_where(p, radius, |s| s.z[1] <= climb_m) < radius
     }
 
+    /// The top of the highest obstacle at most `climb_m` high within
+    /// `radius` of `p` (what a wheel there stands on), if any.
+    pub fn low_obstacle_top_within(&self, p: Vec2, radius: f64, climb_m: f64) -> Option<f64> {
+        if climb_m <= 0.0 {
+            return None;
+        }
+        let cell = INDEX_CELL_M;
+        let lo_x = (((p.x - radius - self.min.x) / cell).floor() as i64).max(0);
+        let hi_x = (((p.x + radius - self.min.x) / cell).floor() as i64).min(self.cols as i64 - 1);
+        let lo_y = (((p.y - radius - self.min.y) / cell).floor() as i64).max(0);
+        let hi_y = (((p.y + radius - self.min.y) / cell).floor() as i64).min(self.rows as i64 - 1);
+        let mut top: Option<f64> = None;
+        for cy in lo_y..=hi_y {
+            for cx in lo_x..=hi_x {
+                for &i in self.cell_items(cx as usize, cy as usize) {
+                    let s = &self.segments[i as usize];
+                    if s.z[1] <= climb_m && s.distance_to(p) < radius {
+                        top = Some(top.map_or(s.z[1], |t: f64| t.max(s.z[1])));
+                    }
+                }
+            }
+        }
+        top
+    }
+
     fn nearest_where(&self, p: Vec2, radius: f64, keep: impl Fn(&Segment) -> bool) -> f64 {
         let cell = INDEX_CELL_M;
         let lo_x = (((p.x - radius - self.min.x) / cell).floor() as i64).max(0);

@@ -114,6 +114,8 @@ pub struct LaserModel {
     /// Unit direction of each beam in the base frame (mount yaw + step angle).
     beam_dirs: Vec<Vec2>,
     rng: Rng,
+    /// Nose-down pitch of the base the laser is bolted to, rad (see [`Self::set_pitch`]).
+    pitch: f64,
 }
 
 /// What one beam saw, before it is turned into the sensor's millimetres.
@@ -139,7 +141,21 @@ impl LaserModel {
             mount,
             beam_dirs,
             rng,
+            pitch: 0.0,
         }
+    }
+
+    /// Tilts the scan plane with the base (nose-down positive, rad): a base
+    /// with one end up on a cable tray points its forward beams at the floor
+    /// ahead, or over low obstacles, for as long as it stays tilted. The
+    /// laser's height is taken as unchanged (the tilt is about the base's
+    /// centre; a few millimetres at a laser mounted near it).
+    pub fn set_pitch(&mut self, pitch_rad: f64) {
+        self.pitch = if pitch_rad.is_finite() {
+            pitch_rad
+        } else {
+            0.0
+        };
     }
 
     /// Sensor pose in the robot's base frame.
@@ -147,17 +163,48 @@ impl LaserModel {
         self.mount
     }
 
-    /// One beam from `o` along unit `d`.
+    /// One beam from `o` along unit `d`, in the horizontal plane at the laser's height.
     pub fn beam(&mut self, arena: &Arena, smoke: &SmokeField, o: Vec2, d: Vec2) -> BeamDetail {
+        self.beam_sloped(arena, smoke, o, d, 0.0)
+    }
+
+    /// One beam from `o` along unit `d` (its horizontal projection) that
+    /// rises `slope` metres per metre it goes out (a tilted scan plane):
+    /// it hits what spans its height where it gets there, or the floor.
+    /// Distances are along the beam.
+    pub fn beam_sloped(
+        &mut self,
+        arena: &Arena,
+        smoke: &SmokeField,
+        o: Vec2,
+        d: Vec2,
+        slope: f64,
+    ) -> BeamDetail {
         let p = &self.params;
         let dmax = URG_DMAX_MM as f64 / 1000.0;
         // Fixed number of draws per beam keeps every later beam's numbers independent of this one's path.
         let (z_patch, noise) = self.rng.normal_pair();
         let caught = self.rng.uniform();
         let patch = (p.patchiness * z_patch - 0.5 * p.patchiness * p.patchiness).exp();
-        let wall = arena
-            .cast_at_height(o, d, dmax, p.height_m)
-            .map(|h| h.distance);
+        let wall = if slope == 0.0 {
+            arena
+                .cast_at_height(o, d, dmax, p.height_m)
+                .map(|h| h.distance)
+        } else {
+            // Horizontal distances, stretched to the beam's own at the end.
+            let stretch = (1.0 + slope * slope).sqrt();
+            let reach = dmax / stretch;
+            let h = p.height_m;
+            let floor = (slope < 0.0).then(|| h / -slope).filter(|&f| f <= reach);
+            let hit = arena
+                .cast_where(o, d, reach, |s, t| s.spans(h + slope * t))
+                .map(|x| x.distance);
+            match (hit, floor) {
+                (Some(a), Some(f)) => Some(a.min(f)),
+                (a, f) => a.or(f),
+            }
+            .map(|t| t * stretch)
+        };
         let end = wall.unwrap_or(dmax);
         // Backscatter power W and its first moment M along the beam, cell by cell
         // (σ constant in a cell); `trans` is the two-way transmission e^{−2τ} so far.
@@ -249,12 +296,21 @@ impl LaserModel {
         let first = URG_AMIN as f64 / URG_ARES as f64;
         let mut rot = Vec2::from_angle(start.theta + dth * first);
         let mount_pos = self.mount.position();
+        let (sp, cp) = self.pitch.sin_cos();
         for (i, slot) in out.iter_mut().enumerate() {
             let s = (URG_AMIN as f64 + i as f64) / URG_ARES as f64;
             let base = start.position() + (end.position() - start.position()) * s;
             let o = base + complex_mul(rot, mount_pos);
             let d = complex_mul(rot, self.beam_dirs[i]);
-            *slot = self.beam(arena, smoke, o, d).value;
+            // The beam (cos b, sin b, 0) in the base frame, pitched nose-down
+            // by p: (cos b cos p, sin b, −cos b sin p); its rise per metre out.
+            let slope = if self.pitch == 0.0 {
+                0.0
+            } else {
+                let (bx, by) = (self.beam_dirs[i].x, self.beam_dirs[i].y);
+                -bx * sp / (bx * bx * cp * cp + by * by).sqrt()
+            };
+            *slot = self.beam_sloped(arena, smoke, o, d, slope).value;
             rot = complex_mul(rot, per_step);
         }
     }
@@ -278,6 +334,49 @@ mod tests {
 
     fn model(seed: u64) -> LaserModel {
         LaserModel::new(LaserParams::default(), Pose2::default(), Rng::new(seed, 1))
+    }
+
+    #[test]
+    fn a_scan_plane_tilted_nose_down_sees_the_floor_ahead_and_the_walls_beside() {
+        // A 5.6 m-wide hall: level, the forward beam reaches the far wall.
+        let t = "[[wall]]\npoints = [[-1, -3], [5, -3], [5, 3], [-1, 3]]\nclosed = true\n";
+        let arena = Arena::from_vector_str(t, Path::new("hall.toml")).unwrap();
+        let smoke = SmokeField::new(&arena, SmokeParams::default(), vec![]).unwrap();
+        let range = |m: &mut LaserModel, pitch_deg: f64| {
+            let mut out = [0u16; URG_STEPS];
+            m.set_pitch(pitch_deg.to_radians());
+            m.scan(
+                &arena,
+                &smoke,
+                &Pose2::default(),
+                &Pose2::default(),
+                &mut out,
+            );
+            let at = |deg: f64| {
+                let i = (URG_AFRT as f64 + deg / 360.0 * URG_ARES as f64).round() as u32 - URG_AMIN;
+                out[i as usize] as f64 / 1000.0
+            };
+            (at(0.0), at(90.0))
+        };
+        let mut m = model(1);
+        let (ahead, side) = range(&mut m, 0.0);
+        assert!(
+            (ahead - 5.0).abs() < 0.15 && (side - 3.0).abs() < 0.1,
+            "{ahead} {side}"
+        );
+        // Pitched 10° nose down at 0.40 m: the floor 0.40 / sin 10° = 2.30 m along the beam.
+        let (ahead, side) = range(&mut m, 10.0);
+        let floor = 0.40 / 10f64.to_radians().sin();
+        assert!((ahead - floor).abs() < 0.05, "{ahead} against {floor}");
+        // The beam square to the pitch axis stays level.
+        assert!((side - 3.0).abs() < 0.05, "{side}");
+        // Nose up, the forward beam rises and still meets the full-height
+        // wall (5.08 m along it; the URG's noise is 1 % of the range, 1σ).
+        let (ahead, _) = range(&mut m, -10.0);
+        assert!(
+            (ahead - 5.0 / 10f64.to_radians().cos()).abs() < 0.15,
+            "{ahead}"
+        );
     }
 
     #[test]

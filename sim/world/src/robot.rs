@@ -69,6 +69,9 @@ pub struct Robot {
     /// On a low obstacle at the last tick.
     on_low: bool,
     bumps: u64,
+    /// Nose-down pitch of the base, rad (negative: nose up): a base with one
+    /// end on a cable or tray is tilted, and so is the laser's scan plane.
+    pitch: f64,
 }
 
 impl Robot {
@@ -89,7 +92,13 @@ impl Robot {
             rng,
             on_low: false,
             bumps: 0,
+            pitch: 0.0,
         }
+    }
+
+    /// Nose-down pitch of the base, rad (negative: nose up; 0 on a level floor).
+    pub fn pitch(&self) -> f64 {
+        self.pitch
     }
 
     /// Times the base climbed onto or off a low obstacle.
@@ -137,6 +146,32 @@ impl Robot {
         self.travel_left = 0.0;
         self.travel_right = 0.0;
         t
+    }
+
+    /// The pitch at the current pose: an end of the base (the front or the
+    /// rear half of its footprint) on a low obstacle and the other on the
+    /// floor tilts it by atan(top / footprint diameter); both ends on it, or
+    /// neither, leave it level.
+    fn pitch_over(&self, arena: &Arena) -> f64 {
+        let climb = self.errors.climb_height_m;
+        if climb <= 0.0 {
+            return 0.0;
+        }
+        let half = self.params.radius_m / 2.0;
+        let heading = Vec2::from_angle(self.truth.theta);
+        let at = |sign: f64| {
+            arena.low_obstacle_top_within(
+                self.truth.position() + heading * (sign * half),
+                half,
+                climb,
+            )
+        };
+        let length = 2.0 * self.params.radius_m;
+        match (at(1.0), at(-1.0)) {
+            (Some(top), None) => -(top / length).atan(),
+            (None, Some(top)) => (top / length).atan(),
+            _ => 0.0,
+        }
     }
 
     /// Advances `dt` seconds.
@@ -205,6 +240,7 @@ impl Robot {
                 spin_r = spin;
             }
         }
+        self.pitch = self.pitch_over(arena);
         // What the encoders count.
         let b = self.params.track_m;
         let (true_l, true_r) = (ds - dth * b / 2.0, ds + dth * b / 2.0);
@@ -446,6 +482,52 @@ mod tests {
             std::path::Path::new("cable.toml"),
         )
         .unwrap()
+    }
+
+    #[test]
+    fn the_base_tilts_nose_up_then_nose_down_over_a_cable_and_is_level_after() {
+        let arena = cable_room();
+        let errors = OdometryErrors {
+            climb_height_m: 0.05,
+            ..Default::default()
+        };
+        let mut r = Robot::new(params(), errors, Pose2::new(1.0, 2.0, 0.0), Rng::new(3, 1));
+        r.command(0.4, 0.0);
+        let (mut up, mut down) = (0.0f64, 0.0f64);
+        let mut order = Vec::new();
+        for _ in 0..12_000 {
+            r.tick(0.001, &arena);
+            let p = r.pitch();
+            up = up.min(p);
+            down = down.max(p);
+            let sign = p.signum() as i8 * i8::from(p != 0.0);
+            if order.last() != Some(&sign) {
+                order.push(sign);
+            }
+        }
+        assert!(r.truth().x > 3.6, "past the cable: {:?}", r.truth());
+        // A 3 cm cable under one end of a 0.52 m base: atan(0.03 / 0.52) = 3.3°.
+        let tilt = (0.03f64 / 0.52).atan();
+        assert!((up + tilt).abs() < 1e-9, "nose up {up}");
+        assert!((down - tilt).abs() < 1e-9, "nose down {down}");
+        assert_eq!(
+            order,
+            [0, -1, 0, 1, 0],
+            "level, front up, on it, rear up, level"
+        );
+        assert_eq!(r.pitch(), 0.0);
+        // An arena without climbing never tilts the base.
+        let mut flat = Robot::new(
+            params(),
+            OdometryErrors::default(),
+            Pose2::new(1.0, 2.0, 0.0),
+            Rng::new(3, 1),
+        );
+        flat.command(0.4, 0.0);
+        for _ in 0..5_000 {
+            flat.tick(0.001, &arena);
+            assert_eq!(flat.pitch(), 0.0);
+        }
     }
 
     #[test]

@@ -402,6 +402,7 @@ impl World {
             let end = self.robot.truth();
             if self.laser_enabled {
                 let mut ranges = [0u16; URG_STEPS];
+                self.laser.set_pitch(self.robot.pitch());
                 self.laser.scan(
                     &self.scenario.arena,
                     &self.smoke,
