@@ -338,7 +338,7 @@ mod tests {
 
     #[test]
     fn a_scan_plane_tilted_nose_down_sees_the_floor_ahead_and_the_walls_beside() {
-        // A 5.6 m-wide hall: level, the forward beam reaches the far wall.
+        // A 6 m hall, the laser 5 m from its far wall: level, the forward beam reaches it.
         let t = "[[wall]]\npoints = [[-1, -3], [5, -3], [5, 3], [-1, 3]]\nclosed = true\n";
         let arena = Arena::from_vector_str(t, Path::new("hall.toml")).unwrap();
         let smoke = SmokeField::new(&arena, SmokeParams::default(), vec![]).unwrap();
