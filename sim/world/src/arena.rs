@@ -602,43 +602,40 @@ impl Arena {
         if climb_m <= 0.0 {
             return None;
         }
-        let cell = INDEX_CELL_M;
-        let lo_x = (((p.x - radius - self.min.x) / cell).floor() as i64).max(0);
-        let hi_x = (((p.x + radius - self.min.x) / cell).floor() as i64).min(self.cols as i64 - 1);
-        let lo_y = (((p.y - radius - self.min.y) / cell).floor() as i64).max(0);
-        let hi_y = (((p.y + radius - self.min.y) / cell).floor() as i64).min(self.rows as i64 - 1);
         let mut top: Option<f64> = None;
-        for cy in lo_y..=hi_y {
-            for cx in lo_x..=hi_x {
-                for &i in self.cell_items(cx as usize, cy as usize) {
-                    let s = &self.segments[i as usize];
-                    if s.z[1] <= climb_m && s.distance_to(p) < radius {
-                        top = Some(top.map_or(s.z[1], |t: f64| t.max(s.z[1])));
-                    }
-                }
+        self.for_each_near(p, radius, |s| {
+            if s.z[1] <= climb_m && s.distance_to(p) < radius {
+                top = Some(top.map_or(s.z[1], |t| t.max(s.z[1])));
             }
-        }
+        });
         top
     }
 
     fn nearest_where(&self, p: Vec2, radius: f64, keep: impl Fn(&Segment) -> bool) -> f64 {
+        let mut best = f64::INFINITY;
+        self.for_each_near(p, radius, |s| {
+            if keep(s) {
+                best = best.min(s.distance_to(p));
+            }
+        });
+        best
+    }
+
+    /// Every segment listed in the index cells within `radius` of `p` (a
+    /// superset of those that are; a segment may come more than once).
+    fn for_each_near(&self, p: Vec2, radius: f64, mut visit: impl FnMut(&Segment)) {
         let cell = INDEX_CELL_M;
         let lo_x = (((p.x - radius - self.min.x) / cell).floor() as i64).max(0);
         let hi_x = (((p.x + radius - self.min.x) / cell).floor() as i64).min(self.cols as i64 - 1);
         let lo_y = (((p.y - radius - self.min.y) / cell).floor() as i64).max(0);
         let hi_y = (((p.y + radius - self.min.y) / cell).floor() as i64).min(self.rows as i64 - 1);
-        let mut best = f64::INFINITY;
         for cy in lo_y..=hi_y {
             for cx in lo_x..=hi_x {
                 for &i in self.cell_items(cx as usize, cy as usize) {
-                    let s = &self.segments[i as usize];
-                    if keep(s) {
-                        best = best.min(s.distance_to(p));
-                    }
+                    visit(&self.segments[i as usize]);
                 }
             }
         }
-        best
     }
 
     /// The true map: walls occupied, the free space reachable from `start`
