@@ -33,7 +33,7 @@
 //! `[odometry]` (scale_left, scale_right, track_error, heading_drift_deg_per_m,
 //! slip_per_sqrt_m; climb_height_m, bump_heading_deg, bump_slip_m: driving
 //! over obstacles at most climb_height_m high jolts the heading and spins a
-//! wheel), `[smoke]` (cell_m, diffusion_m2ps, decay_per_s, wind_mps,
+//! wheel, and leaves them out of the truth map), `[smoke]` (cell_m, diffusion_m2ps, decay_per_s, wind_mps,
 //! layer_height_m, mass_extinction_m2pg, `[[smoke.source]]`, `[[smoke.patch]]`
 //! with center/radius_m/density_gpm3), `[laser]` (height_m, lidar_ratio_sr,
 //! wall_reflectance, min_return, patchiness), `[sonar]` (height_m, critical_angle_deg,

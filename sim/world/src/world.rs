@@ -288,12 +288,25 @@ impl World {
         &self.smoke
     }
 
-    /// The true map at the scenario's `truth.map_resolution_m`.
+    /// The true map at the scenario's `truth.map_resolution_m`: what the
+    /// base must keep clear of. Obstacles on the floor no higher than
+    /// `[odometry] climb_height_m` (cables, a cable tray) are left out: the
+    /// base drives over them, a map that shows them blocks routes the robot
+    /// can take, and SLAMfusion scored its maps against the course without
+    /// the ramp it drove over.
     pub fn truth_map(&self) -> OccupancyGrid {
-        self.scenario.arena.truth_map(
+        let (res, start) = (
             self.scenario.truth_map_resolution_m,
             self.scenario.start.position(),
-        )
+        );
+        let climb = self.scenario.odometry.climb_height_m;
+        if climb > 0.0 {
+            self.scenario
+                .arena
+                .truth_map_where(res, start, |s| s.z[1] > climb)
+        } else {
+            self.scenario.arena.truth_map(res, start)
+        }
     }
 
     /// Drives the base by velocity (m/s, rad/s), as a driver's `cmd_vel` would.

@@ -346,3 +346,19 @@ fn external_commands_take_over_from_the_route() {
     run(&mut world, 2.0);
     assert_eq!(world.truth_pose(), still);
 }
+
+#[test]
+fn the_truth_map_leaves_out_the_cables_the_base_drives_over_and_keeps_the_low_box() {
+    let world = World::new(Scenario::builtin("cables").unwrap()).unwrap();
+    let map = world.truth_map();
+    let at = |x: f64, y: f64| {
+        let (cx, cy) = map.world_to_cell(x, y).unwrap();
+        map.get(cx, cy).unwrap()
+    };
+    // The 3 cm cable at x = 1.5 and the 6 cm tray at x = 8.5 (climb 8 cm): floor.
+    assert_eq!(at(1.5, 2.0), smokenav_platform_map::FREE, "cable");
+    assert_eq!(at(8.5, 2.0), smokenav_platform_map::FREE, "tray");
+    // The 25 cm box (3.8, 1.2; 0.6 × 0.4 m): its south edge at y = 1.0.
+    assert_eq!(at(3.8, 1.0), smokenav_platform_map::OCCUPIED, "low box");
+    assert_eq!(at(5.0, 1.0), smokenav_platform_map::OCCUPIED, "partition");
+}
