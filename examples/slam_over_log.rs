@@ -31,9 +31,9 @@ fn main() -> anyhow::Result<()> {
     let mut scans = LogScans::new(BufReader::new(file));
     let mut slam = SlamPipeline::from_config(
         &cfg,
-        BackendOptions {
+        &BackendOptions {
             keep_trajectory: true,
-            online: false,
+            ..BackendOptions::default()
         },
     );
     let mut n = 0;

@@ -205,6 +205,7 @@ macro_rules! for_each_message {
                         SLAM_VOTE_RBPF = "slam/vote/rbpf",
                         SLAM_VOTE_GRAPH = "slam/vote/graph",
                         SLAM_VOTE_FUZZY = "slam/vote/fuzzy",
+                        SLAM_VOTE_PROJECTED = "slam/vote/projected",
                         MAPPING_GRID = "mapping/grid",
                         MAPPING_PROJECTED = "mapping/projected"
                     ],

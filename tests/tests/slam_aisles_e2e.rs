@@ -24,9 +24,9 @@ fn run(backend: SlamBackendKind, particles: usize) -> (Vec<StampedPose>, Vec<(u6
     let mut drivers = DirectDrivers::new(&profile, T0_NS).unwrap();
     let mut slam = SlamPipeline::from_config(
         &profile.slam,
-        BackendOptions {
+        &BackendOptions {
             keep_trajectory: true,
-            online: false,
+            ..BackendOptions::default()
         },
     )
     .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()));

@@ -176,7 +176,7 @@ fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()>
     // Offline: the profile the process read, the pipeline the process runs.
     let cfg = RobotConfig::load(&cfg_path)?;
     let m = &cfg.laser.mount;
-    let mut pipeline = SlamPipeline::from_config(&cfg.slam, BackendOptions::default())
+    let mut pipeline = SlamPipeline::from_config(&cfg.slam, &BackendOptions::default())
         .with_sensor_pose(Pose2::new(m.x, m.y, m.yaw_rad()));
     let mut offline: Vec<SlamUpdate> = Vec::new();
     replay(&mut pipeline, received, |u| offline.push(*u));

@@ -458,12 +458,32 @@ impl Mapper {
             if !(range.is_finite() && range >= rmin && range < rmax) {
                 continue;
             }
-            self.insert_cone(pose, &m, range);
+            self.insert_cone(pose, &m, range, true);
         }
     }
 
-    /// The voxels (and laser-plane cells) one cone marks.
-    fn insert_cone(&mut self, pose: &Pose2, m: &Mount, range: f64) {
+    /// Sonar echoes whose obstacle is mapped already (another sensor saw
+    /// it): only the free space inside each cone, short of the echo's cap.
+    pub fn insert_sonar_free(&mut self, pose: &Pose2, echoes: impl IntoIterator<Item = (u8, f64)>) {
+        if !pose.is_finite() {
+            return;
+        }
+        let [rmin, rmax] = self.rig.sonar_range_m;
+        let rmax = rmax.min(self.params.sonar_map_range_m);
+        for (index, range) in echoes {
+            let Some(m) = self.rig.sonar(index).copied() else {
+                continue;
+            };
+            if !(range.is_finite() && range >= rmin && range < rmax) {
+                continue;
+            }
+            self.insert_cone(pose, &m, range, false);
+        }
+    }
+
+    /// The voxels (and laser-plane cells) one cone marks; without `cap`,
+    /// only its free space.
+    fn insert_cone(&mut self, pose: &Pose2, m: &Mount, range: f64, cap: bool) {
         let s = pose.compose(&m.pose);
         let ism = self.sonar_ism;
         let reach = range + ism.thickness_m / 2.0;
@@ -521,7 +541,7 @@ impl Mapper {
                         let d = (h2 + dz * dz).sqrt();
                         let upd = if d < range - half_t {
                             free
-                        } else if d <= range + half_t {
+                        } else if cap && d <= range + half_t {
                             occ
                         } else {
                             continue;
@@ -531,7 +551,9 @@ impl Mapper {
                     }
                 }
                 // The cone's slice at the laser's height, in the 2D grid.
-                if let Some(p) = ism.at([a, b, plane_dz], range) {
+                if let Some(p) = ism.at([a, b, plane_dz], range)
+                    && (cap || p <= 0.5)
+                {
                     let d = if p > 0.5 { slice_occ } else { free };
                     self.apply(Sensor::Sonar, None, Some(i), d);
                 }
@@ -732,6 +754,23 @@ mod tests {
         assert!(t.search(t.key([1.5, 0.0, 0.1]).unwrap()).unwrap() > 0.0);
         assert!(t.search(t.key([1.48, 0.0, 0.52]).unwrap()).unwrap() > 0.0);
         assert_eq!(t.search(t.key([1.5, 0.0, 0.7]).unwrap()), None);
+    }
+
+    #[test]
+    fn an_echo_inserted_as_free_space_clears_its_cone_and_marks_no_cap() {
+        let mut m = mapper();
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        for _ in 0..3 {
+            m.insert_sonar_free(&pose, [(0, 1.5)]);
+        }
+        let proj = m.projected(FusionRule::Bayes).unwrap();
+        let geo = proj.geometry;
+        let at = |x: f64, y: f64| geo.index(x, y).unwrap();
+        assert_eq!(proj.class(at(0.8, 0.0)), CellClass::Free);
+        assert_eq!(proj.class(at(1.5, 0.0)), CellClass::Unknown, "no cap");
+        let t = m.octree();
+        assert_eq!(t.search(t.key([1.5, 0.0, 0.3]).unwrap()), None);
+        assert!(t.search(t.key([1.0, 0.0, 0.3]).unwrap()).unwrap() < 0.0);
     }
 
     #[test]

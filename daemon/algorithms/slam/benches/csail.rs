@@ -78,9 +78,9 @@ fn main() {
     let mut scans = LogScans::new(BufReader::new(log));
     let mut slam = SlamPipeline::from_config(
         &cfg,
-        BackendOptions {
+        &BackendOptions {
             keep_trajectory: true,
-            online: false,
+            ..BackendOptions::default()
         },
     );
     if let Some(t) = std::env::var("CSAIL_THETA0")

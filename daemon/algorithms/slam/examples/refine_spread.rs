@@ -23,7 +23,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (sxy, sth): (f64, f64) = (a[4].parse()?, a[5].parse()?);
     let cfg: SlamSection = parse_toml(&a[6..].join("\n"), std::path::Path::new("args"))?;
     let mut scans = LogScans::new(BufReader::new(std::fs::File::open(&a[1])?));
-    let mut slam = SlamPipeline::from_config(&cfg, BackendOptions::default());
+    let mut slam = SlamPipeline::from_config(&cfg, &BackendOptions::default());
     for _ in 0..k {
         let (scan, odom) = scans.next_scan().ok_or("log too short")?;
         slam.process(scan, &odom);

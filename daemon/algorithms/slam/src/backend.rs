@@ -15,6 +15,7 @@
 use crate::frontend::Tracked;
 use crate::fuzzy::FuzzySlam;
 use crate::graph::{GraphParams, GraphSlam};
+use crate::projected::{ProjectedMap, SensorRig};
 use crate::rbpf::{Rbpf, RbpfParams};
 use crate::scan::RangeScan;
 use crate::vote::VoteSlam;
@@ -22,6 +23,7 @@ use nalgebra::Matrix3;
 use smokenav_platform_config::{SlamBackendKind, SlamSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
+use std::sync::Arc;
 
 /// A pose with the stamp of the scan it belongs to.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,6 +94,12 @@ pub trait SlamBackend: Send {
     fn confidence_map(&self) -> Option<OccupancyGrid> {
         None
     }
+    /// Obstacles out of the laser plane (occupied; unknown elsewhere) on
+    /// [`SlamBackend::map`]'s grid, for a back-end that maps in height (the
+    /// projected map); `None` for the laser-plane ones.
+    fn out_of_plane_map(&self) -> Option<OccupancyGrid> {
+        None
+    }
     /// The best estimate of the whole trajectory so far (smoothed where the
     /// back-end can; empty if it keeps no history).
     fn trajectory(&self) -> Vec<StampedPose>;
@@ -103,7 +111,7 @@ pub trait SlamBackend: Send {
 }
 
 /// How a back-end is built beyond its `[slam]` keys.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct BackendOptions {
     /// Keep the whole trajectory for [`SlamBackend::trajectory`] (offline
     /// runs; memory grows with the number of scans).
@@ -114,10 +122,13 @@ pub struct BackendOptions {
     /// is applied at a later scan. Off (offline runs, benches, tests): the
     /// same work runs inline on the scan that calls for it, deterministic.
     pub online: bool,
+    /// The sensors in 3D (the robot profile's mounts at `[mapping]`'s
+    /// heights), for the projected map; without them it maps the laser only.
+    pub sensors: Option<Arc<SensorRig>>,
 }
 
 /// The back-end `[slam] backend` names, with its parameters from the section.
-pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Box<dyn SlamBackend> {
+pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Box<dyn SlamBackend> {
     match cfg.backend {
         SlamBackendKind::Rbpf => Box::new(Rbpf::new(
             RbpfParams::from_config(cfg),
@@ -129,6 +140,9 @@ pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Box<dyn SlamBacke
             Box::new(g)
         }
         SlamBackendKind::Fuzzy => Box::new(FuzzySlam::new(cfg, opts.keep_trajectory)),
+        SlamBackendKind::Projected => {
+            Box::new(ProjectedMap::new(cfg, opts.sensors.clone(), opts.online))
+        }
         // A thread that cannot be spawned is the machine's failure, not the
         // input's (as `std::thread::spawn` itself treats it).
         SlamBackendKind::Vote => Box::new(

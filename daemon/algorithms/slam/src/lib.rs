@@ -37,6 +37,7 @@ pub mod noise;
 pub mod odom_buffer;
 pub mod offline;
 pub mod pipeline;
+pub mod projected;
 pub mod rbpf;
 pub mod scan;
 #[cfg(test)]

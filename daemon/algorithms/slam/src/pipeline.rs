@@ -158,7 +158,7 @@ impl SlamPipeline {
     }
 
     /// A pipeline around the back-end `[slam] backend` names.
-    pub fn from_config(cfg: &SlamSection, opts: BackendOptions) -> Self {
+    pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Self {
         Self::new(cfg, backend::from_config(cfg, opts))
     }
 

@@ -36,6 +36,10 @@ pub struct RangeScan {
     /// Share (0–1) of the scan's beams the fusion did not leave to the laser
     /// (sections it painted from the sonar or dropped as smoke); 0 for a laser scan.
     pub withheld_share: f64,
+    /// The sonar ring's readings the fusion paired with the scan, used or
+    /// rejected, as `(transducer index, range m)`; empty for a laser scan.
+    /// Only a back-end that maps out of the laser plane reads them.
+    pub sonar: Vec<(u8, f64)>,
 }
 
 /// Which beams' endpoints the scan matchers use.
@@ -117,6 +121,7 @@ impl RangeScan {
         self.beams.clear();
         self.laser_noise_factor = 1.0;
         self.withheld_share = 0.0;
+        self.sonar.clear();
         self.sensor_pose = Pose2::default();
         self.stamp_ns = 0;
     }
@@ -185,6 +190,13 @@ impl RangeScan {
             }
         }
         self.withheld_share = withheld as f64 / self.beams.len().max(1) as f64;
+        let used = (fused.section_count as usize).min(fused.sections.len());
+        self.sonar.extend(
+            fused.sections[..used]
+                .iter()
+                .filter(|d| d.sonar_range.is_finite() && d.sonar_range > 0.0)
+                .map(|d| (d.sonar_index, f64::from(d.sonar_range))),
+        );
     }
 }
 
@@ -228,8 +240,17 @@ mod tests {
         }
         f.beam_source[1] = SectionSource::Sonar as u8;
         f.beam_source[2] = SectionSource::Neither as u8;
+        // Two sections: sonar 3 heard 1.2 m, sonar 4 gave no reading (0).
+        f.section_count = 2;
+        f.sections[0].sonar_index = 3;
+        f.sections[0].sonar_range = 1.2;
+        f.sections[1].sonar_index = 4;
+        f.sections[5].sonar_range = 2.0; // beyond section_count: not read
         let mut r = RangeScan::default();
         r.fill_from_fused(&f, Pose2::default(), 1.3);
+        assert_eq!(r.sonar.len(), 1);
+        assert_eq!(r.sonar[0].0, 3);
+        assert!((r.sonar[0].1 - 1.2).abs() < 1e-6);
         assert_eq!(r.beams[0].kind, BeamKind::Laser);
         assert_eq!(r.beams[1].kind, BeamKind::Sonar);
         assert_eq!(r.beams[2].range, None);
@@ -241,5 +262,6 @@ mod tests {
         );
         r.clear();
         assert_eq!(r.withheld_share, 0.0);
+        assert!(r.sonar.is_empty());
     }
 }

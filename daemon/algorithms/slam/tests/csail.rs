@@ -36,9 +36,9 @@ fn run(log: &Path, cfg: &SlamSection) -> Run {
     let mut scans = LogScans::new(BufReader::new(std::fs::File::open(log).unwrap()));
     let mut slam = SlamPipeline::from_config(
         cfg,
-        BackendOptions {
+        &BackendOptions {
             keep_trajectory: true,
-            online: false,
+            ..BackendOptions::default()
         },
     );
     let mut online = Vec::new();

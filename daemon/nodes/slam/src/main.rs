@@ -31,6 +31,7 @@
 use anyhow::Context;
 use clap::Parser;
 use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
+use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::vote::member::MemberFault;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
@@ -271,8 +272,12 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         if let Some(f) = fault {
             tracing::warn!("test fault injected: {f:?}");
         }
-        let vote = VoteSlam::new(&cfg, BackendOptions::default(), fault)
-            .context("cannot start the vote's member threads")?;
+        let opts = BackendOptions {
+            sensors: Some(Arc::new(SensorRig::from_config(&p.config))),
+            ..BackendOptions::default()
+        };
+        let vote =
+            VoteSlam::new(&cfg, &opts, fault).context("cannot start the vote's member threads")?;
         SlamPipeline::new(&cfg, Box::new(vote))
     } else if let Some(mut run) = resumed {
         // Localisation adds no node: no closure to run beside it.
@@ -289,8 +294,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         // The scan path never waits for the graph's loop closures.
         SlamPipeline::from_config(
             &cfg,
-            BackendOptions {
+            &BackendOptions {
                 online: true,
+                sensors: Some(Arc::new(SensorRig::from_config(&p.config))),
                 ..BackendOptions::default()
             },
         )
@@ -303,6 +309,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                 SlamBackendKind::Rbpf => topics::SLAM_VOTE_RBPF,
                 SlamBackendKind::Graph => topics::SLAM_VOTE_GRAPH,
                 SlamBackendKind::Fuzzy => topics::SLAM_VOTE_FUZZY,
+                SlamBackendKind::Projected => topics::SLAM_VOTE_PROJECTED,
                 SlamBackendKind::Vote => continue,
             };
             member_maps.push((m.as_str(), p.bus.map_publisher(topic)?));

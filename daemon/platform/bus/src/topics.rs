@@ -238,6 +238,7 @@ pub fn qos(topic: &str) -> Qos {
             || t == SLAM_VOTE_RBPF.name()
             || t == SLAM_VOTE_GRAPH.name()
             || t == SLAM_VOTE_FUZZY.name()
+            || t == SLAM_VOTE_PROJECTED.name()
             || t == MAPPING_GRID.name()
             || t == MAPPING_PROJECTED.name() =>
         {

@@ -52,6 +52,12 @@ pub struct MappingSection {
     /// floor and this height as an obstacle.
     #[serde(default = "default_robot_height")]
     pub robot_height_m: f64,
+    /// The highest floor obstacle the base drives over (a cable, a sill), m.
+    /// A sonar cone's lower edge comes down to it at some range; an echo
+    /// from farther may be such an obstacle (or the floor itself), so the
+    /// SLAM vote's projected member does not map it as one.
+    #[serde(default)]
+    pub climb_height_m: f64,
     /// Folder the process writes `octree.bt` to, on SIGUSR1 or for
     /// `smokenav map save` (its `--map-dir` overrides it; unset: the
     /// current folder). `smokenav map save --config` copies the file from here.
@@ -93,6 +99,7 @@ impl Default for MappingSection {
             laser_height_m: default_laser_height(),
             sonar_height_m: default_sonar_height(),
             robot_height_m: default_robot_height(),
+            climb_height_m: 0.0,
             map_dir: None,
         }
     }
@@ -107,6 +114,7 @@ impl Validate for MappingSection {
         v.within(&k("laser_height_m"), self.laser_height_m, 0.0, 3.0);
         v.within(&k("sonar_height_m"), self.sonar_height_m, 0.0, 3.0);
         v.within(&k("robot_height_m"), self.robot_height_m, 0.05, 3.0);
+        v.within(&k("climb_height_m"), self.climb_height_m, 0.0, 0.5);
         if let Some(d) = &self.map_dir {
             v.non_empty(&k("map_dir"), d);
         }

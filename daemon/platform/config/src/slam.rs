@@ -81,6 +81,11 @@ pub enum SlamBackendKind {
     /// A per-cell vote over the maps of several back-ends (`[slam.vote]`).
     #[serde(rename = "vote")]
     Vote,
+    /// No estimate of its own: the laser and the sonar cones mapped in 3D at
+    /// the front end's pose and projected to the floor (`[mapping]`'s
+    /// heights); a vote member that sees obstacles out of the laser plane.
+    #[serde(rename = "projected")]
+    Projected,
 }
 
 impl SlamBackendKind {
@@ -90,6 +95,7 @@ impl SlamBackendKind {
             SlamBackendKind::Graph => "graph",
             SlamBackendKind::Fuzzy => "fuzzy",
             SlamBackendKind::Vote => "vote",
+            SlamBackendKind::Projected => "projected",
         }
     }
 }
@@ -535,6 +541,25 @@ mod tests {
         let mut v = Validator::default();
         one.validate("slam", &mut v);
         assert!(!v.issues.is_empty(), "one member is no vote");
+        // `projected` votes out of the plane only: beside two, not as one of them.
+        let ok = section("[vote]\nmembers = [\"rbpf\", \"graph\", \"fuzzy\", \"projected\"]\n");
+        let mut v = Validator::default();
+        ok.validate("slam", &mut v);
+        assert!(v.issues.is_empty(), "{:?}", v.issues);
+        for bad in [
+            "[vote]\nmembers = [\"rbpf\", \"projected\"]\n",
+            "[vote]\nmembers = [\"projected\", \"rbpf\", \"graph\"]\n",
+        ] {
+            let mut v = Validator::default();
+            section(bad).validate("slam", &mut v);
+            assert!(
+                v.issues
+                    .iter()
+                    .any(|i| i.to_string().contains("slam.vote.members")),
+                "{bad}: {:?}",
+                v.issues
+            );
+        }
     }
 
     #[test]

@@ -7,7 +7,8 @@
 //! [slam]
 //! backend = "vote"
 //! [slam.vote]
-//! members = ["rbpf", "graph", "fuzzy"]   # the first is the reference frame
+//! members = ["rbpf", "graph", "fuzzy"]   # the first is the reference frame;
+//!                                        # add "projected" to map out of the laser plane
 //! rule = "majority"                      # or "weighted", "consensus"
 //! agree_radius_m = 0.1                   # consensus: walls this close are one wall
 //! max_residual_m = 0.15                  # alignment residual above it: flagged, left out
@@ -124,10 +125,24 @@ impl Default for VoteSection {
 impl Validate for VoteSection {
     fn validate(&self, key: &str, v: &mut Validator) {
         let k = |name: &str| format!("{key}.{name}");
-        if !(2..=3).contains(&self.members.len()) {
+        // `projected` votes only out of the laser plane: beside 2–3 that map it.
+        let in_plane = self
+            .members
+            .iter()
+            .filter(|m| **m != SlamBackendKind::Projected)
+            .count();
+        if !(2..=3).contains(&in_plane) {
             v.fail(
                 k("members"),
-                format!("must name 2–3 back-ends, got {}", self.members.len()),
+                format!(
+                    "must name 2–3 back-ends that map the laser plane (and `projected` beside them if wanted), got {in_plane}"
+                ),
+            );
+        }
+        if self.members.first() == Some(&SlamBackendKind::Projected) {
+            v.fail(
+                k("members"),
+                "`projected` cannot come first: the first member is the reference frame, and it votes only out of the laser plane",
             );
         }
         for (i, m) in self.members.iter().enumerate() {

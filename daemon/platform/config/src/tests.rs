@@ -431,6 +431,13 @@ fn mapping_heights_and_save_folder_are_keys() {
     let text = format!("{}\n[mapping]\nmap_dir = \"\"\n", pioneer_text());
     let msg = parse(&text).unwrap_err().to_string();
     assert!(msg.contains("mapping.map_dir"), "{msg}");
+    assert_eq!(
+        cfg.mapping.climb_height_m, 0.0,
+        "nothing to climb unless said"
+    );
+    let text = format!("{}\n[mapping]\nclimb_height_m = -0.1\n", pioneer_text());
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(msg.contains("mapping.climb_height_m"), "{msg}");
 }
 
 #[test]

@@ -16,6 +16,7 @@ use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam, ResumedGraph, saved};
 use smokenav_algorithms_slam::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use smokenav_algorithms_slam::offline::LogScans;
+use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::scan::{EndpointLimits, RangeScan};
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, SlamUpdate, StampedPose};
@@ -29,6 +30,7 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::{BufReader, IsTerminal};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
@@ -506,13 +508,24 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
                 )),
             )
         }
-        None => SlamPipeline::from_config(
-            &cfg,
-            BackendOptions {
-                keep_trajectory: true,
-                online: false,
-            },
-        ),
+        None => {
+            // The projected map needs the sensors in 3D: the profile's, if given.
+            let sensors = match &args.profile {
+                Some(p) => Some(Arc::new(SensorRig::from_config(
+                    &RobotConfig::load(p)
+                        .with_context(|| format!("invalid robot profile {}", p.display()))?,
+                ))),
+                None => None,
+            };
+            SlamPipeline::from_config(
+                &cfg,
+                &BackendOptions {
+                    keep_trajectory: true,
+                    sensors,
+                    ..BackendOptions::default()
+                },
+            )
+        }
     };
     let truth_map = match &args.truth_map {
         Some(p) => Some(
@@ -816,11 +829,12 @@ fn vote_report(
     let st = vote.status();
     let _ = writeln!(
         report,
-        "vote               {} rule, {} fused updates, last {:.1} ms; pose from {}",
+        "vote               {} rule, {} fused updates, last {:.1} ms; pose from {}; {} cells out of the laser plane",
         vote.params().section.rule.as_str(),
         st.fuses,
         st.last_fuse_ms,
-        st.pose_member.unwrap_or("-")
+        st.pose_member.unwrap_or("-"),
+        st.out_of_plane_cells
     );
     for m in &st.members {
         let a = m

@@ -8,11 +8,13 @@ use smokenav_algorithms_fusion::engine::StepReport;
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_slam::noise::LaserNoiseModel;
 use smokenav_algorithms_slam::offline::{Received, replay};
+use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, StampedPose};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::{FusedScan, FusionMethod};
 use smokenav_sim_link::TruthTrack;
+use std::sync::Arc;
 
 pub const METHODS: [FusionMethod; 3] =
     [FusionMethod::LaserOnly, FusionMethod::V1, FusionMethod::V2];
@@ -343,9 +345,10 @@ pub(crate) fn replay_slam(
     let mount = profile.laser.mount;
     let mut slam = SlamPipeline::from_config(
         &profile.slam,
-        BackendOptions {
+        &BackendOptions {
             keep_trajectory: true,
-            online: false,
+            sensors: Some(Arc::new(SensorRig::from_config(profile))),
+            ..BackendOptions::default()
         },
     )
     .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()));

@@ -107,7 +107,7 @@ pub struct DemoArgs {
     /// Bayes) on the `heights` scenario (`smokenav-lab map3d`, into OUT/map3d).
     #[arg(long)]
     pub no_map3d: bool,
-    /// Skip the vote back-end's run (its members rbpf, graph, fuzzy and the
+    /// Skip the vote back-end's run (the profile's members, e.g. rbpf, graph, fuzzy, projected, and the
     /// fused map, scored side by side on the trial and its clean twin).
     #[arg(long)]
     pub no_vote: bool,
@@ -196,6 +196,14 @@ fn demo_profile(scenario: &Scenario, particles: Option<usize>) -> RobotConfig {
     if let Some(n) = particles {
         p.slam.particles = n;
     }
+    // The sensors' heights and what the base drives over are the world's
+    // facts here (what the projected vote member maps in 3D with).
+    p.mapping.laser_height_m = scenario.laser.height_m;
+    p.mapping.sonar_height_m = scenario.sonar.height_m;
+    p.mapping.climb_height_m = p
+        .mapping
+        .climb_height_m
+        .max(scenario.odometry.climb_height_m);
     p
 }
 
@@ -410,7 +418,17 @@ fn vote_runs(
     out: &Path,
     say: &Say,
 ) -> anyhow::Result<Vec<vote::VoteComparison>> {
-    say.line("vote back-end (rbpf, graph, fuzzy and their vote; SmokeNav v2):");
+    let names: Vec<&str> = profile
+        .slam
+        .vote
+        .members
+        .iter()
+        .map(|m| m.as_str())
+        .collect();
+    say.line(&format!(
+        "vote back-end ({} and their vote; SmokeNav v2):",
+        names.join(", ")
+    ));
     let mut runs = vec![(main, out.join("recording.mcap"))];
     if let Some(c) = clean {
         runs.push((c, out.join("clean-reference").join("recording.mcap")));

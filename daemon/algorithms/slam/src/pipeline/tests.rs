@@ -10,9 +10,9 @@ use smokenav_shared_types::{BeamReading, Header, SectionSource};
 fn pipeline(c: &SlamSection, keep_trajectory: bool) -> SlamPipeline {
     SlamPipeline::from_config(
         c,
-        BackendOptions {
+        &BackendOptions {
             keep_trajectory,
-            online: false,
+            ..BackendOptions::default()
         },
     )
 }

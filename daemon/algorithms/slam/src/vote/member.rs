@@ -88,6 +88,9 @@ pub(crate) struct MemberState {
     pub revision: u64,
     /// The last exported map and the revision it was exported at.
     pub map: Option<(Arc<OccupancyGrid>, u64)>,
+    /// Its obstacles out of the laser plane, exported with `map` (a member
+    /// that maps in height; see [`SlamBackend::out_of_plane_map`]).
+    pub below: Option<Arc<OccupancyGrid>>,
     /// Why the thread ended, if it panicked.
     pub panicked: Option<String>,
     /// Jobs finished.
@@ -340,18 +343,20 @@ fn worker(
             let map = (exported != Some(revision) && (due || force_export))
                 .then(|| backend.map())
                 .flatten();
-            (update, revision, map)
+            let below = map.as_ref().and_then(|_| backend.out_of_plane_map());
+            (update, revision, map, below)
         }));
         shared.busy_since_ms.store(0, Ordering::Release);
         let mut st = shared.lock();
         match result {
-            Ok((update, revision, map)) => {
+            Ok((update, revision, map, below)) => {
                 if let Some(u) = update {
                     st.update = Some(u);
                 }
                 st.revision = revision;
                 if let Some(m) = map {
                     st.map = Some((Arc::new(m), revision));
+                    st.below = below.map(Arc::new);
                     last_export = Some(Instant::now());
                 }
                 // A timeout tick (no job) only exports.

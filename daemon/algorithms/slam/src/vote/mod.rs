@@ -117,6 +117,9 @@ pub struct VoteStatus {
     pub last_fuse_ms: f64,
     /// The member the fused pose comes from.
     pub pose_member: Option<&'static str>,
+    /// Cells of the last vote set occupied by the members that map in
+    /// height (obstacles out of the laser plane) over the others' vote.
+    pub out_of_plane_cells: u64,
 }
 
 /// What one fused update produced.
@@ -131,6 +134,8 @@ struct FusedOut {
     agreement: Vec<Option<f64>>,
     misaligned: Vec<bool>,
     pose_member: Option<usize>,
+    /// Cells the members mapping in height made occupied over the others' vote.
+    out_of_plane_cells: u64,
 }
 
 /// Evidence per 1 m block of the fused frame: laser and sonar endpoints.
@@ -177,6 +182,8 @@ impl SonarShare {
 /// The member inputs of one fused update.
 struct FuseInput {
     map: Option<(Arc<OccupancyGrid>, u64)>,
+    /// Obstacles out of the laser plane, on `map`'s grid (the projected map).
+    below: Option<Arc<OccupancyGrid>>,
     /// Out for a reason other than its alignment.
     out: bool,
     /// Pose weight from its covariance.
@@ -288,6 +295,7 @@ impl Fuser {
         }
         // Who votes: members in, with a map, aligned within the threshold.
         let mut voters: Vec<(usize, &OccupancyGrid, Pose2, f64)> = Vec::new();
+        let mut below: Vec<(usize, &OccupancyGrid)> = Vec::new();
         for (i, m) in inputs.iter().enumerate() {
             let Some((grid, _)) = &m.map else { continue };
             let a = self.out.alignments[i];
@@ -299,6 +307,11 @@ impl Fuser {
             let Some(a) = a else { continue };
             // Reference point → member point: the inverse of member → reference.
             voters.push((i, grid.as_ref(), a.transform.inverse(), m.weight));
+            if let Some(b) = &m.below
+                && (b.width, b.height, b.origin) == (grid.width, grid.height, grid.origin)
+            {
+                below.push((voters.len() - 1, b.as_ref()));
+            }
         }
         if voters.is_empty() {
             return false;
@@ -338,6 +351,20 @@ impl Fuser {
                 (i, g, a, wgt)
             })
             .collect();
+        // A member that maps in height votes out of the laser plane only: in
+        // it, its map is the same laser at another member's poses (the
+        // graph's), no evidence of its own. Unless no other member is left.
+        let height: Vec<([f64; 6], &OccupancyGrid)> =
+            below.iter().map(|&(k, b)| (maps[k].2, b)).collect();
+        let maps: Vec<(usize, &OccupancyGrid, [f64; 6], f64)> = if height.len() < maps.len() {
+            maps.into_iter()
+                .enumerate()
+                .filter(|(k, _)| !below.iter().any(|b| b.0 == *k))
+                .map(|(_, m)| m)
+                .collect()
+        } else {
+            maps
+        };
         // Every member's cell for every reference cell, member-major, then the vote.
         let (n, k_n) = (w * h, maps.len());
         self.values.clear();
@@ -394,6 +421,38 @@ impl Fuser {
                     .vote(&self.states, k_n, w, h, radius, &mut self.fused_states);
             }
         }
+        // Below and above the laser plane the laser-plane members abstain
+        // (their "free" there is the laser passing over the obstacle): the
+        // members that map in height decide, by majority among themselves.
+        let mut out_of_plane = 0u64;
+        if !height.is_empty() {
+            for y in 0..h {
+                let (fx, fy) = (0.0, y as f64);
+                for x in 0..w {
+                    let fx = fx + x as f64;
+                    let seen = height
+                        .iter()
+                        .filter(|&&(a, b)| {
+                            let mx = a[0] * fx + a[1] * fy + a[2];
+                            let my = a[3] * fx + a[4] * fy + a[5];
+                            mx >= 0.0
+                                && my >= 0.0
+                                && (mx as usize) < b.width
+                                && (my as usize) < b.height
+                                && CellState::of(b.cells[my as usize * b.width + mx as usize])
+                                    == CellState::Occupied
+                        })
+                        .count();
+                    if 2 * seen > height.len()
+                        && self.fused_states[y * w + x] != CellState::Occupied
+                    {
+                        self.fused_states[y * w + x] = CellState::Occupied;
+                        out_of_plane += 1;
+                    }
+                }
+            }
+        }
+        self.out.out_of_plane_cells = out_of_plane;
         for (i, state) in self.fused_states.iter().enumerate() {
             fused.cells[i] = state.value();
             for (k, m) in maps.iter().enumerate() {
@@ -454,6 +513,7 @@ impl MapVote {
             .iter()
             .map(|m| FuseInput {
                 map: Some(m.clone()),
+                below: None,
                 out: false,
                 weight: 1.0,
             })
@@ -529,7 +589,7 @@ impl VoteSlam {
     /// The members of `cfg.vote` with `cfg`'s other keys, on their threads.
     pub fn new(
         cfg: &SlamSection,
-        opts: BackendOptions,
+        opts: &BackendOptions,
         fault: Option<MemberFault>,
     ) -> std::io::Result<Self> {
         let p = VoteParams {
@@ -601,6 +661,7 @@ impl VoteSlam {
                             let st = s.lock();
                             FuseInput {
                                 map: st.map.clone(),
+                                below: st.below.clone(),
                                 out: st.panicked.is_some()
                                     || s.busy_for().is_some_and(|d| d > stall),
                                 weight: pose_weight(st.update.as_ref().map(|u| &u.0)),
@@ -676,6 +737,7 @@ impl VoteSlam {
             fuses: fused.fuses,
             last_fuse_ms: fused.fuse_ms,
             pose_member: fused.pose_member.map(|i| self.members[i].name),
+            out_of_plane_cells: fused.out_of_plane_cells,
         }
     }
 
@@ -726,6 +788,7 @@ impl VoteSlam {
                 let st = m.shared.lock();
                 FuseInput {
                     map: st.map.clone(),
+                    below: st.below.clone(),
                     out: st.panicked.is_some()
                         || m.given_up()
                         || m.shared.busy_for().is_some_and(|d| d > stall),
@@ -983,6 +1046,7 @@ impl SlamBackend for VoteSlam {
             "vote_members_out",
             st.members.iter().filter(|m| m.health.is_out()).count() as f64,
         );
+        emit("vote_out_of_plane_cells", st.out_of_plane_cells as f64);
         emit(
             "vote_drops",
             st.members.iter().map(|m| m.drops).sum::<u64>() as f64,

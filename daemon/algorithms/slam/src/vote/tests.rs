@@ -51,9 +51,9 @@ fn wait_for(v: &VoteSlam, what: &str, mut f: impl FnMut() -> bool) {
 fn three_members_vote_in_lockstep_and_align_to_the_reference() {
     let mut v = VoteSlam::new(
         &cfg(&[K::Rbpf, K::Graph, K::Fuzzy], true),
-        BackendOptions {
+        &BackendOptions {
             keep_trajectory: true,
-            online: false,
+            ..BackendOptions::default()
         },
         None,
     )
@@ -95,7 +95,7 @@ fn a_panicking_member_is_out_and_the_vote_goes_on() {
     };
     let mut v = VoteSlam::new(
         &cfg(&[K::Rbpf, K::Graph, K::Fuzzy], false),
-        BackendOptions::default(),
+        &BackendOptions::default(),
         Some(fault),
     )
     .unwrap();
@@ -134,7 +134,7 @@ fn a_stalled_member_drops_scans_and_never_holds_the_others() {
     };
     let mut c = cfg(&[K::Rbpf, K::Graph], false);
     c.vote.queue = 2;
-    let mut v = VoteSlam::new(&c, BackendOptions::default(), Some(fault)).unwrap();
+    let mut v = VoteSlam::new(&c, &BackendOptions::default(), Some(fault)).unwrap();
     // Scans keep coming while the member hangs in its third: process() keeps returning.
     let deadline = Instant::now() + Duration::from_secs(60);
     let mut i = 0u64;
@@ -192,7 +192,7 @@ fn the_front_end_match_is_forwarded_to_the_graph_member() {
     let graph_pose_error = |forward: bool| -> f64 {
         let mut v = VoteSlam::new(
             &cfg(&[K::Graph, K::Rbpf], true),
-            BackendOptions::default(),
+            &BackendOptions::default(),
             None,
         )
         .unwrap();
@@ -232,4 +232,68 @@ fn the_front_end_match_is_forwarded_to_the_graph_member() {
         shared < 1e-6,
         "with the shared match the pose is the odometry: {shared}"
     );
+}
+
+/// A 4 × 3 m room at 5 cm: walls occupied, inside free.
+fn room() -> OccupancyGrid {
+    use smokenav_platform_map::{FREE, OCCUPIED};
+    let (w, h) = (80, 60);
+    let mut g = OccupancyGrid::new(w, h, 0.05, [0.0, 0.0, 0.0]);
+    for y in 0..h {
+        for x in 0..w {
+            let wall = x < 2 || y < 2 || x >= w - 2 || y >= h - 2 || (x == 40 && y < 30);
+            g.cells[y * w + x] = if wall { OCCUPIED } else { FREE };
+        }
+    }
+    g
+}
+
+#[test]
+fn a_member_that_maps_in_height_decides_out_of_the_plane_and_abstains_in_it() {
+    use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
+    let (w, at, split) = (80, 20 * 80 + 60, 45 * 80 + 20);
+    let mut members: Vec<OccupancyGrid> = vec![room(); 4];
+    // In the plane at `split`: two laser-plane members free, one occupied;
+    // the height member occupied. Counted, 2 : 2 would be a tie (occupied).
+    members[2].cells[split] = OCCUPIED;
+    members[3].cells[split] = OCCUPIED;
+    // Out of the plane at `at`: the three laser-plane members see free floor
+    // (their beams pass over a low box), the height member an obstacle.
+    let mut below = OccupancyGrid::new(w, 60, 0.05, [0.0, 0.0, 0.0]);
+    below.cells.fill(UNKNOWN);
+    below.cells[at] = OCCUPIED;
+    let inputs: Vec<FuseInput> = members
+        .into_iter()
+        .enumerate()
+        .map(|(i, m)| FuseInput {
+            map: Some((Arc::new(m), 1)),
+            below: (i == 3).then(|| Arc::new(below.clone())),
+            out: false,
+            weight: 1.0,
+        })
+        .collect();
+    let section = VoteSection {
+        members: vec![K::Rbpf, K::Graph, K::Fuzzy, K::Projected],
+        ..VoteSection::default()
+    };
+    let mut f = Fuser::new(
+        VoteParams {
+            section,
+            fault: None,
+        },
+        4,
+    );
+    assert!(f.fuse(&inputs, &SonarShare::default(), true));
+    let fused = f.out.map.clone().unwrap();
+    assert_eq!(fused.cells[at], OCCUPIED, "the low box");
+    assert_eq!(fused.cells[split], FREE, "two of three in the plane");
+    assert_eq!(f.out.out_of_plane_cells, 1);
+    // Without its out-of-plane map the same member is one more laser-plane
+    // voter: the box goes, and the split is a tie.
+    let mut plain = inputs;
+    plain[3].below = None;
+    f.fuse(&plain, &SonarShare::default(), true);
+    let fused = f.out.map.clone().unwrap();
+    assert_eq!(fused.cells[at], FREE);
+    assert_eq!(fused.cells[split], OCCUPIED);
 }
