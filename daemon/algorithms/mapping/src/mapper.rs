@@ -446,25 +446,21 @@ impl Mapper {
     /// `sonar_map_range_m` say nothing: far cones are wide, mostly guessed, and
     /// would cost tens of thousands of voxels each.
     pub fn insert_sonar(&mut self, pose: &Pose2, echoes: impl IntoIterator<Item = (u8, f64)>) {
-        if !pose.is_finite() {
-            return;
-        }
-        let [rmin, rmax] = self.rig.sonar_range_m;
-        let rmax = rmax.min(self.params.sonar_map_range_m);
-        for (index, range) in echoes {
-            let Some(m) = self.rig.sonar(index).copied() else {
-                continue;
-            };
-            if !(range.is_finite() && range >= rmin && range < rmax) {
-                continue;
-            }
-            self.insert_cone(pose, &m, range, true);
-        }
+        self.insert_echoes(pose, echoes, true);
     }
 
     /// Sonar echoes whose obstacle is mapped already (another sensor saw
     /// it): only the free space inside each cone, short of the echo's cap.
     pub fn insert_sonar_free(&mut self, pose: &Pose2, echoes: impl IntoIterator<Item = (u8, f64)>) {
+        self.insert_echoes(pose, echoes, false);
+    }
+
+    fn insert_echoes(
+        &mut self,
+        pose: &Pose2,
+        echoes: impl IntoIterator<Item = (u8, f64)>,
+        cap: bool,
+    ) {
         if !pose.is_finite() {
             return;
         }
@@ -477,7 +473,7 @@ impl Mapper {
             if !(range.is_finite() && range >= rmin && range < rmax) {
                 continue;
             }
-            self.insert_cone(pose, &m, range, false);
+            self.insert_cone(pose, &m, range, cap);
         }
     }
 
