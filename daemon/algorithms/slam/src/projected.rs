@@ -23,7 +23,9 @@ use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
 use crate::frontend::Tracked;
 use crate::graph::{GraphParams, GraphSlam};
 use crate::scan::{BeamKind, RangeScan};
-use smokenav_algorithms_mapping::{FusionRule, Heights, MapParams, MapSet, Mapper, Mount, Rig};
+use smokenav_algorithms_mapping::{
+    FusionRule, Heights, MapParams, MapSet, Mapper, Mount, ProbGrid, Rig,
+};
 use smokenav_platform_config::{RobotConfig, SlamSection};
 use smokenav_platform_map::{OCCUPIED, OccupancyGrid, UNKNOWN};
 use smokenav_shared_types::Pose2;
@@ -90,57 +92,10 @@ const PLANE_FREE_P: f32 = 0.35;
 /// cone all lie farther than its range plus this, m.
 pub const OUT_OF_PLANE_MARGIN_M: f64 = 0.3;
 
-/// The projected 3D map at a pose graph's poses.
-pub struct ProjectedMap {
-    resolution: f64,
-    sensors: Option<Arc<SensorRig>>,
-    mapper: Option<Mapper>,
-    graph: GraphSlam,
-    initial: Pose2,
-    revision: u64,
-    scans: u64,
-    echoes: u64,
-    /// Echoes mapped: those the laser could not account for.
-    out_of_plane_echoes: u64,
-    /// Laser endpoints of the current scan in the robot frame (scratch).
-    endpoints: Vec<(f64, f64)>,
-    mapped: Vec<(u8, f64)>,
-    /// The other echoes: their free space only (scratch).
-    cleared: Vec<(u8, f64)>,
-    /// Farther than this an echo may come from the floor or from what the
-    /// base drives over: the cones' lower edge is that low there, m.
-    floor_range_m: f64,
-    /// The last range used per transducer: the ring repeats a transducer's
-    /// reading until it fires again, and a repeat is not a new echo.
-    last_range: Vec<f64>,
-}
-
-impl ProjectedMap {
-    /// `sensors`: the robot's rig in 3D (without it: the laser alone, at the
-    /// scan's mount); `online`: the graph's loop closures run beside the scan path.
-    pub fn new(cfg: &SlamSection, sensors: Option<Arc<SensorRig>>, online: bool) -> Self {
-        let mut graph = GraphSlam::new(cfg, GraphParams::default());
-        graph.set_online(online);
-        Self {
-            resolution: cfg.resolution_m,
-            sensors,
-            mapper: None,
-            graph,
-            initial: Pose2::default(),
-            revision: 0,
-            scans: 0,
-            echoes: 0,
-            out_of_plane_echoes: 0,
-            endpoints: Vec::new(),
-            mapped: Vec::new(),
-            cleared: Vec::new(),
-            floor_range_m: f64::INFINITY,
-            last_range: vec![f64::NAN; 256],
-        }
-    }
-
-    /// The echoes of `scan` the laser cannot account for, into `self.mapped`.
-    fn out_of_plane_echoes(&mut self, scan: &RangeScan, rig: &Rig) {
+impl EchoGate {
+    /// The echoes of `scan` the laser cannot account for, into `mapped`, the
+    /// others into `cleared`.
+    fn sort(&mut self, scan: &RangeScan, rig: &Rig) {
         self.mapped.clear();
         self.cleared.clear();
         self.endpoints.clear();
@@ -186,6 +141,64 @@ impl ProjectedMap {
             }
         }
     }
+}
+
+/// The projected 3D map at a pose graph's poses.
+pub struct ProjectedMap {
+    resolution: f64,
+    sensors: Option<Arc<SensorRig>>,
+    mapper: Option<Mapper>,
+    graph: GraphSlam,
+    initial: Pose2,
+    revision: u64,
+    scans: u64,
+    echoes: u64,
+    /// Echoes mapped: those the laser could not account for.
+    out_of_plane_echoes: u64,
+    gate: EchoGate,
+}
+
+/// Sorts a scan's sonar echoes into those mapped as obstacles and those
+/// whose free space alone is mapped.
+struct EchoGate {
+    /// Laser endpoints of the current scan in the robot frame (scratch).
+    endpoints: Vec<(f64, f64)>,
+    mapped: Vec<(u8, f64)>,
+    /// The other echoes: their free space only (scratch).
+    cleared: Vec<(u8, f64)>,
+    /// Farther than this an echo may come from the floor or from what the
+    /// base drives over: the cones' lower edge is that low there, m.
+    floor_range_m: f64,
+    /// The last range used per transducer: the ring repeats a transducer's
+    /// reading until it fires again, and a repeat is not a new echo.
+    last_range: [f64; 256],
+}
+
+impl ProjectedMap {
+    /// `sensors`: the robot's rig in 3D (without it: the laser alone, at the
+    /// scan's mount); `online`: the graph's loop closures run beside the scan path.
+    pub fn new(cfg: &SlamSection, sensors: Option<Arc<SensorRig>>, online: bool) -> Self {
+        let mut graph = GraphSlam::new(cfg, GraphParams::default());
+        graph.set_online(online);
+        Self {
+            resolution: cfg.resolution_m,
+            sensors,
+            mapper: None,
+            graph,
+            initial: Pose2::default(),
+            revision: 0,
+            scans: 0,
+            echoes: 0,
+            out_of_plane_echoes: 0,
+            gate: EchoGate {
+                endpoints: Vec::new(),
+                mapped: Vec::new(),
+                cleared: Vec::new(),
+                floor_range_m: f64::INFINITY,
+                last_range: [f64::NAN; 256],
+            },
+        }
+    }
 
     fn mapper_for(&mut self, scan: &RangeScan) -> Option<&mut Mapper> {
         if self.mapper.is_none() {
@@ -196,7 +209,7 @@ impl ProjectedMap {
             let half = s.size_m / 2.0;
             let lower_edge = (s.rig.sonar_cone_deg.to_radians() / 2.0).tan();
             let drop = s.heights.sonar_m - s.climb_height_m;
-            self.floor_range_m = if lower_edge > 0.0 && drop > 0.0 {
+            self.gate.floor_range_m = if lower_edge > 0.0 && drop > 0.0 {
                 drop / lower_edge
             } else {
                 0.0
@@ -223,18 +236,27 @@ impl ProjectedMap {
     /// is an obstacle but the laser's own cell is free (it passed over or
     /// under the obstacle), unknown elsewhere; on [`SlamBackend::map`]'s grid.
     pub fn out_of_plane_map(&self) -> Option<OccupancyGrid> {
+        let (plane, below) = self.layers()?;
+        let mut out = plane.to_occupancy_grid();
+        for (o, b) in out.cells.iter_mut().zip(below) {
+            *o = if b { OCCUPIED } else { UNKNOWN };
+        }
+        Some(out)
+    }
+
+    /// The laser plane's grid, and per cell whether it holds an obstacle
+    /// out of that plane.
+    fn layers(&self) -> Option<(ProbGrid, Vec<bool>)> {
         let m = self.mapper.as_ref()?;
         let projected = m.projected(FusionRule::Bayes)?;
         let plane = m.fused_grid(FusionRule::Bayes)?;
-        let mut out = projected.to_occupancy_grid();
-        for ((o, &p), &q) in out.cells.iter_mut().zip(&projected.p).zip(&plane.p) {
-            *o = if p >= OUT_OF_PLANE_P && q < PLANE_FREE_P {
-                OCCUPIED
-            } else {
-                UNKNOWN
-            };
-        }
-        Some(out)
+        let below = projected
+            .p
+            .iter()
+            .zip(&plane.p)
+            .map(|(&p, &q)| p >= OUT_OF_PLANE_P && q < PLANE_FREE_P)
+            .collect();
+        Some((plane, below))
     }
 }
 
@@ -246,35 +268,28 @@ impl SlamBackend for ProjectedMap {
     fn process(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
         let u = self.graph.process(scan, odom);
         let pose = u.pose;
-        if self.mapper_for(scan).is_some() {
-            let rig = self.mapper.as_ref().map(|m| m.rig().clone());
-            match rig {
-                Some(rig) => self.out_of_plane_echoes(scan, &rig),
-                None => {
-                    self.mapped.clear();
-                    self.cleared.clear();
-                }
-            }
-            let mapped = std::mem::take(&mut self.mapped);
-            if let Some(m) = self.mapper.as_mut() {
-                // Only what the laser itself measured: sonar-painted and
-                // withheld beams say nothing about the laser's plane.
-                m.insert_laser(
-                    &pose,
-                    scan.beams
-                        .iter()
-                        .filter(|b| b.kind == BeamKind::Laser)
-                        .map(|b| (f64::from(b.angle), b.range.map(f64::from))),
-                );
-                m.insert_sonar(&pose, mapped.iter().copied());
-                m.insert_sonar_free(&pose, self.cleared.iter().copied());
-            }
-            self.scans += 1;
-            self.echoes += scan.sonar.len() as u64;
-            self.out_of_plane_echoes += mapped.len() as u64;
-            self.mapped = mapped;
-            self.revision += 1;
+        if self.mapper_for(scan).is_none() {
+            return u;
         }
+        let (Some(m), gate) = (self.mapper.as_mut(), &mut self.gate) else {
+            return u;
+        };
+        gate.sort(scan, m.rig());
+        // Only what the laser itself measured: sonar-painted and withheld
+        // beams say nothing about the laser's plane.
+        m.insert_laser(
+            &pose,
+            scan.beams
+                .iter()
+                .filter(|b| b.kind == BeamKind::Laser)
+                .map(|b| (f64::from(b.angle), b.range.map(f64::from))),
+        );
+        m.insert_sonar(&pose, gate.mapped.iter().copied());
+        m.insert_sonar_free(&pose, gate.cleared.iter().copied());
+        self.scans += 1;
+        self.echoes += scan.sonar.len() as u64;
+        self.out_of_plane_echoes += gate.mapped.len() as u64;
+        self.revision += 1;
         u
     }
 
@@ -308,13 +323,11 @@ impl SlamBackend for ProjectedMap {
     /// The laser plane's grid with the obstacles out of it (the projection
     /// of what the gated echoes confirmed; see [`ProjectedMap::out_of_plane_map`]).
     fn map(&self) -> Option<OccupancyGrid> {
-        let m = self.mapper.as_ref()?;
-        let mut out = m.fused_grid(FusionRule::Bayes)?.to_occupancy_grid();
-        if let Some(below) = self.out_of_plane_map() {
-            for (o, b) in out.cells.iter_mut().zip(&below.cells) {
-                if *b == OCCUPIED {
-                    *o = OCCUPIED;
-                }
+        let (plane, below) = self.layers()?;
+        let mut out = plane.to_occupancy_grid();
+        for (o, b) in out.cells.iter_mut().zip(below) {
+            if b {
+                *o = OCCUPIED;
             }
         }
         Some(out)

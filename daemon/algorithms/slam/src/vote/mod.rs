@@ -427,9 +427,9 @@ impl Fuser {
         let mut out_of_plane = 0u64;
         if !height.is_empty() {
             for y in 0..h {
-                let (fx, fy) = (0.0, y as f64);
+                let fy = y as f64;
                 for x in 0..w {
-                    let fx = fx + x as f64;
+                    let fx = x as f64;
                     let seen = height
                         .iter()
                         .filter(|&&(a, b)| {
