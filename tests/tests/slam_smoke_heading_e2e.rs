@@ -23,14 +23,16 @@ use std::time::Duration;
 
 const T0_NS: u64 = 1_000_000_000;
 
-#[test]
-fn with_exact_odometry_the_front_end_keeps_its_heading_through_dense_smoke() {
+/// Runs the trial with exact odometry: the front end's worst heading error,
+/// degrees, when (s), and the scans it matched for the heading only.
+fn worst_heading_error(warm_sensor: bool) -> (f64, f64, u64) {
     let mut scenario = Scenario::builtin("r32-dense-crossing").unwrap();
     scenario.odometry = OdometryErrors::default();
     let mut profile = scenario.profile.clone();
-    // As the demo runs it: the smoke sensor warm from the start.
     assert!(!scenario.smoke_sensor.cold_start);
-    profile.smoke.warmup_s = 0.0;
+    if warm_sensor {
+        profile.smoke.warmup_s = 0.0;
+    }
     profile.slam.backend = SlamBackendKind::Graph;
     let mount = profile.laser.mount;
     let mut drivers = DirectDrivers::new(&profile, T0_NS).unwrap();
@@ -95,15 +97,38 @@ fn with_exact_odometry_the_front_end_keeps_its_heading_through_dense_smoke() {
         }
     }
     eprintln!(
-        "{} scans, {withheld} mostly withheld from the laser; worst heading error {:.2}° at {:.1} s",
+        "warm sensor {warm_sensor}: {} scans, {withheld} mostly withheld from the laser; \
+         worst heading error {:.2}° at {:.1} s",
         scans.len(),
         worst.to_degrees(),
         (worst_at - T0_NS) as f64 * 1e-9
     );
-    assert!(
-        worst.to_degrees() < 3.0,
-        "the front end's heading strayed {:.2}° from exact odometry at {:.1} s",
+    (
         worst.to_degrees(),
-        (worst_at - T0_NS) as f64 * 1e-9
+        (worst_at - T0_NS) as f64 * 1e-9,
+        withheld,
+    )
+}
+
+#[test]
+fn with_exact_odometry_the_front_end_keeps_its_heading_through_dense_smoke() {
+    // As the demo runs it: the smoke sensor warm from the start.
+    let (worst, at, _) = worst_heading_error(true);
+    assert!(
+        worst < 3.0,
+        "the front end's heading strayed {worst:.2}° from exact odometry at {at:.1} s"
+    );
+}
+
+#[test]
+fn with_exact_odometry_the_front_end_keeps_its_heading_while_the_smoke_sensor_warms_up() {
+    // Powered up and driving at once: v2 takes the first minute as smoke
+    // (the MQ303A's warm-up), so every scan is mostly withheld until then and
+    // the front end holds the heading against a map of such scans. Taking
+    // every scan into it, the heading random-walked 4.4° by 42 s.
+    let (worst, at, _) = worst_heading_error(false);
+    assert!(
+        worst < 3.5,
+        "the front end's heading strayed {worst:.2}° from exact odometry at {at:.1} s"
     );
 }
