@@ -77,15 +77,6 @@ const MIN_POINTS: usize = 20;
 /// scores of 0.26–0.52, half a degree a scan and always the same way
 /// (`slam_smoke_heading_e2e`). Odometry turns less wrong than that.
 const HEADING_MIN_SCORE: f64 = 0.5;
-/// A local map of heading-tracked scans only (the smoke sensor warming up)
-/// takes a scan once the robot moved this far or turned this much since the
-/// last one it took, m and rad. Each scan matched against the one before it
-/// and then added hands its small heading error on: taking every scan, the
-/// heading random-walked 4.4° in 40 s with exact odometry on the
-/// dense-smoke trial; with a scan every half metre, 2.8°
-/// (`slam_smoke_heading_e2e`).
-const BOOTSTRAP_KEY_M: f64 = 0.5;
-const BOOTSTRAP_KEY_RAD: f64 = 0.2;
 
 #[derive(Debug, Clone)]
 pub struct FrontEndParams {
@@ -165,8 +156,6 @@ pub struct FrontEnd {
     degenerate_matches: u64,
     /// The local map holds only a scan tracked by heading (see [`Self::track_heading`]).
     bootstrap_map: bool,
-    /// Where the last scan joined such a map.
-    bootstrap_key: Option<Pose2>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -215,7 +204,6 @@ impl FrontEnd {
             degeneracy: DegeneracyParams::default(),
             degenerate_matches: 0,
             bootstrap_map: false,
-            bootstrap_key: None,
         }
     }
 
@@ -270,7 +258,6 @@ impl FrontEnd {
         if !heading_only && self.bootstrap_map {
             self.history.clear();
             self.bootstrap_map = false;
-            self.bootstrap_key = None;
         }
         self.decimate(endpoints);
         let stale = self.last_odom.is_some_and(|o| o == *odom);
@@ -337,21 +324,14 @@ impl FrontEnd {
             ),
         };
         // A map of heading-tracked scans only (no scan matched in full yet)
-        // takes one every BOOTSTRAP_KEY_M or BOOTSTRAP_KEY_RAD: turning on
-        // the spot while the smoke sensor warms up, the laser's few kept
-        // sections move from scan to scan and soon share nothing with the
-        // first one.
-        let key = self.history.is_empty()
-            || self.bootstrap_key.is_none_or(|k| {
-                let m = k.between(&pose);
-                m.translation_norm() >= BOOTSTRAP_KEY_M || m.theta.abs() >= BOOTSTRAP_KEY_RAD
-            });
-        let into_map = !heading_only || self.history.is_empty() || (self.bootstrap_map && key);
+        // takes each of them: turning on the spot while the smoke sensor
+        // warms up, the laser's few kept sections move from scan to scan and
+        // soon share nothing with the first one. (Keyframes every 0.5 m or
+        // 0.2 rad halved its heading walk with exact odometry, but the RBPF's
+        // maps of the dense trial got worse: 8 seeds, 0.090 → 0.160 m.)
+        let into_map = !heading_only || self.history.is_empty() || self.bootstrap_map;
         if heading_only && self.history.is_empty() {
             self.bootstrap_map = true;
-        }
-        if heading_only && into_map {
-            self.bootstrap_key = Some(pose);
         }
         self.accept(pose, odom, stamp_ns, stale, into_map);
         Tracked {
