@@ -3,13 +3,14 @@
 //! path (the messages the real drivers would publish), SmokeNav v2 and the
 //! SLAM pipeline. Wherever the fusion withholds most of a scan from the
 //! laser, the front end matches the rest for the heading only; with exact
-//! odometry every degree it turns away from the odometry's heading is its
-//! own error (measured so, not against the truth, whose samples and the
-//! scans' stamps differ by a few milliseconds: degrees in a turn). At the
-//! end of the route the laser keeps a third of each scan while the robot
-//! drives away from the last scans it saw in full: a match that kept turning on fewer and fewer points slid the heading 9° in two
-//! seconds there; the front end now leaves a match that explains less than
-//! half its points to the odometry.
+//! odometry every degree it turns away from the odometry the pipeline paired
+//! with the scan is its own error (measured so, not against the truth, whose
+//! samples and the scans' stamps differ by a few milliseconds: degrees in a
+//! turn). At the end of the route the laser keeps a third of each scan while
+//! the robot drives away from the last scans it saw in full: a match that
+//! kept turning on fewer and fewer points slid the heading 9° in two seconds
+//! there; the front end now leaves a match that explains less than half its
+//! points to the odometry.
 
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline};
@@ -40,10 +41,8 @@ fn check_heading_held(warm_sensor: bool, limit_deg: f64) {
     let mut slam = SlamPipeline::from_config(&profile.slam, &BackendOptions::default())
         .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()));
     let mut world = World::new(scenario).unwrap();
-    // (stamp, heading) of every odometry reading.
-    let mut odometry: Vec<(u64, f64)> = Vec::new();
-    // (stamp, front-end pose) of every scan SLAM took.
-    let mut tracked: Vec<(u64, Pose2)> = Vec::new();
+    // (stamp, heading the front end added to the odometry) of every scan SLAM took.
+    let mut added: Vec<(u64, f64)> = Vec::new();
     let mut fused: Vec<FusedScan> = Vec::new();
     let mut out = StepOutput::default();
     while !world.is_finished() && !world.route_done() {
@@ -55,17 +54,18 @@ fn check_heading_held(warm_sensor: bool, limit_deg: f64) {
                 DirectMessage::Laser(s) => fusion.push_laser(s, now, &mut emit),
                 DirectMessage::Sonar(r) => fusion.push_sonar(r, now, &mut emit),
                 DirectMessage::Smoke(r) => fusion.push_smoke(r, now, &mut emit),
-                DirectMessage::Odometry(o) => {
-                    odometry.push((o.header.stamp_ns, o.theta));
-                    slam.push_odom(o);
-                }
+                DirectMessage::Odometry(o) => slam.push_odom(o),
             }
             fusion.poll(now, &mut emit);
             for f in fused.drain(..) {
                 slam.push_fused(&f);
             }
             if let Some(u) = slam.poll(now) {
-                tracked.push((u.stamp_ns, slam.frontend_pose().unwrap()));
+                let (pose, odom) = (slam.frontend_pose(), slam.last_odometry());
+                added.push((
+                    u.stamp_ns,
+                    normalize_angle(pose.unwrap().theta - odom.unwrap().theta),
+                ));
             }
         });
     }
@@ -75,23 +75,11 @@ fn check_heading_held(warm_sensor: bool, limit_deg: f64) {
         withheld > 300,
         "only {withheld} scans mostly withheld from the laser: no dense smoke"
     );
-    // The odometry's heading at a scan, interpolated as the pipeline does.
-    let odometry_at = |t: u64| {
-        let i = odometry
-            .partition_point(|(s, _)| *s < t)
-            .clamp(1, odometry.len() - 1);
-        let ((t0, a), (t1, b)) = (odometry[i - 1], odometry[i]);
-        let f = ((t as f64 - t0 as f64) / (t1 - t0).max(1) as f64).clamp(0.0, 1.0);
-        a + f * normalize_angle(b - a)
-    };
-    let scans = tracked;
-    assert!(scans.len() > 1000, "{} scans tracked", scans.len());
-    // The odometry is exact: any turn the front end adds to it is its own error.
-    let added = |&(t, pose): &(u64, Pose2)| normalize_angle(pose.theta - odometry_at(t));
-    let start = added(&scans[0]);
+    assert!(added.len() > 1000, "{} scans tracked", added.len());
+    let start = added[0].1;
     let (mut worst, mut worst_at) = (0.0f64, 0u64);
-    for &(t, pose) in &scans {
-        let err = normalize_angle(added(&(t, pose)) - start).abs();
+    for &(t, a) in &added {
+        let err = normalize_angle(a - start).abs();
         if err > worst {
             (worst, worst_at) = (err, t);
         }
@@ -99,7 +87,7 @@ fn check_heading_held(warm_sensor: bool, limit_deg: f64) {
     eprintln!(
         "warm sensor {warm_sensor}: {} scans, {withheld} mostly withheld from the laser; \
          worst heading error {:.2}° at {:.1} s",
-        scans.len(),
+        added.len(),
         worst.to_degrees(),
         (worst_at - T0_NS) as f64 * 1e-9
     );
