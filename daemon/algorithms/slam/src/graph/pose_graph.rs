@@ -601,6 +601,65 @@ impl PoseGraph {
         Ok(report)
     }
 
+    /// The marginal covariance of vertex `index`'s (x, y, θ), in the map
+    /// frame, at the current poses: its 3 × 3 block of the inverse of the
+    /// Gauss–Newton information (with `kernel`'s weights on the robust edges,
+    /// as the optimiser last saw them), found by one sparse factorisation and
+    /// three solves. A fixed vertex's is zero.
+    pub fn marginal_covariance(
+        &mut self,
+        index: usize,
+        kernel: &RobustKernel,
+    ) -> Result<Information, GraphError> {
+        self.validate()?;
+        if self.structure.is_none() {
+            self.structure = Some(self.build_structure()?);
+        }
+        let s = self.structure.take().expect("built above");
+        let result = self.marginal_with(&s, index, kernel);
+        self.structure = Some(s);
+        result
+    }
+
+    fn marginal_with(
+        &self,
+        s: &Structure,
+        index: usize,
+        kernel: &RobustKernel,
+    ) -> Result<Information, GraphError> {
+        let Some(k) = s.block.get(index).copied().flatten() else {
+            return Ok([[0.0; 3]; 3]);
+        };
+        let mut values = Vec::new();
+        let mut b = vec![0.0; s.dim];
+        self.normal_equations(s, &self.poses, kernel, &mut values, &mut b);
+        let h = SparseColMat::new_from_argsort(s.symbolic.clone(), &s.argsort, &values)
+            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
+        let llt = Llt::try_new_with_symbolic(s.llt.clone(), h.rb(), faer::Side::Lower)
+            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
+        // Three columns of the identity at the vertex's block: H X = E gives
+        // the block's columns of H⁻¹.
+        let mut cols = vec![0.0; 3 * s.dim];
+        for c in 0..3 {
+            cols[c * s.dim + 3 * k + c] = 1.0;
+        }
+        llt.solve_in_place_with_conj(
+            faer::Conj::No,
+            faer::MatMut::from_column_major_slice_mut(&mut cols, s.dim, 3),
+        );
+        let mut out = [[0.0; 3]; 3];
+        for (r, row) in out.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                // Symmetrised: the two triangles differ by rounding only.
+                *v = 0.5 * (cols[c * s.dim + 3 * k + r] + cols[r * s.dim + 3 * k + c]);
+            }
+        }
+        if out.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(GraphError::Indeterminate("non-finite marginal".into()));
+        }
+        Ok(out)
+    }
+
     fn optimize_with(
         &self,
         s: &Structure,
@@ -894,5 +953,60 @@ mod tests {
         ));
         assert!(!is_positive_definite(&info(1.0, 0.0)));
         assert!(is_positive_definite(&info(1.0, 1e-9)));
+    }
+
+    /// A chain is a tree: the marginal is the covariance composed along it,
+    /// which here is known in closed form.
+    #[test]
+    fn a_chains_marginal_is_its_edges_composed() {
+        let mut g = PoseGraph::new();
+        for i in 0..3 {
+            g.add_vertex(i, Pose2::new(i as f64, 0.0, 0.0));
+        }
+        // σ² = 0.01 m² across and along each 1 m step, 0.0025 rad² in heading.
+        g.add_edge(edge(0, 1, Pose2::new(1.0, 0.0, 0.0)));
+        g.add_edge(edge(1, 2, Pose2::new(1.0, 0.0, 0.0)));
+        let c = g.marginal_covariance(2, &RobustKernel::None).unwrap();
+        let want = [
+            [0.02, 0.0, 0.0],
+            [0.0, 0.0225, 0.0025],
+            [0.0, 0.0025, 0.005],
+        ];
+        for r in 0..3 {
+            for k in 0..3 {
+                assert!((c[r][k] - want[r][k]).abs() < 1e-9, "{c:?}");
+            }
+        }
+        assert_eq!(
+            g.marginal_covariance(0, &RobustKernel::None).unwrap(),
+            [[0.0; 3]; 3],
+            "the gauge vertex is certain"
+        );
+    }
+
+    #[test]
+    fn a_loop_closure_shrinks_the_far_end_of_the_loop() {
+        let mut open = PoseGraph::new();
+        let mut closed = square();
+        open.add_vertex(0, Pose2::default());
+        for i in 1..4 {
+            open.add_vertex(i, closed.poses()[i as usize]);
+            open.add_edge(edge(
+                i as usize - 1,
+                i as usize,
+                Pose2::new(2.0, 0.0, std::f64::consts::FRAC_PI_2),
+            ));
+        }
+        closed.optimize(&OptimizeParams::default()).unwrap();
+        let trace = |c: Information| c[0][0] + c[1][1];
+        let o = trace(open.marginal_covariance(3, &RobustKernel::None).unwrap());
+        let k = trace(closed.marginal_covariance(3, &RobustKernel::None).unwrap());
+        assert!(k < 0.5 * o, "closed {k} against open {o}");
+        // An island makes the information singular: named, not a garbage answer.
+        closed.add_vertex(9, Pose2::default());
+        assert!(matches!(
+            closed.marginal_covariance(3, &RobustKernel::None),
+            Err(GraphError::UnderConstrained { vertex: 9, .. })
+        ));
     }
 }

@@ -29,6 +29,14 @@
 //! closure can stretch the corridor where odometry was wrong. A closure's
 //! covariance is its own match's the same way. Edges built from scans that
 //! were mostly sonar-painted are widened by `sonar_edge_widening`.
+//!
+//! The pose each scan reports carries the graph's own uncertainty: the
+//! newest node's marginal covariance (its block of the inverse information,
+//! [`PoseGraph::marginal_covariance`], after each accepted closure; carried
+//! along the odometry edges between closures, which for a chain is exact)
+//! composed with the tracked motion since that node. It grows over a blind
+//! stretch and shrinks when a closure ties the robot to the known map; the
+//! vote's weighted rule and `slam/pose` read it.
 
 use super::pose_graph::{Edge, Information, OptimizeParams, PoseGraph, RobustKernel};
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
@@ -296,6 +304,15 @@ pub struct GraphSlam {
     since_node_cov: Matrix3<f64>,
     /// Sum of the sonar shares of the scans since the last node, and their number.
     since_node_sonar: (f64, u32),
+    /// Marginal covariance of the newest node (map frame): exact after an
+    /// optimisation, carried along the odometry edges between optimisations.
+    newest_cov: Matrix3<f64>,
+    /// Covariance of the odometry edge into each node (zero for the first
+    /// and for loaded nodes): carries an optimisation's marginal to the nodes
+    /// added while it ran.
+    chain_cov: Vec<Matrix3<f64>>,
+    /// Set by a successful [`Self::close_loops`]: the optimised marginal of its node.
+    closure_marginal: Option<(usize, Matrix3<f64>)>,
     degeneracy: DegeneracyParams,
     /// The pipeline front end's match of the scan about to come (used
     /// instead of the own tracker's: the scan is matched once).
@@ -459,6 +476,9 @@ impl GraphSlam {
             revision: 0,
             since_node_cov: Matrix3::zeros(),
             since_node_sonar: (0.0, 0),
+            newest_cov: Matrix3::zeros(),
+            chain_cov: Vec::new(),
+            closure_marginal: None,
             degeneracy: DegeneracyParams::default(),
             shared: None,
             near_scan: CellSet::default(),
@@ -556,6 +576,9 @@ impl GraphSlam {
             self.graph.set_pose(i, carried);
             self.stats.closure_nodes_carried += 1;
         }
+        if let Some((j, c)) = outcome.marginal.filter(|&(j, _)| j <= m) {
+            self.newest_cov = self.carry_marginal(j, c);
+        }
         self.revision += 1;
     }
 
@@ -612,6 +635,9 @@ impl GraphSlam {
         self.stats.nodes += 1;
         self.revision += 1;
         let id = self.graph.len() as u64;
+        // The odometry edge's covariance is set when that edge is made.
+        self.chain_cov
+            .resize(self.graph.len() + 1, Matrix3::zeros());
         self.graph.add_vertex(id, pose)
     }
 
@@ -671,6 +697,7 @@ impl GraphSlam {
                 .collect();
             if result.is_ok() && consistent.len() == kept.len() {
                 self.stats.closures_accepted += kept.len() as u64;
+                self.closure_marginal = self.exact_marginal(k).map(|c| (k, c));
                 return kept.len();
             }
             for _ in &kept {
@@ -885,13 +912,52 @@ impl GraphSlam {
         self.graph.poses()[node].compose(offset)
     }
 
+    /// Covariance of the latest scan's pose: the newest node's marginal
+    /// carried by the tracked motion since it. Zero before the first node.
+    fn scan_covariance(&self) -> Matrix3<f64> {
+        match self.scans.last() {
+            Some(&(_, n, rel)) if n + 1 == self.nodes.len() => compose_covariance(
+                &self.graph.poses()[n],
+                &self.newest_cov,
+                &rel,
+                &self.since_node_cov,
+            ),
+            _ => Matrix3::zeros(),
+        }
+    }
+
+    /// The newest node's marginal from node `m`'s (`cov`), carried along
+    /// the odometry edges of the nodes after it.
+    fn carry_marginal(&self, m: usize, cov: Matrix3<f64>) -> Matrix3<f64> {
+        let poses = self.graph.poses();
+        (m + 1..poses.len()).fold(cov, |c, i| {
+            let step = poses[i - 1].between(&poses[i]);
+            let edge = self
+                .chain_cov
+                .get(i)
+                .copied()
+                .unwrap_or_else(Matrix3::zeros);
+            compose_covariance(&poses[i - 1], &c, &step, &edge)
+        })
+    }
+
+    /// The exact marginal of node `k` from the graph as it stands (`None`
+    /// if the graph cannot be factorised: the carried estimate stays).
+    fn exact_marginal(&mut self, k: usize) -> Option<Matrix3<f64>> {
+        match self.graph.marginal_covariance(k, &self.p.optimize.kernel) {
+            Ok(c) => Some(Matrix3::from_fn(|r, col| c[r][col])),
+            Err(e) => {
+                tracing::debug!(node = k, error = %e, "no marginal covariance");
+                None
+            }
+        }
+    }
+
     fn update(&self, stamp_ns: u64, pose: Pose2, processed: bool) -> SlamUpdate {
         SlamUpdate {
             stamp_ns,
             pose,
-            // Not estimated yet (marginals of the graph are the next step):
-            // zero says "unknown", not "certain", to the pipeline's callers.
-            covariance: Matrix3::zeros(),
+            covariance: self.scan_covariance(),
             n_eff: 1.0,
             particles: 1,
             processed,
@@ -1057,6 +1123,12 @@ impl SlamBackend for GraphSlam {
             information,
             robust: false,
         });
+        let edge_cov = Matrix3::from_fn(|r, c| information[r][c])
+            .try_inverse()
+            .unwrap_or_else(Matrix3::zeros);
+        self.chain_cov[k] = edge_cov;
+        self.newest_cov =
+            compose_covariance(&self.graph.poses()[last], &self.newest_cov, &rel, &edge_cov);
         self.since_node_cov = Matrix3::zeros();
         self.since_node_sonar = (0.0, 0);
         self.last_node_tracked = tracked;
@@ -1069,6 +1141,9 @@ impl SlamBackend for GraphSlam {
                 self.start_pending_closure();
             } else {
                 self.close_loops(k);
+                if let Some((m, c)) = self.closure_marginal.take() {
+                    self.newest_cov = self.carry_marginal(m, c);
+                }
             }
         }
         self.update(stamp_ns, self.graph.poses()[k], true)
@@ -1426,6 +1501,66 @@ mod tests {
         assert!(worst < 0.2, "with threaded closures: {worst} m");
     }
 
+    /// The pose covariance each scan reports follows the graph's marginals:
+    /// it grows over the blind legs, and the first accepted closure shrinks
+    /// it, inline at that scan and online once the worker's outcome is applied.
+    #[test]
+    fn the_reported_covariance_grows_while_blind_and_shrinks_at_a_closure() {
+        for online in [false, true] {
+            let mut slam = GraphSlam::new(
+                &SlamSection::default(),
+                GraphParams {
+                    closure_every: 2,
+                    ..GraphParams::default()
+                },
+            );
+            slam.set_online(online);
+            // (position variance, closures accepted and applied so far) per scan.
+            let mut seen: Vec<(f64, u64)> = Vec::new();
+            let (slam, _, _) = drive_legs_with(
+                slam,
+                &[10.0, 6.0, 10.0, 6.0, 8.0],
+                &[1, 2, 3],
+                &[],
+                &mut |s| {
+                    let c = s.scan_covariance();
+                    assert!(
+                        c.iter().all(|v| v.is_finite()) && c[(0, 0)] >= 0.0 && c[(1, 1)] >= 0.0,
+                        "{c}"
+                    );
+                    let applied = if online {
+                        s.stats()
+                            .closure_outcomes_applied
+                            .min(s.stats().closures_accepted)
+                    } else {
+                        s.stats().closures_accepted
+                    };
+                    seen.push((c[(0, 0)] + c[(1, 1)], applied));
+                },
+            );
+            let stats = slam.stats();
+            assert!(stats.closures_accepted >= 1, "{stats:?}");
+            let first = seen
+                .iter()
+                .position(|&(_, n)| n > 0)
+                .expect("a closure reaches the reported pose");
+            let before = seen[first - 1].0;
+            let after = seen[first].0;
+            let start = seen[5].0;
+            eprintln!(
+                "online {online}: variance {start:.5} early, {before:.4} m² before the first closure, {after:.5} after"
+            );
+            assert!(
+                before > 10.0 * start.max(1e-6),
+                "grows while blind: {start} → {before}"
+            );
+            assert!(
+                after < 0.5 * before,
+                "the closure shrinks it: {before} → {after}"
+            );
+        }
+    }
+
     /// An outcome for nodes 0..=m applied after the scan path added nodes
     /// m+1..: those keep their pose relative to node m.
     #[test]
@@ -1462,6 +1597,7 @@ mod tests {
                 closures_accepted: 1,
                 ..GraphStats::default()
             },
+            marginal: None,
         });
         let after = slam.graph.poses();
         assert_eq!(&after[..=m], &poses[..]);

@@ -378,6 +378,9 @@ pub fn load(
     slam.nodes = saved.nodes.into_iter().map(Arc::new).collect();
     slam.graph = graph;
     slam.revision = 1;
+    if let Some(last) = slam.graph.len().checked_sub(1) {
+        slam.newest_cov = slam.exact_marginal(last).unwrap_or_else(Matrix3::zeros);
+    }
     // Where the run ended, also for a save of the graph before any new scan.
     slam.initial = saved.last_pose;
     Ok(SavedRun {
@@ -519,13 +522,23 @@ impl ResumedGraph {
             } else {
                 (1.0, 0.5)
             };
+            let measurement = g.graph.poses()[last].between(&pose);
             g.graph.add_edge(Edge {
                 from: last,
                 to: k,
-                measurement: g.graph.poses()[last].between(&pose),
+                measurement,
                 information: super::diagonal(st, sr),
                 robust: true,
             });
+            let edge_cov =
+                Matrix3::from_diagonal(&nalgebra::Vector3::new(st * st, st * st, sr * sr));
+            g.chain_cov[k] = edge_cov;
+            g.newest_cov = super::compose_covariance(
+                &g.graph.poses()[last],
+                &g.newest_cov,
+                &measurement,
+                &edge_cov,
+            );
         }
         g.last_node_tracked = *odom;
         g.last_tracked = *odom;
@@ -575,7 +588,12 @@ impl ResumedGraph {
         if self.keep_trajectory {
             self.trajectory.push(StampedPose { stamp_ns, pose });
         }
-        self.inner.update(stamp_ns, pose, processed)
+        SlamUpdate {
+            // Not estimated while localising (zero: unknown); the inner
+            // graph's newest marginal belongs to the saved run's end.
+            covariance: Matrix3::zeros(),
+            ..self.inner.update(stamp_ns, pose, processed)
+        }
     }
 }
 

@@ -36,6 +36,8 @@ pub(super) struct Outcome {
     pub poses: Option<Vec<Pose2>>,
     /// The search's counters (closures tried, refused by reason, accepted, optimisations).
     pub stats: GraphStats,
+    /// The optimised marginal covariance of the job's node, when edges were kept.
+    pub marginal: Option<(usize, nalgebra::Matrix3<f64>)>,
 }
 
 /// Latencies kept for the p99 (the last this many jobs).
@@ -68,12 +70,14 @@ impl ClosureWorker {
                     search.graph = job.graph;
                     search.nodes = job.nodes;
                     search.stats = GraphStats::default();
+                    search.closure_marginal = None;
                     let before = search.graph.edges().len();
                     let kept = search.close_loops(job.node);
                     let outcome = Outcome {
                         edges: search.graph.edges()[before..].to_vec(),
                         poses: (kept > 0).then(|| search.graph.poses().to_vec()),
                         stats: search.stats,
+                        marginal: search.closure_marginal.take(),
                     };
                     // The scans are the scan path's: do not hold them between jobs.
                     search.nodes = Vec::new();
