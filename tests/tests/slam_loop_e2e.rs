@@ -6,7 +6,8 @@
 //! and slip), so the pose drifts along the featureless aisles until the robot
 //! sees the start hall again. From the bus only: the health report of
 //! `smokenav-slam` must count an accepted loop closure, and the pose on
-//! `slam/pose` must be closer to the world's truth within a second of it.
+//! `slam/pose` must be closer to the world's truth within a second of it,
+//! and the covariance it carries (the graph's marginal) smaller.
 //!
 //! The wheels' scale errors alone cancel on a closed loop (every leg out is
 //! driven back), and the front end holds the heading against the aisle
@@ -318,6 +319,32 @@ fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
             "the closure did not reach slam/pose within 1 s: {pre:.3} m before, {window:?}"
         );
     }
+    // The published covariance is the graph's own (not zero): the position
+    // variance grew over the lap and the closure shrinks it within the second.
+    let variance = |from: Instant, to: Instant| -> Vec<f64> {
+        poses
+            .iter()
+            .filter(|(at, _)| *at > from && *at <= to)
+            .map(|(_, p)| p.covariance[0] + p.covariance[4])
+            .collect()
+    };
+    let var_before = variance(before_at - Duration::from_secs(2), before_at)
+        .into_iter()
+        .fold(0.0f64, f64::max);
+    let var_window = variance(before_at, after_at + Duration::from_secs(1))
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "position variance on slam/pose: {var_before:.4} m² before the closure, {var_window:.4} m² within 1 s of it"
+    );
+    assert!(
+        var_before.is_finite() && var_before > 0.0,
+        "slam/pose carries no covariance: {var_before}"
+    );
+    assert!(
+        var_window < 0.5 * var_before,
+        "the closure did not shrink the published covariance: {var_before} → {var_window} m²"
+    );
     assert!(
         rms(&after) < 0.5 * rms(&leg),
         "ATE after the closure {:.3} m, before {:.3} m",
