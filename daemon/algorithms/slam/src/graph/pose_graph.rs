@@ -589,14 +589,7 @@ impl PoseGraph {
     /// Levenberg–Marquardt from the current poses. On success the poses are
     /// replaced by the optimum; on failure they are left as they were.
     pub fn optimize(&mut self, p: &OptimizeParams) -> Result<OptimizeReport, GraphError> {
-        self.validate()?;
-        if self.structure.is_none() {
-            self.structure = Some(self.build_structure()?);
-        }
-        let s = self.structure.take().expect("built above");
-        let result = self.optimize_with(&s, p);
-        self.structure = Some(s);
-        let (poses, report) = result?;
+        let (poses, report) = self.with_structure(|g, s| g.optimize_with(s, p))?;
         self.poses = poses;
         Ok(report)
     }
@@ -611,12 +604,21 @@ impl PoseGraph {
         index: usize,
         kernel: &RobustKernel,
     ) -> Result<Information, GraphError> {
+        self.with_structure(|g, s| g.marginal_with(s, index, kernel))
+    }
+
+    /// Runs `f` on the validated graph with its sparse structure (built
+    /// once per graph structure and kept for the next call).
+    fn with_structure<R>(
+        &mut self,
+        f: impl FnOnce(&Self, &Structure) -> Result<R, GraphError>,
+    ) -> Result<R, GraphError> {
         self.validate()?;
         if self.structure.is_none() {
             self.structure = Some(self.build_structure()?);
         }
         let s = self.structure.take().expect("built above");
-        let result = self.marginal_with(&s, index, kernel);
+        let result = f(self, &s);
         self.structure = Some(s);
         result
     }

@@ -912,6 +912,22 @@ impl GraphSlam {
         self.graph.poses()[node].compose(offset)
     }
 
+    /// Adds the edge from the previous node to the newest one and carries
+    /// the newest node's marginal along it.
+    fn add_chain_edge(&mut self, edge: Edge) {
+        let cov = Matrix3::from_fn(|r, c| edge.information[r][c])
+            .try_inverse()
+            .unwrap_or_else(Matrix3::zeros);
+        self.newest_cov = compose_covariance(
+            &self.graph.poses()[edge.from],
+            &self.newest_cov,
+            &edge.measurement,
+            &cov,
+        );
+        self.chain_cov[edge.to] = cov;
+        self.graph.add_edge(edge);
+    }
+
     /// Covariance of the latest scan's pose: the newest node's marginal
     /// carried by the tracked motion since it. Zero before the first node.
     fn scan_covariance(&self) -> Matrix3<f64> {
@@ -1116,19 +1132,13 @@ impl SlamBackend for GraphSlam {
         let information = information_of(&self.since_node_cov, floor)
             .unwrap_or_else(|| diagonal(floor.0, floor.1))
             .map(|row| row.map(|v| v / widening));
-        self.graph.add_edge(Edge {
+        self.add_chain_edge(Edge {
             from: last,
             to: k,
             measurement: rel,
             information,
             robust: false,
         });
-        let edge_cov = Matrix3::from_fn(|r, c| information[r][c])
-            .try_inverse()
-            .unwrap_or_else(Matrix3::zeros);
-        self.chain_cov[k] = edge_cov;
-        self.newest_cov =
-            compose_covariance(&self.graph.poses()[last], &self.newest_cov, &rel, &edge_cov);
         self.since_node_cov = Matrix3::zeros();
         self.since_node_sonar = (0.0, 0);
         self.last_node_tracked = tracked;

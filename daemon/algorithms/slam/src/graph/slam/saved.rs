@@ -522,23 +522,13 @@ impl ResumedGraph {
             } else {
                 (1.0, 0.5)
             };
-            let measurement = g.graph.poses()[last].between(&pose);
-            g.graph.add_edge(Edge {
+            g.add_chain_edge(Edge {
                 from: last,
                 to: k,
-                measurement,
+                measurement: g.graph.poses()[last].between(&pose),
                 information: super::diagonal(st, sr),
                 robust: true,
             });
-            let edge_cov =
-                Matrix3::from_diagonal(&nalgebra::Vector3::new(st * st, st * st, sr * sr));
-            g.chain_cov[k] = edge_cov;
-            g.newest_cov = super::compose_covariance(
-                &g.graph.poses()[last],
-                &g.newest_cov,
-                &measurement,
-                &edge_cov,
-            );
         }
         g.last_node_tracked = *odom;
         g.last_tracked = *odom;
