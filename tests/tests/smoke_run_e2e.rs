@@ -351,4 +351,12 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
         "SLAM through smoke: ATE RMS {:.3} m",
         report.ate_m.rmse
     );
+    // The particle filter reports the scans it only weighed because the
+    // fusion withheld much of them from the laser (the smoke's edge).
+    let withheld = slam_health.metric("withheld_updates").unwrap_or(0.0);
+    let updates = slam_health.metric("updates").unwrap_or(0.0);
+    assert!(
+        withheld > 0.0 && withheld < updates,
+        "{withheld} of {updates} updates mostly withheld from the laser"
+    );
 }

@@ -656,10 +656,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             tile_bytes as f64 / 1e6,
             cfg.particles
         );
+        let s = rbpf.stats();
         let _ = writeln!(
             report,
-            "filter             {} resamples",
-            rbpf.stats().resamples
+            "filter             {} resamples; {} of {} updates weighed without refining, {} of them mostly withheld from the laser",
+            s.resamples, s.unmatched_updates, s.updates, s.withheld_updates
         );
     }
     let _ = writeln!(
