@@ -97,10 +97,10 @@ pub struct FilterStats {
 /// [`crate::pipeline::MAX_WITHHELD_TO_MATCH`]). Above the front end's 0.1 so
 /// that a scan with one of the Scout's sections withheld (0.11 of the
 /// beams, as v2 keeps while its smoke sensor warms up in clean air) is still
-/// refined. On four
-/// recordings of the dense-smoke trial, 8 seeds each, v2's mean map error /
-/// ATE went from 0.112 / 0.257 m (no gate) to 0.098 / 0.113 m at 0.1, 0.092
-/// / 0.099 m at 0.15 and 0.101 / 0.164 m at 0.3; clean air stayed 0.033 m.
+/// refined. On four recordings of the dense-smoke trial, 8 seeds each, v2's
+/// mean map error / ATE went from 0.112 / 0.257 m (no gate) to 0.098 /
+/// 0.113 m at 0.1, 0.092 / 0.099 m at 0.15 and 0.101 / 0.164 m at 0.3;
+/// clean air stayed 0.033 m.
 pub const MAX_WITHHELD_TO_REFINE: f64 = 0.15;
 
 /// The particle filter's own parameters (from `[slam]`).
