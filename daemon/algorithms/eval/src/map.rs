@@ -14,9 +14,12 @@
 //! The alignment is rigid (x, y, θ), found by minimising the truncated squared
 //! distance of the estimate's occupied cells to the ground truth's walls:
 //! a coarse search over rotations and translations, then a pattern search
-//! with the truncation shrinking to two cells, so a wall displaced by more
-//! than that does not drag the whole map along. Ties keep the identity, so
-//! a map already in the ground truth's frame is not moved by symmetric rooms.
+//! from the best few and from the best of each other rotation, with the
+//! truncation shrinking to two cells, so a wall displaced by more than that
+//! does not drag the whole map along. Of the refined fits the one that fits
+//! both ways best wins (a turned-round building can fit the estimate's walls
+//! alone as well). Ties keep the identity, so a map already in the ground
+//! truth's frame is not moved by symmetric rooms.
 
 use crate::nn::{PointIndex, distance_transform};
 use serde::Serialize;
@@ -173,9 +176,9 @@ fn check_geometry(g: &OccupancyGrid, which: &'static str) -> Result<(), MapMetri
     Ok(())
 }
 
-/// Distance field of the ground-truth walls, padded so aligned points just
-/// outside the truth's grid still find their distance.
-struct TruthField {
+/// Distance field of one map's walls, padded so aligned points just outside
+/// its grid still find their distance.
+struct WallField {
     origin: (f64, f64),
     res: f64,
     w: usize,
@@ -184,7 +187,7 @@ struct TruthField {
     dist: Vec<f64>,
 }
 
-impl TruthField {
+impl WallField {
     fn new(truth: &OccupancyGrid, threshold: i8) -> Self {
         let pad = 20usize;
         let (w, h) = (truth.width + 2 * pad, truth.height + 2 * pad);
@@ -240,6 +243,16 @@ impl TruthField {
         }
         sum / pts.len().max(1) as f64
     }
+
+    /// The same for points of the other map, taken back by the inverse of `al`.
+    fn cost_inverse(&self, pts: &[(f64, f64)], al: &Alignment, trunc: f64) -> f64 {
+        let t2 = trunc * trunc;
+        let sum: f64 = pts
+            .iter()
+            .map(|&p| self.at(al.inverse_apply(p), trunc).powi(2).min(t2))
+            .sum();
+        sum / pts.len().max(1) as f64
+    }
 }
 
 /// Every `step`-th point, so the coarse search stays cheap on big maps.
@@ -256,7 +269,7 @@ fn centroid(pts: &[(f64, f64)]) -> (f64, f64) {
 
 /// Pattern search from `start` at truncation `trunc`, halving steps down to the floor.
 fn refine(
-    field: &TruthField,
+    field: &WallField,
     pts: &[(f64, f64)],
     start: Alignment,
     trunc: f64,
@@ -301,21 +314,40 @@ fn refine(
 
 /// Finds the rigid transform that best lays the estimate over the truth.
 fn align(
-    field: &TruthField,
+    field: &WallField,
+    est_field: &WallField,
     truth_pts: &[(f64, f64)],
     est_pts: &[(f64, f64)],
     opts: &MapOptions,
 ) -> Alignment {
     let res = field.res;
-    let coarse = subsample(est_pts, 800);
+    let coarse = subsample(est_pts, 300);
     let identity = Alignment::default();
-    // Coarse: rotations every 3°, translations on a 0.1 m grid around the
-    // centroid match, with a generous truncation (walls within 0.5 m count).
+    // Coarse: rotations every 3°, translations on a grid around the centroid
+    // match, with a generous truncation (walls within 0.5 m count). The grid
+    // spans half the truth's extent each way (0.6 m at least, 10 m at most):
+    // an estimate of one room of a building has its centroid metres from the
+    // whole building's. Its step, at most 41 × 41 positions, stays inside
+    // the truncation's reach.
     let trunc_coarse = 0.5;
     let ct = centroid(truth_pts);
     let ce = centroid(est_pts);
-    let mut candidates: Vec<(f64, Alignment)> =
-        vec![(field.cost(&coarse, &identity, trunc_coarse), identity)];
+    let extent = {
+        let (lo, hi) = truth_pts.iter().fold(
+            ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN)),
+            |(lo, hi), p| {
+                (
+                    (lo.0.min(p.0), lo.1.min(p.1)),
+                    (hi.0.max(p.0), hi.1.max(p.1)),
+                )
+            },
+        );
+        (hi.0 - lo.0).hypot(hi.1 - lo.1)
+    };
+    let half_span = (extent / 2.0).clamp(0.6, 10.0);
+    let step = (half_span / 20.0).max(0.1);
+    let n_step = (half_span / step).round() as i64;
+    let mut candidates: Vec<(f64, Alignment)> = Vec::new();
     let max_rot = opts.max_rotation_deg.clamp(0.0, 180.0);
     let n_rot = (max_rot / 3.0).floor() as i64;
     for k in -n_rot..=n_rot {
@@ -326,34 +358,77 @@ fn align(
         let (s, c) = th.to_radians().sin_cos();
         let rc = (c * ce.0 - s * ce.1, s * ce.0 + c * ce.1);
         let base = (ct.0 - rc.0, ct.1 - rc.1);
-        for iy in -6..=6 {
-            for ix in -6..=6 {
+        for iy in -n_step..=n_step {
+            for ix in -n_step..=n_step {
                 let a = Alignment {
-                    dx_m: base.0 + ix as f64 * 0.1,
-                    dy_m: base.1 + iy as f64 * 0.1,
+                    dx_m: base.0 + ix as f64 * step,
+                    dy_m: base.1 + iy as f64 * step,
                     dtheta_deg: th,
                 };
                 candidates.push((field.cost(&coarse, &a, trunc_coarse), a));
             }
         }
     }
-    // Keep the identity and the best few, in a stable order.
-    let mut ranked: Vec<(f64, Alignment)> = candidates[1..].to_vec();
-    ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Seeds: the identity, the best few, and the best of every other
+    // rotation 15° or more from those: in a nearly symmetric building the
+    // best few can all be the turned-round fit.
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut seeds = vec![identity];
-    seeds.extend(ranked.iter().take(6).map(|c| c.1));
-    // Refine each with shrinking truncation; compare all at the final one.
-    let final_trunc = 2.0 * res;
-    let mut best = identity;
-    let mut best_cost = field.cost(est_pts, &identity, final_trunc);
-    for seed in seeds {
-        let mut a = seed;
-        for trunc in [0.5f64.max(8.0 * res), 4.0 * res, final_trunc] {
-            a = refine(field, est_pts, a, trunc, res).0;
+    seeds.extend(candidates.iter().take(6).map(|c| c.1));
+    let turn = |a: &Alignment, b: &Alignment| {
+        (a.dtheta_deg - b.dtheta_deg + 180.0).rem_euclid(360.0) - 180.0
+    };
+    for c in &candidates[candidates.len().min(6)..] {
+        if seeds.len() >= 32 {
+            break;
         }
-        let c = field.cost(est_pts, &a, final_trunc);
-        if c < best_cost - 1e-15 {
-            best = a;
+        if seeds[1..].iter().all(|s| turn(s, &c.1).abs() >= 15.0) {
+            seeds.push(c.1);
+        }
+    }
+    // Refine each against the truth's walls with shrinking truncation. The
+    // fit both ways (the estimate's walls on the truth's and the truth's on
+    // the estimate's) picks the basin: the estimate's walls alone can fit a
+    // turned-round building as well when it has phantom walls where the
+    // truth's were not seen. Within that basin the estimate's fit decides,
+    // so a wall the estimate missed does not drag the rest.
+    let final_trunc = 2.0 * res;
+    let pick_trunc = 0.5f64.max(8.0 * res);
+    let refined: Vec<Alignment> = seeds
+        .into_iter()
+        .map(|mut a| {
+            for trunc in [pick_trunc, 4.0 * res, final_trunc] {
+                a = refine(field, est_pts, a, trunc, res).0;
+            }
+            a
+        })
+        .collect();
+    let both = |a: &Alignment| {
+        field.cost(est_pts, a, pick_trunc) + est_field.cost_inverse(truth_pts, a, pick_trunc)
+    };
+    let mut basin = identity;
+    let mut basin_cost = both(&identity);
+    for a in &refined {
+        let c = both(a);
+        if c < basin_cost - 1e-15 {
+            basin = *a;
+            basin_cost = c;
+        }
+    }
+    let near = |a: &Alignment| {
+        (a.dx_m - basin.dx_m).hypot(a.dy_m - basin.dy_m) <= 4.0 * res
+            && turn(a, &basin).abs() <= 2.0
+    };
+    let mut best = basin;
+    let mut best_cost = field.cost(est_pts, &basin, final_trunc);
+    // Ties keep the identity (first), then the earlier seed.
+    for a in std::iter::once(&identity)
+        .chain(&refined)
+        .filter(|a| near(a))
+    {
+        let c = field.cost(est_pts, a, final_trunc);
+        if c < best_cost - 1e-15 || (c <= best_cost + 1e-15 && *a == identity) {
+            best = *a;
             best_cost = c;
         }
     }
@@ -410,9 +485,10 @@ pub fn evaluate_maps(
             threshold: thr,
         });
     }
-    let field = TruthField::new(truth, thr);
+    let field = WallField::new(truth, thr);
     let alignment = if opts.align {
-        align(&field, &truth_pts, &est_pts, opts)
+        let est_field = WallField::new(est, thr);
+        align(&field, &est_field, &truth_pts, &est_pts, opts)
     } else {
         Alignment::default()
     };
@@ -576,6 +652,54 @@ mod tests {
                 r.pixel_error
             );
         }
+    }
+
+    /// A 14 × 10 m hall (280 × 200 cells) in three bays: partitions at
+    /// x = 4.5 m and 9 m up to y = 6.75 m, a box in each outer bay. Walls of
+    /// the left bay only with `left_bay_only`.
+    fn hall(left_bay_only: bool) -> OccupancyGrid {
+        let (w, h) = (284, 204);
+        let mut g = OccupancyGrid::new(w, h, RES, [-0.1, -0.1, 0.0]);
+        let mut wall = |x0: usize, y0: usize, x1: usize, y1: usize| {
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    if !left_bay_only || x <= 92 {
+                        g.set(x, y, OCCUPIED);
+                    }
+                }
+            }
+        };
+        wall(2, 2, 281, 2);
+        wall(2, 201, 281, 201);
+        wall(2, 2, 2, 201);
+        wall(281, 2, 281, 201);
+        wall(92, 2, 92, 137);
+        wall(182, 2, 182, 137);
+        wall(30, 70, 43, 70);
+        wall(30, 92, 43, 92);
+        wall(30, 70, 30, 92);
+        wall(43, 70, 43, 92);
+        wall(230, 40, 250, 55);
+        g
+    }
+
+    #[test]
+    fn a_map_of_one_bay_is_found_in_the_whole_building() {
+        // The estimate mapped the left bay only, in a frame 2 m right and
+        // 1.5 m down of the truth's: its centroid lies 4.7 m from the
+        // hall's, beyond the ±0.6 m a search around the centroids reached.
+        let truth = hall(false);
+        let mut est = hall(true);
+        est.origin = [-0.1 + 2.0, -0.1 - 1.5, 0.0];
+        let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
+        assert!(
+            (r.alignment.dx_m + 2.0).abs() < 0.02
+                && (r.alignment.dy_m - 1.5).abs() < 0.02
+                && r.alignment.dtheta_deg.abs() < 0.2,
+            "{:?}",
+            r.alignment
+        );
+        assert!(r.map_to_truth.mean_m < 0.005, "{:?}", r.map_to_truth);
     }
 
     #[test]
