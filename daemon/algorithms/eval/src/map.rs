@@ -72,6 +72,21 @@ impl Alignment {
         (c * x - s * y + self.dx_m, s * x + c * y + self.dy_m)
     }
 
+    /// The transform that undoes this one.
+    fn inverse(&self) -> Alignment {
+        let (dx_m, dy_m) = Alignment {
+            dx_m: 0.0,
+            dy_m: 0.0,
+            ..*self
+        }
+        .inverse_apply((-self.dx_m, -self.dy_m));
+        Alignment {
+            dx_m,
+            dy_m,
+            dtheta_deg: -self.dtheta_deg,
+        }
+    }
+
     fn inverse_apply(&self, (x, y): (f64, f64)) -> (f64, f64) {
         let (s, c) = self.dtheta_deg.to_radians().sin_cos();
         let (x, y) = (x - self.dx_m, y - self.dy_m);
@@ -243,16 +258,6 @@ impl WallField {
         }
         sum / pts.len().max(1) as f64
     }
-
-    /// The same for points of the other map, taken back by the inverse of `al`.
-    fn cost_inverse(&self, pts: &[(f64, f64)], al: &Alignment, trunc: f64) -> f64 {
-        let t2 = trunc * trunc;
-        let sum: f64 = pts
-            .iter()
-            .map(|&p| self.at(al.inverse_apply(p), trunc).powi(2).min(t2))
-            .sum();
-        sum / pts.len().max(1) as f64
-    }
 }
 
 /// Every `step`-th point, so the coarse search stays cheap on big maps.
@@ -404,7 +409,7 @@ fn align(
         })
         .collect();
     let both = |a: &Alignment| {
-        field.cost(est_pts, a, pick_trunc) + est_field.cost_inverse(truth_pts, a, pick_trunc)
+        field.cost(est_pts, a, pick_trunc) + est_field.cost(truth_pts, &a.inverse(), pick_trunc)
     };
     let mut basin = identity;
     let mut basin_cost = both(&identity);
@@ -419,19 +424,19 @@ fn align(
         (a.dx_m - basin.dx_m).hypot(a.dy_m - basin.dy_m) <= 4.0 * res
             && turn(a, &basin).abs() <= 2.0
     };
-    let mut best = basin;
-    let mut best_cost = field.cost(est_pts, &basin, final_trunc);
-    // Ties keep the identity (first), then the earlier seed.
+    // The basin's fits, identity first: ties keep the identity, then the
+    // earlier seed. The basin itself is one of them.
+    let mut best: Option<(Alignment, f64)> = None;
     for a in std::iter::once(&identity)
         .chain(&refined)
         .filter(|a| near(a))
     {
         let c = field.cost(est_pts, a, final_trunc);
-        if c < best_cost - 1e-15 || (c <= best_cost + 1e-15 && *a == identity) {
-            best = *a;
-            best_cost = c;
+        if best.is_none_or(|(_, b)| c < b - 1e-15) {
+            best = Some((*a, c));
         }
     }
+    let mut best = best.map_or(basin, |(a, _)| a);
     best.dtheta_deg = ((best.dtheta_deg + 180.0).rem_euclid(360.0)) - 180.0;
     best
 }
@@ -681,6 +686,22 @@ mod tests {
         wall(43, 70, 43, 92);
         wall(230, 40, 250, 55);
         g
+    }
+
+    #[test]
+    fn inverse_undoes_the_alignment() {
+        let a = Alignment {
+            dx_m: 1.3,
+            dy_m: -0.7,
+            dtheta_deg: 73.0,
+        };
+        for p in [(0.0, 0.0), (2.5, -1.0), (-4.0, 3.2)] {
+            let (x, y) = a.inverse().apply(a.apply(p));
+            assert!((x - p.0).abs() < 1e-12 && (y - p.1).abs() < 1e-12, "{p:?}");
+            let q = a.inverse().apply(p);
+            let r = a.inverse_apply(p);
+            assert!((q.0 - r.0).abs() < 1e-12 && (q.1 - r.1).abs() < 1e-12);
+        }
     }
 
     #[test]
