@@ -369,7 +369,11 @@ fn map_vote_aligns_saved_maps_and_votes_out_what_one_member_alone_drew() {
         members.iter().all(|&m| m > vote),
         "vote {vote} vs members {members:?}"
     );
-    for rule in ["vote (weighted)", "vote (consensus)"] {
+    for rule in [
+        "vote (weighted)",
+        "vote (consensus)",
+        "vote (majority-reference)",
+    ] {
         assert!(error(rule).is_finite());
     }
     let fused = smokenav_platform_map::load_map_server(&out.join("map.yaml")).unwrap();

@@ -9,7 +9,7 @@
 //! [slam.vote]
 //! members = ["graph", "rbpf", "fuzzy"]   # the first is the reference frame;
 //!                                        # add "projected" to map out of the laser plane
-//! rule = "majority"                      # or "weighted", "consensus"
+//! rule = "majority"                      # or "weighted", "consensus", "majority-reference"
 //! agree_radius_m = 0.1                   # consensus: walls this close are one wall
 //! max_residual_m = 0.15                  # alignment residual above it: flagged, left out
 //! ```
@@ -41,6 +41,11 @@ pub enum VoteRule {
     /// wall copied a cell or two apart by two members is one wall, not two.
     #[serde(rename = "consensus")]
     Consensus,
+    /// The paper's majority; without one, the reference member's state
+    /// (occupied when the reference is out) instead of occupied: the
+    /// members' copies of a wall a cell apart are not all drawn.
+    #[serde(rename = "majority-reference")]
+    MajorityReference,
 }
 
 impl VoteRule {
@@ -49,13 +54,19 @@ impl VoteRule {
             VoteRule::Majority => "majority",
             VoteRule::Weighted => "weighted",
             VoteRule::Consensus => "consensus",
+            VoteRule::MajorityReference => "majority-reference",
         }
     }
 
     /// Every rule, the configured default first.
-    pub const ALL: [VoteRule; 3] = [VoteRule::Majority, VoteRule::Weighted, VoteRule::Consensus];
+    pub const ALL: [VoteRule; 4] = [
+        VoteRule::Majority,
+        VoteRule::Weighted,
+        VoteRule::Consensus,
+        VoteRule::MajorityReference,
+    ];
 
-    /// The rule named `name` (`majority`, `weighted`, `consensus`).
+    /// The rule named `name` (`majority`, `weighted`, `consensus`, `majority-reference`).
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|r| r.as_str() == name)
     }
@@ -74,7 +85,7 @@ pub struct VoteSection {
     /// the RBPF first; lower in clean air (0.031 / 0.032 against 0.033 /
     /// 0.034 m), the same within 0.004 m in smoke.
     pub members: Vec<SlamBackendKind>,
-    /// `majority` (the paper's, default), `weighted` or `consensus`.
+    /// `majority` (the paper's, default), `weighted`, `consensus` or `majority-reference`.
     pub rule: VoteRule,
     /// `consensus`: two members' walls this close (a square window) are the
     /// same wall, m.

@@ -920,7 +920,7 @@ pub enum MapCommand {
         /// map_server YAMLs, 2–8; the first is the frame and grid of the vote.
         #[arg(required = true, num_args = 2..)]
         maps: Vec<PathBuf>,
-        /// `majority`, `weighted` or `consensus` [default: the profile's `[slam.vote] rule`].
+        /// `majority`, `weighted`, `consensus` or `majority-reference` [default: the profile's `[slam.vote] rule`].
         #[arg(long, value_parser = parse_rule)]
         rule: Option<VoteRule>,
         /// Robot profile whose `[slam.vote]` keys (windows, residual threshold, radius) apply.

@@ -49,7 +49,7 @@ use crate::scan::{BeamKind, RangeScan};
 use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
 use nalgebra::Matrix3;
-use rule::{CellState, Consensus, WeightedVote, majority, weighted};
+use rule::{CellState, Consensus, WeightedVote, majority, majority_or, weighted};
 use smokenav_platform_config::{SlamSection, VoteRule, VoteSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
@@ -395,6 +395,17 @@ impl Fuser {
                     self.votes.clear();
                     self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
                     self.fused_states[i] = majority(&self.votes);
+                }
+            }
+            VoteRule::MajorityReference => {
+                // The reference votes unless it is out (or misaligned: it is not, at identity).
+                let reference = maps.iter().position(|m| m.0 == 0);
+                for i in 0..n {
+                    self.votes.clear();
+                    self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
+                    let fallback =
+                        reference.map_or(CellState::Occupied, |k| self.states[k * n + i]);
+                    self.fused_states[i] = majority_or(&self.votes, fallback);
                 }
             }
             VoteRule::Weighted => {

@@ -297,3 +297,51 @@ fn a_member_that_maps_in_height_decides_out_of_the_plane_and_abstains_in_it() {
     assert_eq!(fused.cells[at], FREE);
     assert_eq!(fused.cells[split], OCCUPIED);
 }
+
+#[test]
+fn majority_reference_takes_the_references_cell_where_the_members_split() {
+    use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
+    // At `split` the reference sees free floor, member 1 a wall, member 2
+    // nothing: a three-way split. At `two` members 1 and 2 agree on a wall
+    // the reference lacks: a majority, whatever the rule.
+    let (split, two) = (20 * 80 + 20, 45 * 80 + 60);
+    let mut members: Vec<OccupancyGrid> = vec![room(); 3];
+    members[1].cells[split] = OCCUPIED;
+    members[2].cells[split] = UNKNOWN;
+    members[1].cells[two] = OCCUPIED;
+    members[2].cells[two] = OCCUPIED;
+    let mut inputs: Vec<FuseInput> = members
+        .into_iter()
+        .map(|m| FuseInput {
+            map: Some((Arc::new(m), 1)),
+            below: None,
+            out: false,
+            weight: 1.0,
+        })
+        .collect();
+    let fuse = |rule: VoteRule, inputs: &[FuseInput]| {
+        let section = VoteSection {
+            rule,
+            ..VoteSection::default()
+        };
+        let mut f = Fuser::new(
+            VoteParams {
+                section,
+                fault: None,
+            },
+            3,
+        );
+        assert!(f.fuse(inputs, &SonarShare::default(), true));
+        f.out.map.clone().unwrap()
+    };
+    let paper = fuse(VoteRule::Majority, &inputs);
+    assert_eq!(paper.cells[split], OCCUPIED, "the paper: doubt is a wall");
+    assert_eq!(paper.cells[two], OCCUPIED);
+    let by_ref = fuse(VoteRule::MajorityReference, &inputs);
+    assert_eq!(by_ref.cells[split], FREE, "the reference's cell");
+    assert_eq!(by_ref.cells[two], OCCUPIED, "a majority still wins");
+    // With the reference out (its map still sets the frame), doubt is a wall again.
+    inputs[0].out = true;
+    let out = fuse(VoteRule::MajorityReference, &inputs);
+    assert_eq!(out.cells[split], OCCUPIED);
+}
