@@ -76,6 +76,13 @@ fn check_heading_held(warm_sensor: bool, limit_deg: f64) {
         "only {withheld} scans mostly withheld from the laser: no dense smoke"
     );
     assert!(added.len() > 1000, "{} scans tracked", added.len());
+    // The crossing is blind: the laser gives no heading for metres, which
+    // the SLAM process's health reports past `[slam] max_blind_m`.
+    let blind = slam.stats().longest_blind_m;
+    assert!(
+        blind > profile.slam.max_blind_m,
+        "longest blind stretch {blind:.1} m"
+    );
     let start = added[0].1;
     let (mut worst, mut worst_at) = (0.0f64, 0u64);
     for &(t, a) in &added {

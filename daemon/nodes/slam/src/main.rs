@@ -31,6 +31,7 @@
 use anyhow::Context;
 use clap::Parser;
 use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
+use smokenav_algorithms_slam::pipeline::PipelineStats;
 use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::vote::member::MemberFault;
@@ -315,7 +316,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             member_maps.push((m.as_str(), p.bus.map_publisher(topic)?));
         }
     }
-    let mut vote_flagged = false;
+    let mut flagged = false;
     let mut last_update: Option<SlamUpdate> = None;
     let mut map: Option<OccupancyGrid> = None;
     let mut last_map_revision = None;
@@ -432,9 +433,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                 publish_members(p, &pipeline, &mut member_maps, &mut counters);
             }
         }
-        if let Some(vote) = pipeline.backend().as_any().downcast_ref::<VoteSlam>() {
-            vote_flagged = flag_members(p, vote, vote_flagged);
-        }
+        flagged = flag_conditions(p, &pipeline, cfg.max_blind_m, flagged);
         report(p, &pipeline, &counters, &scans);
         p.tick()?;
     }
@@ -465,18 +464,27 @@ fn publish_members(
     }
 }
 
-/// Degraded, naming them, while members are out; back to Ok when all are in.
-fn flag_members(p: &mut Process, vote: &VoteSlam, flagged: bool) -> bool {
-    let st = vote.status();
-    let out: Vec<String> = st
-        .members
-        .iter()
-        .filter(|m| m.health.is_out())
-        .map(|m| format!("{} {}", m.name, m.health))
-        .collect();
-    if !out.is_empty() {
-        p.health
-            .error(&format!("vote: member {}", out.join("; member ")));
+/// Degraded, naming the reasons, while a vote member is out or the heading
+/// has been odometry's alone for more than `max_blind_m`; back to Ok when
+/// none holds. Returns whether it is flagged now.
+fn flag_conditions(
+    p: &mut Process,
+    pipeline: &SlamPipeline,
+    max_blind_m: f64,
+    flagged: bool,
+) -> bool {
+    let vote = pipeline.backend().as_any().downcast_ref::<VoteSlam>();
+    let out: Vec<String> = vote.map_or_else(Vec::new, |v| {
+        v.status()
+            .members
+            .iter()
+            .filter(|m| m.health.is_out())
+            .map(|m| format!("{} {}", m.name, m.health))
+            .collect()
+    });
+    let reasons = conditions(&out, &pipeline.stats(), max_blind_m);
+    if !reasons.is_empty() {
+        p.health.error(&reasons.join("; "));
         if p.health.state() == HealthState::Ok {
             p.health.set_state(HealthState::Degraded);
         }
@@ -492,6 +500,23 @@ fn flag_members(p: &mut Process, vote: &VoteSlam, flagged: bool) -> bool {
     }
 }
 
+/// Why the SLAM process is degraded: the vote members that are out (as
+/// `name state`) and a blind stretch longer than `max_blind_m` (0: never).
+fn conditions(members_out: &[String], stats: &PipelineStats, max_blind_m: f64) -> Vec<String> {
+    let mut reasons = Vec::new();
+    if !members_out.is_empty() {
+        reasons.push(format!("vote: member {}", members_out.join("; member ")));
+    }
+    if max_blind_m > 0.0 && stats.blind_m > max_blind_m {
+        // The limit, not the running figure: the text stays the same while
+        // the stretch lasts (a new text is logged again); heading_blind_m has the figure.
+        reasons.push(format!(
+            "heading from odometry alone for over {max_blind_m:.1} m (the laser blind or unmatched): the map may turn"
+        ));
+    }
+    reasons
+}
+
 fn report(p: &mut Process, pipeline: &SlamPipeline, c: &Counters, scans: &Scans) {
     let h = &mut p.health;
     let stats = pipeline.stats();
@@ -504,6 +529,10 @@ fn report(p: &mut Process, pipeline: &SlamPipeline, c: &Counters, scans: &Scans)
     h.set_metric("odom_resets", stats.odom_resets as f64);
     h.set_metric("odom_out_of_order", stats.odom_out_of_order as f64);
     h.set_metric("frontend_fallbacks", stats.frontend_fallbacks as f64);
+    h.set_metric("frontend_withheld", stats.frontend_withheld as f64);
+    h.set_metric("heading_blind_m", stats.blind_m);
+    h.set_metric("heading_blind_deg", stats.blind_rad.to_degrees());
+    h.set_metric("heading_blind_longest_m", stats.longest_blind_m);
     h.set_metric("maps_published", c.maps_published as f64);
     h.set_metric("maps_saved", c.maps_saved as f64);
     h.set_metric("publish_errors", c.publish_errors as f64);
@@ -529,6 +558,32 @@ mod tests {
         );
         assert_eq!(default_map_dir(None), PathBuf::from("maps"));
         assert_eq!(default_map_dir(Some("".into())), PathBuf::from("maps"));
+    }
+
+    #[test]
+    fn a_long_blind_stretch_and_members_out_are_named_in_health() {
+        let blind = |m: f64| PipelineStats {
+            blind_m: m,
+            blind_rad: 0.5,
+            ..PipelineStats::default()
+        };
+        assert!(conditions(&[], &blind(4.9), 5.0).is_empty());
+        let r = conditions(&[], &blind(6.2), 5.0);
+        assert_eq!(r.len(), 1);
+        assert!(
+            r[0].starts_with("heading from odometry alone for over 5.0 m"),
+            "{r:?}"
+        );
+        // The same text while the stretch lasts (the log repeats a new text).
+        assert_eq!(conditions(&[], &blind(9.0), 5.0), r);
+        assert!(
+            conditions(&[], &blind(60.0), 0.0).is_empty(),
+            "0 never flags"
+        );
+        let out = ["rbpf stalled".to_string()];
+        let r = conditions(&out, &blind(6.2), 5.0);
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0], "vote: member rbpf stalled");
     }
 
     #[test]

@@ -668,6 +668,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         "pipeline           {} held back by the motion filter, {} front-end fallbacks to odometry, {} scans mostly withheld from the laser (heading matched, position by odometry), {} scans without ranges",
         stats.held_back, stats.frontend_fallbacks, stats.frontend_withheld, stats.empty_scans
     );
+    let _ = writeln!(
+        report,
+        "heading            longest stretch on odometry alone (no laser match) {:.1} m",
+        stats.longest_blind_m
+    );
     if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
         let s = g.stats();
         let _ = writeln!(

@@ -1053,7 +1053,7 @@ impl SlamBackend for GraphSlam {
             "graph_optimization_failures",
             s.optimization_failures as f64,
         );
-        // Online only (a health report holds 24 metrics: the p99 is in the stats of benches).
+        // Online only (a health report holds 32 metrics: the p99 is in the stats of benches).
         if self.worker.is_some() {
             emit("loop_closure_nodes_skipped", s.closure_nodes_skipped as f64);
             emit("loop_closure_latency_max_ms", self.closure_latency_ms().0);

@@ -452,3 +452,40 @@ fn a_robot_turning_on_the_spot_while_its_scans_are_withheld_holds_its_heading() 
     );
     assert_eq!(slam.stats().frontend_withheld, steps);
 }
+
+#[test]
+fn the_blind_stretch_counts_odometry_until_the_laser_gives_the_heading_again() {
+    let mut slam = pipeline(&cfg(2), false);
+    let mut truth = Pose2::new(-3.5, -1.5, 0.0);
+    let mut odom = Pose2::new(10.0, 20.0, 1.0);
+    let mut at = |k: u64, blind: bool, slam: &mut SlamPipeline| {
+        let mut scan = scan_at(&truth, k * 100_000_000);
+        if blind {
+            // Dense smoke: v2 withholds every beam from the laser.
+            for b in &mut scan.beams {
+                b.kind = BeamKind::Sonar;
+                b.range = None;
+            }
+            scan.withheld_share = 1.0;
+        }
+        slam.process(&scan, &odom);
+        truth = truth.compose(&Pose2::new(0.1, 0.0, 0.0));
+        odom = odom.compose(&Pose2::new(0.1, 0.0, 0.02));
+        slam.stats()
+    };
+    for k in 0..5 {
+        let st = at(k, false, &mut slam);
+        assert_eq!((st.blind_m, st.longest_blind_m), (0.0, 0.0), "scan {k}");
+    }
+    // Ten blind scans: 1 m and 0.2 rad of odometry since the last matched one.
+    let mut st = PipelineStats::default();
+    for k in 5..15 {
+        st = at(k, true, &mut slam);
+    }
+    assert!((st.blind_m - 1.0).abs() < 1e-6, "{}", st.blind_m);
+    assert!((st.blind_rad - 0.2).abs() < 1e-6, "{}", st.blind_rad);
+    // The laser back: the stretch ends, the longest is kept.
+    let st = at(15, false, &mut slam);
+    assert_eq!((st.blind_m, st.blind_rad), (0.0, 0.0));
+    assert!((st.longest_blind_m - 1.0).abs() < 1e-6);
+}

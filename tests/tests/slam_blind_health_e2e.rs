@@ -1,0 +1,200 @@
+//! The SLAM process says when its heading is dead reckoning: fused scans
+//! whose every beam the fusion withheld from the laser (dense smoke) go
+//! through the real `smokenav-slam` over iceoryx2 while the odometry moves
+//! on; past `[slam] max_blind_m` its health turns degraded, names the
+//! reason and reports the stretch (`heading_blind_m`), and once the laser
+//! is back the reason goes and the longest stretch stays in the report.
+//!
+//! The scans and odometry are the first 200 of the MIT CSAIL log, the
+//! middle ones blinded.
+
+use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_platform_bus::{Publisher, Subscriber, Waiter, topics};
+use smokenav_platform_config::{MountPose, SlamInput};
+use smokenav_shared_types::{
+    BeamReading, Clock, FusedScan, Header, Health, HealthState, MonotonicClock, Odometry,
+    PoseEstimate, SectionSource,
+};
+use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
+use std::io::BufReader;
+use std::time::{Duration, Instant};
+
+const RANGE_MAX: f32 = 81.9;
+/// Records whose scans the fusion withheld entirely.
+const BLIND: std::ops::Range<usize> = 60..130;
+const MAX_BLIND_M: f64 = 1.0;
+
+fn records() -> Vec<LaserRecord> {
+    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
+    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
+        .filter_map(|r| match r {
+            Ok(Record::Laser(l)) => Some(l),
+            _ => None,
+        })
+        .collect()
+}
+
+fn fused(rec: &LaserRecord, stamp: u64, blind: bool) -> FusedScan {
+    let mut f = FusedScan::default();
+    let s = &mut f.scan;
+    s.header = Header::new(stamp, 0, "laser");
+    s.angle_min = rec.start_angle as f32;
+    s.angle_increment = rec.angular_resolution as f32;
+    s.range_min = 0.02;
+    s.range_max = RANGE_MAX;
+    s.count = rec.ranges.len() as u32;
+    for (i, &r) in rec.ranges.iter().enumerate() {
+        let beam = if r > 0.0 && r < RANGE_MAX {
+            BeamReading::Range(r)
+        } else {
+            BeamReading::BeyondMax
+        };
+        s.set_beam(i, beam);
+        if blind {
+            // A wall of smoke, no sonar echo in range: nothing is mapped.
+            f.beam_source[i] = SectionSource::Neither as u8;
+        }
+    }
+    f
+}
+
+/// The next health report of `sub` that `done` accepts, within 15 s.
+fn health_until(
+    sub: &Subscriber<Health>,
+    waiter: &Waiter,
+    what: &str,
+    mut done: impl FnMut(&Health) -> bool,
+) -> Health {
+    let end = Instant::now() + Duration::from_secs(15);
+    let mut last = None;
+    loop {
+        while let Some(h) = sub.receive().unwrap() {
+            let h: Health = *h;
+            if done(&h) {
+                return h;
+            }
+            last = Some(h);
+        }
+        let now = Instant::now();
+        assert!(
+            now < end,
+            "no health report {what}; last: {:?} `{}`",
+            last.map(|h| h.state()),
+            last.map_or(String::new(), |h| h.last_error.as_str().to_owned())
+        );
+        waiter
+            .wait(Some((end - now).min(Duration::from_millis(200))))
+            .unwrap();
+    }
+}
+
+#[test]
+fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
+    let instance = unique_instance("slam_blind_health_e2e");
+    let dir = tempfile::tempdir().unwrap();
+    let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Fused;
+        c.slam.max_blind_m = MAX_BLIND_M;
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
+    let mut slam = Child::spawn(
+        &bin("smokenav-slam"),
+        &["--config", cfg_path.to_str().unwrap(), "--backend", "graph"],
+        &instance,
+    )
+    .unwrap();
+    slam.wait_for_line("graph on fusion/scan", Duration::from_secs(30))
+        .unwrap_or_else(|e| panic!("{e}\n{}", slam.output()));
+
+    let bus = open_bus(&instance);
+    let mut odom_pub: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM).unwrap();
+    let mut scan_pub: Publisher<FusedScan> = bus.publisher(topics::FUSION_SCAN).unwrap();
+    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE).unwrap();
+    let health = bus.subscriber::<Health>(topics::health("slam")).unwrap();
+    let waiter = Waiter::new().unwrap();
+    let _g = [
+        waiter.attach(&poses).unwrap(),
+        waiter.attach(&health).unwrap(),
+    ];
+    let records = records();
+    // How far the odometry goes while blind: the limit must fall inside.
+    let travel: f64 = records[BLIND.start - 1..BLIND.end]
+        .windows(2)
+        .map(|w| w[0].robot_pose.between(&w[1].robot_pose).translation_norm())
+        .sum();
+    assert!(travel > 2.0 * MAX_BLIND_M, "{travel} m");
+
+    let t0 = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    let mut send = |k: usize| {
+        let rec = &records[k];
+        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
+        odom_pub
+            .publish(&Odometry {
+                header: Header::new(stamp, 0, "odom"),
+                x: rec.robot_pose.x,
+                y: rec.robot_pose.y,
+                theta: rec.robot_pose.theta,
+                ..Default::default()
+            })
+            .unwrap();
+        scan_pub
+            .publish(&fused(rec, stamp, BLIND.contains(&k)))
+            .unwrap();
+        // Lock step: the pose of this scan before the next one goes out.
+        let end = Instant::now() + Duration::from_secs(30);
+        'pose: loop {
+            while let Some(p) = poses.receive().unwrap() {
+                if p.header.stamp_ns == stamp {
+                    break 'pose;
+                }
+            }
+            assert!(Instant::now() < end, "no pose for scan {k}");
+            waiter.wait(Some(Duration::from_millis(200))).unwrap();
+        }
+    };
+    for k in 0..BLIND.end {
+        send(k);
+    }
+    let blind = health_until(&health, &waiter, "naming the blind stretch", |h| {
+        h.last_error
+            .as_str()
+            .contains("heading from odometry alone")
+    });
+    assert_eq!(blind.state(), HealthState::Degraded);
+    let metric = |h: &Health, name: &str| h.metric(name).unwrap_or(f64::NAN);
+    assert!(
+        (metric(&blind, "heading_blind_m") - travel).abs() < 0.05,
+        "heading_blind_m {} against {travel:.2} m of odometry",
+        metric(&blind, "heading_blind_m")
+    );
+    assert_eq!(
+        metric(&blind, "frontend_withheld"),
+        BLIND.len() as f64,
+        "every blinded scan counted"
+    );
+    for k in BLIND.end..records.len() {
+        send(k);
+    }
+    let back = health_until(&health, &waiter, "without the blind stretch", |h| {
+        metric(h, "heading_blind_m") == 0.0
+    });
+    assert!(
+        !back.last_error.as_str().contains("heading from odometry"),
+        "{}",
+        back.last_error.as_str()
+    );
+    // The first scan back has nothing near to match (the front end's last
+    // scans are metres behind): the stretch ends at the one after it.
+    let longest = metric(&back, "heading_blind_longest_m");
+    assert!(
+        longest > travel - 0.05 && longest < travel + 0.5,
+        "longest {longest} against {travel:.2} m"
+    );
+    let status = slam.terminate(Duration::from_secs(10)).unwrap();
+    assert!(status.success(), "{status:?}\n{}", slam.output());
+}
