@@ -11,11 +11,15 @@
 //!   output captured for the failure message;
 //! - [`profile`]: a robot profile based on a shipped one, modified and written
 //!   to a temporary file;
-//! - [`wait_for`]: receive messages of a topic until a predicate holds or a timeout passes.
+//! - [`wait_for`]: receive messages of a topic until a predicate holds or a timeout passes;
+//! - [`csail_prefix`], [`fill_carmen_scan`], [`carmen_odometry`]: the real
+//!   robot log the SLAM tests replay, as bus messages.
 
 use anyhow::{Context, bail};
+use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
 use smokenav_platform_bus::{Bus, BusOptions, Message, Topic, Waiter};
 use smokenav_platform_config::RobotConfig;
+use smokenav_shared_types::{BeamReading, Header, LaserScan, Odometry};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -392,4 +396,56 @@ pub fn ensure_octomap_tools() -> bool {
         .status()
         .expect("bash runs");
     st.success() && have_bt2vrml()
+}
+
+/// CARMEN max-range readings are 81.91: beyond the scan's `range_max`, i.e. no return.
+pub const CARMEN_RANGE_MAX: f32 = 81.9;
+
+/// The MIT CSAIL log's first 200 laser records, a CARMEN file.
+pub fn csail_prefix_path() -> PathBuf {
+    workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf")
+}
+
+/// The first 200 laser records (odometry and scan each) of the MIT CSAIL
+/// log: the real robot input the SLAM tests replay.
+pub fn csail_prefix() -> Vec<LaserRecord> {
+    let path = csail_prefix_path();
+    let file = std::fs::File::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    CarmenReader::new(BufReader::new(file))
+        .filter_map(|r| match r {
+            Ok(Record::Laser(l)) => Some(l),
+            _ => None,
+        })
+        .collect()
+}
+
+/// `rec`'s scan as the laser driver publishes it, stamped `stamp_ns`
+/// (readings at or past [`CARMEN_RANGE_MAX`] are no return).
+pub fn fill_carmen_scan(s: &mut LaserScan, rec: &LaserRecord, stamp_ns: u64) {
+    s.header = Header::new(stamp_ns, 0, "laser");
+    s.angle_min = rec.start_angle as f32;
+    s.angle_increment = rec.angular_resolution as f32;
+    s.range_min = 0.02;
+    s.range_max = CARMEN_RANGE_MAX;
+    s.count = rec.ranges.len() as u32;
+    s.has_intensities = 0;
+    for (i, &r) in rec.ranges.iter().enumerate() {
+        let beam = if r > 0.0 && r < CARMEN_RANGE_MAX {
+            BeamReading::Range(r)
+        } else {
+            BeamReading::BeyondMax
+        };
+        s.set_beam(i, beam);
+    }
+}
+
+/// `rec`'s odometry as the base driver publishes it, stamped `stamp_ns`.
+pub fn carmen_odometry(rec: &LaserRecord, stamp_ns: u64) -> Odometry {
+    Odometry {
+        header: Header::new(stamp_ns, 0, "odom"),
+        x: rec.robot_pose.x,
+        y: rec.robot_pose.y,
+        theta: rec.robot_pose.theta,
+        ..Default::default()
+    }
 }

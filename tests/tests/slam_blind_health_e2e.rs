@@ -8,52 +8,27 @@
 //! The scans and odometry are the first 200 of the MIT CSAIL log, the
 //! middle ones blinded.
 
-use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_algorithms_slam::carmen::LaserRecord;
 use smokenav_platform_bus::{Publisher, Subscriber, Waiter, topics};
 use smokenav_platform_config::{MountPose, SlamInput};
 use smokenav_shared_types::{
-    BeamReading, Clock, FusedScan, Header, Health, HealthState, MonotonicClock, Odometry,
-    PoseEstimate, SectionSource,
+    Clock, FusedScan, Health, HealthState, MonotonicClock, Odometry, PoseEstimate, SectionSource,
 };
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
-use std::io::BufReader;
+use smokenav_tests::{
+    Child, bin, carmen_odometry, csail_prefix, fill_carmen_scan, open_bus, profile, unique_instance,
+};
 use std::time::{Duration, Instant};
 
-const RANGE_MAX: f32 = 81.9;
 /// Records whose scans the fusion withheld entirely.
 const BLIND: std::ops::Range<usize> = 60..130;
 const MAX_BLIND_M: f64 = 1.0;
 
-fn records() -> Vec<LaserRecord> {
-    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
-    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
-        .filter_map(|r| match r {
-            Ok(Record::Laser(l)) => Some(l),
-            _ => None,
-        })
-        .collect()
-}
-
 fn fused(rec: &LaserRecord, stamp: u64, blind: bool) -> FusedScan {
     let mut f = FusedScan::default();
-    let s = &mut f.scan;
-    s.header = Header::new(stamp, 0, "laser");
-    s.angle_min = rec.start_angle as f32;
-    s.angle_increment = rec.angular_resolution as f32;
-    s.range_min = 0.02;
-    s.range_max = RANGE_MAX;
-    s.count = rec.ranges.len() as u32;
-    for (i, &r) in rec.ranges.iter().enumerate() {
-        let beam = if r > 0.0 && r < RANGE_MAX {
-            BeamReading::Range(r)
-        } else {
-            BeamReading::BeyondMax
-        };
-        s.set_beam(i, beam);
-        if blind {
-            // A wall of smoke, no sonar echo in range: nothing is mapped.
-            f.beam_source[i] = SectionSource::Neither as u8;
-        }
+    fill_carmen_scan(&mut f.scan, rec, stamp);
+    if blind {
+        // A wall of smoke, no sonar echo in range: nothing is mapped.
+        f.beam_source[..rec.ranges.len()].fill(SectionSource::Neither as u8);
     }
     f
 }
@@ -120,7 +95,7 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
         waiter.attach(&poses).unwrap(),
         waiter.attach(&health).unwrap(),
     ];
-    let records = records();
+    let records = csail_prefix();
     // How far the odometry goes while blind: the limit must fall inside.
     let travel: f64 = records[BLIND.start - 1..BLIND.end]
         .windows(2)
@@ -133,15 +108,7 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
     let mut send = |k: usize| {
         let rec = &records[k];
         let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
-        odom_pub
-            .publish(&Odometry {
-                header: Header::new(stamp, 0, "odom"),
-                x: rec.robot_pose.x,
-                y: rec.robot_pose.y,
-                theta: rec.robot_pose.theta,
-                ..Default::default()
-            })
-            .unwrap();
+        odom_pub.publish(&carmen_odometry(rec, stamp)).unwrap();
         scan_pub
             .publish(&fused(rec, stamp, BLIND.contains(&k)))
             .unwrap();

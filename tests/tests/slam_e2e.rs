@@ -10,29 +10,16 @@
 
 use smokenav_algorithms_eval::{StampedPose, TrajectoryOptions, evaluate_trajectories};
 use smokenav_algorithms_slam::Pose2;
-use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_algorithms_slam::carmen::LaserRecord;
 use smokenav_platform_bus::{Publisher, Waiter, topics};
 use smokenav_platform_config::MountPose;
 use smokenav_platform_config::slam::SlamInput;
-use smokenav_shared_types::{
-    BeamReading, Clock, Header, LaserScan, MonotonicClock, Odometry, PoseEstimate,
+use smokenav_shared_types::{Clock, LaserScan, MonotonicClock, Odometry, PoseEstimate};
+use smokenav_tests::{
+    Child, bin, carmen_odometry, csail_prefix, csail_prefix_path, fill_carmen_scan, open_bus,
+    profile, python, unique_instance, workspace_root,
 };
-use smokenav_tests::{Child, bin, open_bus, profile, python, unique_instance, workspace_root};
-use std::io::BufReader;
 use std::time::{Duration, Instant};
-
-/// CARMEN max-range readings are 81.91: beyond the scan's range_max, i.e. no return.
-const RANGE_MAX: f32 = 81.9;
-
-fn log_records() -> Vec<LaserRecord> {
-    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
-    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
-        .filter_map(|r| match r {
-            Ok(Record::Laser(l)) => Some(l),
-            _ => None,
-        })
-        .collect()
-}
 
 fn publish(
     odom: &mut Publisher<Odometry>,
@@ -40,32 +27,8 @@ fn publish(
     rec: &LaserRecord,
     stamp_ns: u64,
 ) -> anyhow::Result<()> {
-    odom.publish_with(|o: &mut Odometry| {
-        *o = Odometry {
-            header: Header::new(stamp_ns, 0, "odom"),
-            x: rec.robot_pose.x,
-            y: rec.robot_pose.y,
-            theta: rec.robot_pose.theta,
-            ..Default::default()
-        };
-    })?;
-    scans.publish_with(|s: &mut LaserScan| {
-        s.header = Header::new(stamp_ns, 0, "laser");
-        s.angle_min = rec.start_angle as f32;
-        s.angle_increment = rec.angular_resolution as f32;
-        s.range_min = 0.02;
-        s.range_max = RANGE_MAX;
-        s.count = rec.ranges.len() as u32;
-        s.has_intensities = 0;
-        for (i, &r) in rec.ranges.iter().enumerate() {
-            let beam = if r > 0.0 && r < RANGE_MAX {
-                BeamReading::Range(r)
-            } else {
-                BeamReading::BeyondMax
-            };
-            s.set_beam(i, beam);
-        }
-    })?;
+    odom.publish(&carmen_odometry(rec, stamp_ns))?;
+    scans.publish_with(|s: &mut LaserScan| fill_carmen_scan(s, rec, stamp_ns))?;
     Ok(())
 }
 
@@ -106,7 +69,7 @@ fn replay_in_lock_step(
     let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
     let waiter = Waiter::new()?;
     let _g = waiter.attach(&poses)?;
-    let records = log_records();
+    let records = csail_prefix();
     let base_ns = MonotonicClock.now_ns();
     let ipc0 = records[0].ipc_timestamp_ns;
     let mut estimate = Vec::new();
@@ -196,7 +159,7 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
     let _g = waiter.attach(&poses)?;
 
     // Replay in lock step: each scan's pose comes back before the next scan goes out.
-    let records = log_records();
+    let records = csail_prefix();
     assert_eq!(records.len(), 200);
     let base_ns = MonotonicClock.now_ns();
     let ipc0 = records[0].ipc_timestamp_ns;
@@ -451,7 +414,7 @@ fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> a
 fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one()
 -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
-    let log = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
+    let log = csail_prefix_path();
     let graph = dir.path().join("csail.g2o");
     let out = std::process::Command::new(bin("smokenav"))
         .args([

@@ -15,37 +15,24 @@
 //! none: every pose must be bit-identical. `recording_e2e`'s replay of a
 //! live run at full speed is the test that allows for skips under load.
 
-use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
+use smokenav_algorithms_slam::carmen::LaserRecord;
 use smokenav_algorithms_slam::offline::{Received, replay};
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
 use smokenav_platform_bus::{Publisher, Waiter, topics};
 use smokenav_platform_config::{MountPose, RobotConfig, SlamInput};
 use smokenav_shared_types::{
-    BeamReading, Clock, FusedScan, Header, MonotonicClock, Odometry, OdometryFlags, PoseEstimate,
-    SectionSource,
+    Clock, FusedScan, Header, MonotonicClock, Odometry, OdometryFlags, PoseEstimate, SectionSource,
 };
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, workspace_root};
-use std::io::BufReader;
+use smokenav_tests::{
+    Child, bin, csail_prefix, fill_carmen_scan, open_bus, profile, unique_instance,
+};
 use std::time::{Duration, Instant};
 
-/// CARMEN max-range readings are 81.91: beyond the scan's range_max, i.e. no return.
-const RANGE_MAX: f32 = 81.9;
 /// The scan is stamped this long before the odometry reading of its record.
 const SCAN_LEAD_NS: u64 = 20_000_000;
 /// Record whose odometry starts a new frame.
 const RESET_AT: usize = 100;
 
-fn records() -> Vec<LaserRecord> {
-    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
-    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
-        .filter_map(|r| match r {
-            Ok(Record::Laser(l)) => Some(l),
-            _ => None,
-        })
-        .collect()
-}
-
-/// The recording: (odometry, fused scan) per log record, stamped from `base_ns`.
 fn recording(records: &[LaserRecord], base_ns: u64) -> Vec<(Odometry, Box<FusedScan>)> {
     let ipc0 = records[0].ipc_timestamp_ns;
     let jump = Pose2::new(40.0, -12.0, 2.5);
@@ -74,21 +61,7 @@ fn recording(records: &[LaserRecord], base_ns: u64) -> Vec<(Odometry, Box<FusedS
                 ..Default::default()
             };
             let mut f = Box::<FusedScan>::default();
-            let s = &mut f.scan;
-            s.header = Header::new(stamp - SCAN_LEAD_NS, 0, "laser");
-            s.angle_min = rec.start_angle as f32;
-            s.angle_increment = rec.angular_resolution as f32;
-            s.range_min = 0.02;
-            s.range_max = RANGE_MAX;
-            s.count = rec.ranges.len() as u32;
-            for (i, &r) in rec.ranges.iter().enumerate() {
-                let beam = if r > 0.0 && r < RANGE_MAX {
-                    BeamReading::Range(r)
-                } else {
-                    BeamReading::BeyondMax
-                };
-                s.set_beam(i, beam);
-            }
+            fill_carmen_scan(&mut f.scan, rec, stamp - SCAN_LEAD_NS);
             // Clear air to beyond SmokeNav's dense threshold over the log.
             f.smoke_level = 300.0 * k as f32 / records.len() as f32;
             if (60..140).contains(&k) {
@@ -152,7 +125,7 @@ fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()>
     let waiter = Waiter::new()?;
     let _g = waiter.attach(&poses)?;
 
-    let records = records();
+    let records = csail_prefix();
     assert_eq!(records.len(), 200);
     let recorded = recording(&records, MonotonicClock.now_ns());
     // Live, in lock step; what was sent and when is the recording replayed offline.

@@ -4,29 +4,15 @@
 //! made to panic or hang (the test-only `SMOKENAV_TEST_VOTE_FAULT`), the vote
 //! keeps updating on the others and `health/slam` names the member that is out.
 
-use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
 use smokenav_platform_bus::{Bus, Publisher, Topic, Waiter, topics};
 use smokenav_platform_config::{MountPose, SlamBackendKind, SlamInput};
 use smokenav_shared_types::{
-    BeamReading, Clock, Header, Health, HealthState, LaserScan, MapInfo, MonotonicClock, Odometry,
-    PoseEstimate,
+    Clock, Header, Health, HealthState, LaserScan, MapInfo, MonotonicClock, Odometry, PoseEstimate,
 };
-use smokenav_tests::{Child, bin, open_bus, profile, unique_instance, wait_for, workspace_root};
-use std::io::BufReader;
+use smokenav_tests::{
+    Child, bin, csail_prefix, fill_carmen_scan, open_bus, profile, unique_instance, wait_for,
+};
 use std::time::{Duration, Instant};
-
-const RANGE_MAX: f32 = 81.9;
-
-fn log_records(n: usize) -> Vec<LaserRecord> {
-    let path = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
-    CarmenReader::new(BufReader::new(std::fs::File::open(path).unwrap()))
-        .filter_map(|r| match r {
-            Ok(Record::Laser(l)) => Some(l),
-            _ => None,
-        })
-        .take(n)
-        .collect()
-}
 
 struct Run {
     slam: Child,
@@ -89,7 +75,7 @@ fn replay(r: &Run, n: usize) {
     let poses = r.bus.subscriber::<PoseEstimate>(topics::SLAM_POSE).unwrap();
     let waiter = Waiter::new().unwrap();
     let _g = waiter.attach(&poses).unwrap();
-    let records = log_records(n);
+    let records: Vec<_> = csail_prefix().into_iter().take(n).collect();
     let base = MonotonicClock.now_ns();
     let ipc0 = records[0].ipc_timestamp_ns;
     for rec in &records {
@@ -105,25 +91,7 @@ fn replay(r: &Run, n: usize) {
         })
         .unwrap();
         scans
-            .publish_with(|s: &mut LaserScan| {
-                s.header = Header::new(stamp, 0, "laser");
-                s.angle_min = rec.start_angle as f32;
-                s.angle_increment = rec.angular_resolution as f32;
-                s.range_min = 0.02;
-                s.range_max = RANGE_MAX;
-                s.count = rec.ranges.len() as u32;
-                s.has_intensities = 0;
-                for (i, &v) in rec.ranges.iter().enumerate() {
-                    s.set_beam(
-                        i,
-                        if v > 0.0 && v < RANGE_MAX {
-                            BeamReading::Range(v)
-                        } else {
-                            BeamReading::BeyondMax
-                        },
-                    );
-                }
-            })
+            .publish_with(|s: &mut LaserScan| fill_carmen_scan(s, rec, stamp))
             .unwrap();
         // The vote answers at once (members work behind it): a pose per scan.
         let end = Instant::now() + Duration::from_secs(30);

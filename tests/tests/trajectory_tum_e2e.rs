@@ -4,13 +4,13 @@
 //! of a CSAIL prefix and finds the same ATE as smokenav's own evaluation.
 
 use smokenav_algorithms_eval::{TrajectoryOptions, evaluate_trajectories, load_trajectory};
-use smokenav_tests::{bin, python, workspace_root};
+use smokenav_tests::{bin, csail_prefix_path, python};
 use std::process::Command;
 
 #[test]
 fn evo_ape_reads_the_tum_trajectories_smokenav_slam_writes() -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
-    let log = workspace_root().join("daemon/algorithms/slam/tests/data/csail-prefix-200.clf");
+    let log = csail_prefix_path();
     let out = Command::new(bin("smokenav"))
         .args(["slam", "--particles", "5", "--format", "tum", "--carmen"])
         .arg(&log)
