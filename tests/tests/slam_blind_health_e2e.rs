@@ -70,11 +70,8 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
     let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
         c.slam.input = SlamInput::Fused;
         c.slam.max_blind_m = MAX_BLIND_M;
-        c.laser.mount = MountPose {
-            x: 0.0,
-            y: 0.0,
-            yaw_deg: 0.0,
-        };
+        // The CARMEN laser pose is the robot pose.
+        c.laser.mount = MountPose::default();
     });
     let mut slam = Child::spawn(
         &bin("smokenav-slam"),
