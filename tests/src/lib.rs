@@ -13,13 +13,14 @@
 //!   to a temporary file;
 //! - [`wait_for`]: receive messages of a topic until a predicate holds or a timeout passes;
 //! - [`csail_prefix`], [`fill_carmen_scan`], [`carmen_odometry`]: the real
-//!   robot log the SLAM tests replay, as bus messages.
+//!   robot log the SLAM tests replay, as bus messages; [`pose_for_scan`]:
+//!   the SLAM process's answer to one of them.
 
 use anyhow::{Context, bail};
 use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
-use smokenav_platform_bus::{Bus, BusOptions, Message, Topic, Waiter};
+use smokenav_platform_bus::{Bus, BusOptions, Message, Subscriber, Topic, Waiter};
 use smokenav_platform_config::RobotConfig;
-use smokenav_shared_types::{BeamReading, Header, LaserScan, Odometry};
+use smokenav_shared_types::{BeamReading, Header, LaserScan, Odometry, PoseEstimate};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -447,5 +448,25 @@ pub fn carmen_odometry(rec: &LaserRecord, stamp_ns: u64) -> Odometry {
         y: rec.robot_pose.y,
         theta: rec.robot_pose.theta,
         ..Default::default()
+    }
+}
+
+/// Waits up to 30 s for the `slam/pose` of the scan stamped `stamp_ns`
+/// (`waiter` has `poses` attached); earlier poses are passed over.
+pub fn pose_for_scan(
+    poses: &Subscriber<PoseEstimate>,
+    waiter: &Waiter,
+    stamp_ns: u64,
+) -> anyhow::Result<PoseEstimate> {
+    let end = Instant::now() + Duration::from_secs(30);
+    loop {
+        while let Some(p) = poses.receive()? {
+            if p.header.stamp_ns == stamp_ns {
+                return Ok(*p);
+            }
+        }
+        let now = Instant::now();
+        anyhow::ensure!(now < end, "no slam/pose for the scan stamped {stamp_ns}");
+        waiter.wait(Some((end - now).min(Duration::from_millis(200))))?;
     }
 }

@@ -15,7 +15,8 @@ use smokenav_shared_types::{
     Clock, FusedScan, Health, HealthState, MonotonicClock, Odometry, PoseEstimate, SectionSource,
 };
 use smokenav_tests::{
-    Child, bin, carmen_odometry, csail_prefix, fill_carmen_scan, open_bus, profile, unique_instance,
+    Child, bin, carmen_odometry, csail_prefix, fill_carmen_scan, open_bus, pose_for_scan, profile,
+    unique_instance,
 };
 use std::time::{Duration, Instant};
 
@@ -110,16 +111,7 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
             .publish(&fused(rec, stamp, BLIND.contains(&k)))
             .unwrap();
         // Lock step: the pose of this scan before the next one goes out.
-        let end = Instant::now() + Duration::from_secs(30);
-        'pose: loop {
-            while let Some(p) = poses.receive().unwrap() {
-                if p.header.stamp_ns == stamp {
-                    break 'pose;
-                }
-            }
-            assert!(Instant::now() < end, "no pose for scan {k}");
-            waiter.wait(Some(Duration::from_millis(200))).unwrap();
-        }
+        pose_for_scan(&poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
     };
     for k in 0..BLIND.end {
         send(k);

@@ -24,9 +24,9 @@ use smokenav_shared_types::{
     Clock, FusedScan, Header, MonotonicClock, Odometry, OdometryFlags, PoseEstimate, SectionSource,
 };
 use smokenav_tests::{
-    Child, bin, csail_prefix, fill_carmen_scan, open_bus, profile, unique_instance,
+    Child, bin, csail_prefix, fill_carmen_scan, open_bus, pose_for_scan, profile, unique_instance,
 };
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// The scan is stamped this long before the odometry reading of its record.
 const SCAN_LEAD_NS: u64 = 20_000_000;
@@ -74,25 +74,6 @@ fn recording(records: &[LaserRecord], base_ns: u64) -> Vec<(Odometry, Box<FusedS
         .collect()
 }
 
-/// Waits for the pose of the scan stamped `stamp_ns`.
-fn pose_for(
-    poses: &smokenav_platform_bus::Subscriber<PoseEstimate>,
-    waiter: &Waiter,
-    stamp_ns: u64,
-) -> anyhow::Result<PoseEstimate> {
-    let end = Instant::now() + Duration::from_secs(30);
-    loop {
-        while let Some(p) = poses.receive()? {
-            if p.header.stamp_ns == stamp_ns {
-                return Ok(*p);
-            }
-        }
-        let now = Instant::now();
-        anyhow::ensure!(now < end, "no slam/pose for the scan stamped {stamp_ns}");
-        waiter.wait(Some((end - now).min(Duration::from_millis(200))))?;
-    }
-}
-
 #[test]
 fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()> {
     let instance = unique_instance("slam_pipeline_e2e");
@@ -136,7 +117,7 @@ fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()>
         received.push((MonotonicClock.now_ns(), Received::Odometry(odom)));
         scan_pub.publish(fused)?;
         received.push((MonotonicClock.now_ns(), Received::Fused(fused)));
-        live.push(pose_for(&poses, &waiter, fused.scan.header.stamp_ns)?);
+        live.push(pose_for_scan(&poses, &waiter, fused.scan.header.stamp_ns)?);
     }
     let status = slam.terminate(Duration::from_secs(10))?;
     assert!(status.success(), "{status:?}");

@@ -7,10 +7,11 @@
 use smokenav_platform_bus::{Bus, Publisher, Topic, Waiter, topics};
 use smokenav_platform_config::{MountPose, SlamBackendKind, SlamInput};
 use smokenav_shared_types::{
-    Clock, Header, Health, HealthState, LaserScan, MapInfo, MonotonicClock, Odometry, PoseEstimate,
+    Clock, Health, HealthState, LaserScan, MapInfo, MonotonicClock, Odometry, PoseEstimate,
 };
 use smokenav_tests::{
-    Child, bin, csail_prefix, fill_carmen_scan, open_bus, profile, unique_instance, wait_for,
+    Child, bin, carmen_odometry, csail_prefix, fill_carmen_scan, open_bus, pose_for_scan, profile,
+    unique_instance, wait_for,
 };
 use std::time::{Duration, Instant};
 
@@ -80,34 +81,13 @@ fn replay(r: &Run, n: usize) {
     let ipc0 = records[0].ipc_timestamp_ns;
     for rec in &records {
         let stamp = base + (rec.ipc_timestamp_ns - ipc0);
-        odom.publish_with(|o: &mut Odometry| {
-            *o = Odometry {
-                header: Header::new(stamp, 0, "odom"),
-                x: rec.robot_pose.x,
-                y: rec.robot_pose.y,
-                theta: rec.robot_pose.theta,
-                ..Default::default()
-            };
-        })
-        .unwrap();
+        odom.publish(&carmen_odometry(rec, stamp)).unwrap();
         scans
             .publish_with(|s: &mut LaserScan| fill_carmen_scan(s, rec, stamp))
             .unwrap();
         // The vote answers at once (members work behind it): a pose per scan.
-        let end = Instant::now() + Duration::from_secs(30);
-        'wait: loop {
-            while let Some(p) = poses.receive().unwrap() {
-                if p.header.stamp_ns == stamp {
-                    break 'wait;
-                }
-            }
-            assert!(
-                Instant::now() < end,
-                "no pose for a scan\n{}",
-                r.slam.output()
-            );
-            waiter.wait(Some(Duration::from_millis(200))).unwrap();
-        }
+        pose_for_scan(&poses, &waiter, stamp)
+            .unwrap_or_else(|e| panic!("{e}\n{}", r.slam.output()));
     }
 }
 

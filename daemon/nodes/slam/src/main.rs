@@ -564,7 +564,6 @@ mod tests {
     fn a_long_blind_stretch_and_members_out_are_named_in_health() {
         let blind = |m: f64| PipelineStats {
             blind_m: m,
-            blind_rad: 0.5,
             ..PipelineStats::default()
         };
         assert!(conditions(&[], &blind(4.9), 5.0).is_empty());

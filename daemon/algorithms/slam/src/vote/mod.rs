@@ -49,7 +49,7 @@ use crate::scan::{BeamKind, RangeScan};
 use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
 use nalgebra::Matrix3;
-use rule::{CellState, Consensus, WeightedVote, majority, majority_or, weighted};
+use rule::{CellState, Consensus, WeightedVote, majority_or, weighted};
 use smokenav_platform_config::{SlamSection, VoteRule, VoteSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
@@ -390,16 +390,13 @@ impl Fuser {
         self.fused_states.clear();
         self.fused_states.resize(n, CellState::Unknown);
         match rule {
-            VoteRule::Majority => {
-                for i in 0..n {
-                    self.votes.clear();
-                    self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
-                    self.fused_states[i] = majority(&self.votes);
-                }
-            }
-            VoteRule::MajorityReference => {
-                // The reference votes unless it is out (or misaligned: it is not, at identity).
-                let reference = maps.iter().position(|m| m.0 == 0);
+            VoteRule::Majority | VoteRule::MajorityReference => {
+                // Without a majority: occupied (the paper), or the reference's
+                // state while it votes (it is out, never misaligned: at identity).
+                let reference = maps
+                    .iter()
+                    .position(|m| m.0 == 0)
+                    .filter(|_| rule == VoteRule::MajorityReference);
                 for i in 0..n {
                     self.votes.clear();
                     self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
