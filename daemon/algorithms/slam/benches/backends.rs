@@ -11,7 +11,8 @@
 //!
 //! `cargo bench -p smokenav-algorithms-slam --bench backends`
 //! Environment: `CSAIL_DIR` (the folder of the log; required), `CSAIL_DRIFT=SEED` (run on the
-//! corrected log's scans with seeded drifted odometry instead, see `drift`), `BACKENDS` (`rbpf,graph` by default; `fuzzy` too), `CSAIL_LOG` / `CSAIL_REFERENCE`
+//! corrected log's scans with seeded drifted odometry instead, see `drift`; `CSAIL_DRIFT_PARAMS`
+//! overrides its parameters), `BACKENDS` (`rbpf,graph` by default; `fuzzy` too), `CSAIL_LOG` / `CSAIL_REFERENCE`
 //! (other log and reference files in that folder), `SLAM_TOML` (`[slam]` keys), `CSAIL_OUT` (folder for
 //! each back-end's map PNG and trajectory), `GRAPH_ONLINE=1` (the graph's loop closures on their
 //! own thread, as the SLAM process runs them: the per-scan figures are then the scan path's alone,
@@ -46,6 +47,34 @@ fn thread_cpu_ns() -> u64 {
 /// The whole process's CPU time (online, the closure worker's too).
 fn process_cpu_ns() -> u64 {
     cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID)
+}
+
+/// `CSAIL_DRIFT_PARAMS="heading_bias=0.012;scale=0.05"` overrides the drift's
+/// defaults (all zero: the reference poses themselves as odometry).
+fn drift_params(seed: u64) -> drift::DriftParams {
+    let mut p = drift::DriftParams {
+        seed,
+        ..drift::DriftParams::default()
+    };
+    for kv in std::env::var("CSAIL_DRIFT_PARAMS")
+        .unwrap_or_default()
+        .split(';')
+    {
+        let Some((k, v)) = kv.split_once('=') else {
+            continue;
+        };
+        let v: f64 = v.trim().parse().expect("CSAIL_DRIFT_PARAMS value");
+        match k.trim() {
+            "scale" => p.scale = v,
+            "turn_scale" => p.turn_scale = v,
+            "heading_bias" => p.heading_bias = v,
+            "sigma_t" => p.sigma_t = v,
+            "sigma_r" => p.sigma_r = v,
+            "sigma_r_per_m" => p.sigma_r_per_m = v,
+            other => panic!("CSAIL_DRIFT_PARAMS: unknown key {other}"),
+        }
+    }
+    p
 }
 
 /// `GRAPH_PARAMS="closure_search_m=6;closure_min_score=0.5"` overrides graph parameters.
@@ -157,10 +186,7 @@ fn main() {
     // (`drift::DriftParams::default()` with that seed), against its own poses.
     let (dir, log) = match std::env::var("CSAIL_DRIFT") {
         Ok(seed) => {
-            let p = drift::DriftParams {
-                seed: seed.parse().expect("CSAIL_DRIFT is a seed"),
-                ..drift::DriftParams::default()
-            };
+            let p = drift_params(seed.parse().expect("CSAIL_DRIFT is a seed"));
             let text = std::process::Command::new("gzip")
                 .arg("-dc")
                 .arg(dir.join("csail-corrected.log.gz"))

@@ -22,7 +22,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum VoteRule {
     /// The paper's rule: the state most members agree on (more than half);
-    /// no majority → occupied. The default: on the bundled dense-smoke trial
+    /// no majority → occupied (with only two members voting, one out, the
+    /// first of them decides instead: two votes that differ are never a
+    /// majority, and "occupied" drew both maps' walls). The default: on the bundled dense-smoke trial
     /// (SmokeNav v2, `smokenav-lab demo --fast --seeds 1`) majority 0.113 m
     /// map error against weighted 0.626 m, clean twin 0.034 against 0.039 m.
     #[default]
@@ -30,9 +32,7 @@ pub enum VoteRule {
     Majority,
     /// Each member's vote weighted by its certainty for that cell, its pose
     /// covariance and (for occupied/free) how little of the region was seen
-    /// only by sonar; ties → occupied. Better where a member is out (MIT
-    /// CSAIL, fuzzy left out: weighted 0.059 m, majority 0.186 m, best member
-    /// 0.056 m), worse where a member's covariance claims more than its map
+    /// only by sonar; ties → occupied. Worse where a member's covariance claims more than its map
     /// is worth (the fuzzy member in smoke carries the vote).
     #[serde(rename = "weighted")]
     Weighted,
@@ -42,7 +42,7 @@ pub enum VoteRule {
     #[serde(rename = "consensus")]
     Consensus,
     /// The paper's majority; without one, the reference member's state
-    /// (occupied when the reference is out) instead of occupied: the
+    /// (the next member's in order while the reference is out) instead of occupied: the
     /// members' copies of a wall a cell apart are not all drawn.
     #[serde(rename = "majority-reference")]
     MajorityReference,

@@ -24,7 +24,8 @@
 //!   is flagged in health and left out of the vote, and its next search
 //!   spans the whole window again.
 //! - **Vote** ([`rule`]): per cell of the reference's grid over occupied /
-//!   free / unknown, the paper's majority (no majority → occupied) or the
+//!   free / unknown, the paper's majority (no majority → occupied; with two
+//!   members left, the first of them decides) or the
 //!   weighted variant. Recomputed every `fuse_period_s` on a thread of its own
 //!   (online) or when the map is asked for (lockstep).
 //! - **Fused pose**: the pose of the member whose map agrees best with the
@@ -391,17 +392,17 @@ impl Fuser {
         self.fused_states.resize(n, CellState::Unknown);
         match rule {
             VoteRule::Majority | VoteRule::MajorityReference => {
-                // Without a majority: occupied (the paper), or the reference's
-                // state while it votes (it is out, never misaligned: at identity).
-                let reference = maps
-                    .iter()
-                    .position(|m| m.0 == 0)
-                    .filter(|_| rule == VoteRule::MajorityReference);
+                // Without a majority: occupied (the paper), or the state of
+                // the first member voting (the reference while it is in; it
+                // is never misaligned, at identity). With two left (one out)
+                // every cell they differ on lacks a majority, so the paper's
+                // rule would draw the union, every wall twice a cell or two
+                // apart: then the first one's state decides under either rule.
+                let decider = (rule == VoteRule::MajorityReference || k_n == 2).then_some(0);
                 for i in 0..n {
                     self.votes.clear();
                     self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
-                    let fallback =
-                        reference.map_or(CellState::Occupied, |k| self.states[k * n + i]);
+                    let fallback = decider.map_or(CellState::Occupied, |k| self.states[k * n + i]);
                     self.fused_states[i] = majority_or(&self.votes, fallback);
                 }
             }

@@ -10,9 +10,12 @@
 //!   decide to assign the value corresponding to an obstacle"; most
 //!   disagreements lie on the border of free and unknown space, where an
 //!   obstacle usually is). With three members that is "at least two agree".
+//!   With two left (one out), every cell they differ on would be a wall,
+//!   the union of both maps: the vote (`super`) then lets the first of them
+//!   decide, as `majority-reference` does.
 //! - `majority-reference` ([`majority_or`]): the paper's majority, but
-//!   without one the cell takes the reference member's state (occupied
-//!   when the reference is out). Three members rarely draw a wall in the
+//!   without one the cell takes the reference member's state (the next
+//!   member's in order while the reference is out). Three members rarely draw a wall in the
 //!   same cell: on the dense-smoke trial 146 cells were occupied in all
 //!   three maps. Where they split, the paper's rule draws a wall on every
 //!   disagreement, so the fused map holds each member's copy of a wall a

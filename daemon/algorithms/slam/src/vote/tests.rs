@@ -340,8 +340,72 @@ fn majority_reference_takes_the_references_cell_where_the_members_split() {
     let by_ref = fuse(VoteRule::MajorityReference, &inputs);
     assert_eq!(by_ref.cells[split], FREE, "the reference's cell");
     assert_eq!(by_ref.cells[two], OCCUPIED, "a majority still wins");
-    // With the reference out (its map still sets the frame), doubt is a wall again.
+    // With the reference out (its map still sets the frame), the first
+    // member still voting decides: member 1's wall.
     inputs[0].out = true;
     let out = fuse(VoteRule::MajorityReference, &inputs);
     assert_eq!(out.cells[split], OCCUPIED);
+    let mut m1 = (*inputs[1].map.as_ref().unwrap().0).clone();
+    m1.cells[split] = FREE;
+    inputs[1].map = Some((Arc::new(m1), 2));
+    let out = fuse(VoteRule::MajorityReference, &inputs);
+    assert_eq!(out.cells[split], FREE, "member 1's free floor");
+}
+
+#[test]
+fn with_a_member_out_two_maps_do_not_vote_their_union() {
+    use smokenav_platform_map::{FREE, OCCUPIED};
+    // Member 1 draws the partition (x = 40) one cell east: the kind of
+    // offset two members' walls have everywhere. Member 2 is out. Two votes
+    // never split in a majority, and the paper's "no majority → occupied"
+    // would draw both copies of every wall.
+    let (w, h) = (80, 60);
+    let mut members: Vec<OccupancyGrid> = vec![room(); 3];
+    for y in 2..30 {
+        members[1].cells[y * w + 40] = FREE;
+        members[1].cells[y * w + 41] = OCCUPIED;
+    }
+    let inputs: Vec<FuseInput> = members
+        .into_iter()
+        .enumerate()
+        .map(|(i, m)| FuseInput {
+            map: Some((Arc::new(m), 1)),
+            below: None,
+            out: i == 2,
+            weight: 1.0,
+        })
+        .collect();
+    for rule in [VoteRule::Majority, VoteRule::MajorityReference] {
+        let section = VoteSection {
+            rule,
+            ..VoteSection::default()
+        };
+        let mut f = Fuser::new(
+            VoteParams {
+                section,
+                fault: None,
+            },
+            3,
+        );
+        assert!(f.fuse(&inputs, &SonarShare::default(), true));
+        let fused = f.out.map.clone().unwrap();
+        assert!(f.out.alignments[1].is_some_and(|a| a.transform.translation_norm() < 0.01));
+        for y in 2..30 {
+            assert_eq!(
+                fused.cells[y * w + 40],
+                OCCUPIED,
+                "{rule:?} y {y}: the reference's wall"
+            );
+            assert_eq!(
+                fused.cells[y * w + 41],
+                FREE,
+                "{rule:?} y {y}: one copy, not two"
+            );
+        }
+        assert_eq!(
+            fused.cells[(h - 1) * w + 10],
+            OCCUPIED,
+            "{rule:?}: the walls they share"
+        );
+    }
 }
