@@ -2,7 +2,8 @@
 //! MIT CSAIL log replayed over the bus, the three members' maps arrive on
 //! `slam/vote/{rbpf,graph,fuzzy}` and the vote on `slam/map`; with a member
 //! made to panic or hang (the test-only `SMOKENAV_TEST_VOTE_FAULT`), the vote
-//! keeps updating on the others and `health/slam` names the member that is out.
+//! keeps updating on the others, `health/slam` names the member that is out,
+//! and the two left do not vote the union of their maps.
 
 use smokenav_platform_bus::{Bus, Publisher, Topic, Waiter, topics};
 use smokenav_platform_config::{MountPose, SlamBackendKind, SlamInput};
@@ -197,6 +198,55 @@ fn a_crashed_member_is_named_and_the_vote_goes_on() {
     assert_eq!(later.metric("vote_out_rbpf"), Some(0.0));
     assert_eq!(later.metric("vote_out_graph"), Some(0.0));
     map_with_walls(&r, topics::SLAM_MAP, 100);
+    // Two votes left: where graph and rbpf differ there is no majority, and
+    // "occupied" there drew both maps' walls. The first member voting (the
+    // graph, the reference) decides instead: the fused map is its map.
+    let graph = settled_map(&r, topics::SLAM_VOTE_GRAPH);
+    let fused = settled_map(&r, topics::SLAM_MAP);
+    let walls = |m: &[i8]| m.iter().filter(|&&c| c >= 65).count();
+    assert_eq!(
+        graph.len(),
+        fused.len(),
+        "the vote is on the reference's grid"
+    );
+    let same = graph
+        .iter()
+        .zip(&fused)
+        .filter(|&(&g, &f)| (g >= 65) == (f >= 65))
+        .count();
+    assert!(
+        walls(&fused) <= walls(&graph) + walls(&graph) / 20
+            && same >= graph.len() - graph.len() / 200,
+        "fused {} walls, graph {} walls, {} of {} cells alike",
+        walls(&fused),
+        walls(&graph),
+        same,
+        graph.len()
+    );
+}
+
+/// The newest map on `topic` once the members are idle (the replay is
+/// over): maps arrive at `map_rate_hz`; the last of 3 s of them.
+fn settled_map(r: &Run, topic: Topic<MapInfo>) -> Vec<i8> {
+    let sub = r.bus.map_subscriber(topic.clone()).unwrap();
+    let waiter = Waiter::new().unwrap();
+    let _g = waiter.attach(&sub).unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    let end = Instant::now() + Duration::from_secs(3);
+    let mut last = None;
+    while Instant::now() < end || last.is_none() {
+        while let Some(s) = sub.receive().unwrap() {
+            last = Some(s.payload().to_vec());
+        }
+        assert!(
+            Instant::now() < end + Duration::from_secs(30),
+            "no map on {}\n{}",
+            topic.name(),
+            r.slam.output()
+        );
+        waiter.wait(Some(Duration::from_millis(200))).unwrap();
+    }
+    last.unwrap()
 }
 
 #[test]
