@@ -389,6 +389,29 @@ fn map_vote_aligns_saved_maps_and_votes_out_what_one_member_alone_drew() {
     assert_eq!(walls_at(1.0), 0, "a's phantom voted out");
     assert!(out.join("map.png").exists());
 
+    // Two maps: no majority where they differ, so the first decides (not
+    // the union, which drew both maps' walls and phantoms), and it is said.
+    let two = std::process::Command::new(bin("smokenav"))
+        .args(["map", "vote"])
+        .args([&a, &b])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&two.stdout);
+    assert!(two.status.success(), "{text}");
+    assert!(text.contains("note: two maps vote"), "{text}");
+    let fused = smokenav_platform_map::load_map_server(&out.join("map.yaml")).unwrap();
+    let first = smokenav_platform_map::load_map_server(&a).unwrap();
+    assert_eq!((fused.width, fused.height), (first.width, first.height));
+    let differ = fused
+        .cells
+        .iter()
+        .zip(&first.cells)
+        .filter(|&(&f, &m)| (f >= 65) != (m >= 65))
+        .count();
+    assert_eq!(differ, 0, "the two-map vote is the first map");
+
     // Bad uses: one map, an unreadable one, an unknown rule.
     let refused = |args: &[&std::ffi::OsStr], want: &str| {
         let o = std::process::Command::new(bin("smokenav"))
