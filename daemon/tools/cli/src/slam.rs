@@ -659,8 +659,8 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         let s = rbpf.stats();
         let _ = writeln!(
             report,
-            "filter             {} resamples; {} of {} updates weighed without refining, {} of them mostly withheld from the laser",
-            s.resamples, s.unmatched_updates, s.updates, s.withheld_updates
+            "filter             {} resamples, {} put off while the laser was withheld; {} of {} updates weighed without refining, {} of them mostly withheld from the laser",
+            s.resamples, s.held_resamples, s.unmatched_updates, s.updates, s.withheld_updates
         );
     }
     let _ = writeln!(
