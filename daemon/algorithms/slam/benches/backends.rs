@@ -49,6 +49,22 @@ fn process_cpu_ns() -> u64 {
     cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID)
 }
 
+/// The `key=value;…` pairs of the environment variable `var`.
+fn overrides(var: &str) -> Vec<(String, f64)> {
+    std::env::var(var)
+        .unwrap_or_default()
+        .split(';')
+        .filter_map(|kv| kv.split_once('='))
+        .map(|(k, v)| {
+            let v = v
+                .trim()
+                .parse()
+                .unwrap_or_else(|_| panic!("{var}: {k} = {v} is not a number"));
+            (k.trim().to_string(), v)
+        })
+        .collect()
+}
+
 /// `CSAIL_DRIFT_PARAMS="heading_bias=0.012;scale=0.05"` overrides the drift's
 /// defaults (all zero: the reference poses themselves as odometry).
 fn drift_params(seed: u64) -> drift::DriftParams {
@@ -56,15 +72,8 @@ fn drift_params(seed: u64) -> drift::DriftParams {
         seed,
         ..drift::DriftParams::default()
     };
-    for kv in std::env::var("CSAIL_DRIFT_PARAMS")
-        .unwrap_or_default()
-        .split(';')
-    {
-        let Some((k, v)) = kv.split_once('=') else {
-            continue;
-        };
-        let v: f64 = v.trim().parse().expect("CSAIL_DRIFT_PARAMS value");
-        match k.trim() {
+    for (k, v) in overrides("CSAIL_DRIFT_PARAMS") {
+        match k.as_str() {
             "scale" => p.scale = v,
             "turn_scale" => p.turn_scale = v,
             "heading_bias" => p.heading_bias = v,
@@ -80,12 +89,8 @@ fn drift_params(seed: u64) -> drift::DriftParams {
 /// `GRAPH_PARAMS="closure_search_m=6;closure_min_score=0.5"` overrides graph parameters.
 fn graph_params() -> GraphParams {
     let mut p = GraphParams::default();
-    for kv in std::env::var("GRAPH_PARAMS").unwrap_or_default().split(';') {
-        let Some((k, v)) = kv.split_once('=') else {
-            continue;
-        };
-        let v: f64 = v.trim().parse().expect("GRAPH_PARAMS value");
-        match k.trim() {
+    for (k, v) in overrides("GRAPH_PARAMS") {
+        match k.as_str() {
             "node_distance_m" => p.node_distance_m = v,
             "node_angle_rad" => p.node_angle_rad = v,
             "closure_search_m" => p.closure_search_m = v,

@@ -248,6 +248,33 @@ fn room() -> OccupancyGrid {
     g
 }
 
+/// The members' maps as the fuser's inputs, one revision each; member `k` out when `out(k)`.
+fn inputs_of(members: Vec<OccupancyGrid>, out: impl Fn(usize) -> bool) -> Vec<FuseInput> {
+    members
+        .into_iter()
+        .enumerate()
+        .map(|(k, m)| FuseInput {
+            map: Some((Arc::new(m), 1)),
+            below: None,
+            out: out(k),
+            weight: 1.0,
+        })
+        .collect()
+}
+
+/// One forced fused update of `inputs` under `section`: the fuser after it.
+fn fused_once(section: VoteSection, inputs: &[FuseInput]) -> Fuser {
+    let mut f = Fuser::new(
+        VoteParams {
+            section,
+            fault: None,
+        },
+        inputs.len(),
+    );
+    assert!(f.fuse(inputs, &SonarShare::default(), true));
+    f
+}
+
 #[test]
 fn a_member_that_maps_in_height_decides_out_of_the_plane_and_abstains_in_it() {
     use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
@@ -276,14 +303,7 @@ fn a_member_that_maps_in_height_decides_out_of_the_plane_and_abstains_in_it() {
         members: vec![K::Rbpf, K::Graph, K::Fuzzy, K::Projected],
         ..VoteSection::default()
     };
-    let mut f = Fuser::new(
-        VoteParams {
-            section,
-            fault: None,
-        },
-        4,
-    );
-    assert!(f.fuse(&inputs, &SonarShare::default(), true));
+    let mut f = fused_once(section, &inputs);
     let fused = f.out.map.clone().unwrap();
     assert_eq!(fused.cells[at], OCCUPIED, "the low box");
     assert_eq!(fused.cells[split], FREE, "two of three in the plane");
@@ -310,29 +330,13 @@ fn majority_reference_takes_the_references_cell_where_the_members_split() {
     members[2].cells[split] = UNKNOWN;
     members[1].cells[two] = OCCUPIED;
     members[2].cells[two] = OCCUPIED;
-    let mut inputs: Vec<FuseInput> = members
-        .into_iter()
-        .map(|m| FuseInput {
-            map: Some((Arc::new(m), 1)),
-            below: None,
-            out: false,
-            weight: 1.0,
-        })
-        .collect();
+    let mut inputs = inputs_of(members, |_| false);
     let fuse = |rule: VoteRule, inputs: &[FuseInput]| {
         let section = VoteSection {
             rule,
             ..VoteSection::default()
         };
-        let mut f = Fuser::new(
-            VoteParams {
-                section,
-                fault: None,
-            },
-            3,
-        );
-        assert!(f.fuse(inputs, &SonarShare::default(), true));
-        f.out.map.clone().unwrap()
+        fused_once(section, inputs).out.map.clone().unwrap()
     };
     let paper = fuse(VoteRule::Majority, &inputs);
     assert_eq!(paper.cells[split], OCCUPIED, "the paper: doubt is a wall");
@@ -365,29 +369,13 @@ fn with_a_member_out_two_maps_do_not_vote_their_union() {
         members[1].cells[y * w + 40] = FREE;
         members[1].cells[y * w + 41] = OCCUPIED;
     }
-    let inputs: Vec<FuseInput> = members
-        .into_iter()
-        .enumerate()
-        .map(|(i, m)| FuseInput {
-            map: Some((Arc::new(m), 1)),
-            below: None,
-            out: i == 2,
-            weight: 1.0,
-        })
-        .collect();
+    let inputs = inputs_of(members, |k| k == 2);
     for rule in [VoteRule::Majority, VoteRule::MajorityReference] {
         let section = VoteSection {
             rule,
             ..VoteSection::default()
         };
-        let mut f = Fuser::new(
-            VoteParams {
-                section,
-                fault: None,
-            },
-            3,
-        );
-        assert!(f.fuse(&inputs, &SonarShare::default(), true));
+        let f = fused_once(section, &inputs);
         let fused = f.out.map.clone().unwrap();
         assert!(f.out.alignments[1].is_some_and(|a| a.transform.translation_norm() < 0.01));
         for y in 2..30 {
