@@ -104,12 +104,7 @@ pub fn run(a: VoteArgs) -> anyhow::Result<()> {
         };
         println!("  member {}: {al}{}", name(p), score(m).unwrap_or_default());
     }
-    let voting = v
-        .alignments()
-        .iter()
-        .filter(|a| a.is_some_and(|a| a.residual_m <= section.max_residual_m))
-        .count();
-    if voting == 2 && matches!(rule, VoteRule::Majority | VoteRule::MajorityReference) {
+    if v.voters() == 2 && matches!(rule, VoteRule::Majority | VoteRule::MajorityReference) {
         println!(
             "  note: two maps vote; where they differ neither is a majority and the first one voting decides, so the vote is that map: give three or more"
         );

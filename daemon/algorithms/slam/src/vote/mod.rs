@@ -134,6 +134,8 @@ struct FusedOut {
     alignments: Vec<Option<Alignment>>,
     agreement: Vec<Option<f64>>,
     misaligned: Vec<bool>,
+    /// Members that voted in the laser plane in the last update.
+    plane_voters: usize,
     pose_member: Option<usize>,
     /// Cells the members mapping in height made occupied over the others' vote.
     out_of_plane_cells: u64,
@@ -368,6 +370,7 @@ impl Fuser {
         };
         // Every member's cell for every reference cell, member-major, then the vote.
         let (n, k_n) = (w * h, maps.len());
+        self.out.plane_voters = k_n;
         self.values.clear();
         self.values.resize(k_n * n, -1);
         for (k, (_, g, a, _)) in maps.iter().enumerate() {
@@ -540,6 +543,11 @@ impl MapVote {
 
     pub fn alignments(&self) -> &[Option<Alignment>] {
         &self.fuser.out.alignments
+    }
+
+    /// Maps that voted in the last update (those aligned within `max_residual_m`).
+    pub fn voters(&self) -> usize {
+        self.fuser.out.plane_voters
     }
 
     /// Time of the last update (alignment + vote), ms.
