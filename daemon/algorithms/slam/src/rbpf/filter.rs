@@ -25,7 +25,7 @@
 use super::matcher::{self, MatchParams, PreparedScan};
 use super::motion::MotionModel;
 use super::resample;
-use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
+use crate::backend::{MAX_WITHHELD_TO_REFINE, SlamBackend, SlamUpdate, StampedPose};
 use crate::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use crate::scan::RangeScan;
 use nalgebra::{Matrix3, Vector3};
@@ -91,29 +91,6 @@ pub struct FilterStats {
     /// mostly withheld from the laser (see [`MAX_WITHHELD_TO_REFINE`]).
     pub held_resamples: u64,
 }
-
-/// A scan the fusion withheld more than this share of beams from the laser
-/// weighs the particles but does not refine them: what is left is the
-/// laser's view past the edge of the smoke, often one wall, and refining
-/// every particle on it slid them along that wall. They keep the front end's
-/// heading-corrected pose instead (its own threshold is
-/// [`crate::pipeline::MAX_WITHHELD_TO_MATCH`]). Above the front end's 0.1 so
-/// that a scan with one of the Scout's sections withheld (0.11 of the
-/// beams, as v2 keeps while its smoke sensor warms up in clean air) is still
-/// refined. On four recordings of the dense-smoke trial, 8 seeds each, v2's
-/// mean map error / ATE went from 0.112 / 0.257 m (no gate) to 0.098 /
-/// 0.113 m at 0.1, 0.092 / 0.099 m at 0.15 and 0.101 / 0.164 m at 0.3;
-/// clean air stayed 0.033 m.
-///
-/// Nor do such scans resample the particles: their weights come from the
-/// sonar's coarse arcs and what the laser sees past the smoke, and
-/// resampling on them through a blind stretch left the particles few
-/// headings to offer when the laser came back. The weights carry on and
-/// the first scan the laser sees again resamples on all of it. On three
-/// recordings of the dense-smoke trial (the simulator's seeds 3, 5 and 7),
-/// 8 filter seeds each, v2's mean map error went 0.097 / 0.401 / 0.159 m →
-/// 0.084 / 0.400 / 0.158 m; their clean twins were unchanged (4 seeds).
-pub const MAX_WITHHELD_TO_REFINE: f64 = 0.15;
 
 /// The particle filter's own parameters (from `[slam]`).
 #[derive(Debug, Clone)]
