@@ -13,6 +13,7 @@ use smokenav_algorithms_eval::{
     load_trajectory,
 };
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
+use smokenav_algorithms_slam::fuzzy::FuzzySlam;
 use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam, ResumedGraph, saved};
 use smokenav_algorithms_slam::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use smokenav_algorithms_slam::offline::LogScans;
@@ -661,6 +662,19 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             report,
             "filter             {} resamples, {} put off while the laser was withheld; {} of {} updates weighed without refining, {} of them mostly withheld from the laser",
             s.resamples, s.held_resamples, s.unmatched_updates, s.updates, s.withheld_updates
+        );
+    }
+    if let Some(f) = slam.backend().as_any().downcast_ref::<FuzzySlam>() {
+        let s = f.stats();
+        let mean_overlap = if s.registrations > 0 {
+            s.overlap_sum / s.registrations as f64
+        } else {
+            0.0
+        };
+        let _ = writeln!(
+            report,
+            "fuzzy              {} registered (mean overlap {:.3}, {} in some directions only); the prediction kept for {} refused and {} mostly withheld from the laser",
+            s.registrations, mean_overlap, s.degenerate, s.fallbacks, s.withheld
         );
     }
     let _ = writeln!(

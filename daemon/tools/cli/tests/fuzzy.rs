@@ -48,6 +48,27 @@ fn fuzzy_back_end_tracks_csail_and_two_runs_are_bit_identical() {
     let (ok, stdout, stderr) = slam(a.path(), &["--seed", "7"]);
     assert!(ok, "{stderr}");
     assert!(stdout.contains("back-end           fuzzy\n"), "{stdout}");
+    // Clean air: every scan but the first is registered or refused, none withheld.
+    let fuzzy = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("fuzzy              "))
+        .unwrap_or_else(|| panic!("no fuzzy line in {stdout}"));
+    let count = |after: &str| -> u64 {
+        let at = fuzzy
+            .find(after)
+            .unwrap_or_else(|| panic!("{after:?} in {fuzzy}"));
+        fuzzy[..at]
+            .split_whitespace()
+            .last()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert_eq!(count(" registered") + count(" refused"), 199, "{fuzzy}");
+    assert!(
+        fuzzy.ends_with(" 0 mostly withheld from the laser"),
+        "{fuzzy}"
+    );
     // 0.03 m when measured; the odometry alone is off by decimetres here.
     let ate = ate_rms(&stdout);
     assert!(ate < 0.15, "ATE {ate} m\n{stdout}");
