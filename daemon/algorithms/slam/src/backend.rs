@@ -40,7 +40,8 @@ use std::sync::Arc;
 /// the RBPF: v2's mean map error / ATE went from 0.112 / 0.257 m (no gate)
 /// to 0.098 / 0.113 m at 0.1, 0.092 / 0.099 m at 0.15 and 0.101 / 0.164 m
 /// at 0.3; clean air stayed 0.033 m. For the fuzzy registration, on the
-/// trial's recordings from simulator seeds 3, 5 and 7 (back-end seeds 1–4):
+/// trial's recordings from simulator seeds 3, 5 and 7 (back-end seeds 1–4,
+/// before the fuzzy map's evidence threshold rose to one reading's worth):
 /// 0.161 / 0.364 / 0.166 m → 0.076 / 0.449 / 0.100 m, with the clean twins
 /// unchanged (0.041–0.044 m). Seed 5 is the one whose odometry turned 20°
 /// while the laser saw nothing: every back-end loses it.
