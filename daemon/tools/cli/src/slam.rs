@@ -666,15 +666,14 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     }
     if let Some(f) = slam.backend().as_any().downcast_ref::<FuzzySlam>() {
         let s = f.stats();
-        let mean_overlap = if s.registrations > 0 {
-            s.overlap_sum / s.registrations as f64
-        } else {
-            0.0
-        };
         let _ = writeln!(
             report,
             "fuzzy              {} registered (mean overlap {:.3}, {} in some directions only); the prediction kept for {} refused and {} mostly withheld from the laser",
-            s.registrations, mean_overlap, s.degenerate, s.fallbacks, s.withheld
+            s.registrations,
+            s.mean_overlap(),
+            s.degenerate,
+            s.fallbacks,
+            s.withheld
         );
     }
     let _ = writeln!(

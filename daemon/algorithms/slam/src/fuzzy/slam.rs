@@ -59,6 +59,17 @@ pub struct FuzzyStats {
     pub withheld: u64,
 }
 
+impl FuzzyStats {
+    /// The overlap the accepted registrations reached, on average (0 before the first).
+    pub fn mean_overlap(&self) -> f64 {
+        if self.registrations > 0 {
+            self.overlap_sum / self.registrations as f64
+        } else {
+            0.0
+        }
+    }
+}
+
 /// A local map and its occupied cells, in the robot frame of its scan.
 struct Local {
     grid: FuzzyGrid,
@@ -396,14 +407,7 @@ impl SlamBackend for FuzzySlam {
         emit("fuzzy_evaluations", s.evaluations as f64);
         emit("fuzzy_degenerate", s.degenerate as f64);
         emit("fuzzy_withheld", s.withheld as f64);
-        emit(
-            "fuzzy_mean_overlap",
-            if s.registrations > 0 {
-                s.overlap_sum / s.registrations as f64
-            } else {
-                0.0
-            },
-        );
+        emit("fuzzy_mean_overlap", s.mean_overlap());
     }
 
     fn as_any(&self) -> &dyn std::any::Any {
