@@ -166,7 +166,7 @@ pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Box<dyn SlamBack
             opts.keep_trajectory,
         )),
         SlamBackendKind::Graph => {
-            let mut g = GraphSlam::new(cfg, GraphParams::default());
+            let mut g = GraphSlam::new(cfg, GraphParams::from_config(cfg));
             g.set_online(opts.online);
             Box::new(g)
         }

@@ -178,7 +178,7 @@ impl ProjectedMap {
     /// `sensors`: the robot's rig in 3D (without it: the laser alone, at the
     /// scan's mount); `online`: the graph's loop closures run beside the scan path.
     pub fn new(cfg: &SlamSection, sensors: Option<Arc<SensorRig>>, online: bool) -> Self {
-        let mut graph = GraphSlam::new(cfg, GraphParams::default());
+        let mut graph = GraphSlam::new(cfg, GraphParams::from_config(cfg));
         graph.set_online(online);
         Self {
             resolution: cfg.resolution_m,

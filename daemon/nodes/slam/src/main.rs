@@ -218,7 +218,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     );
     let resumed = match &args.load_graph {
         Some(g) => Some(
-            saved::load(&cfg, GraphParams::default(), g)
+            saved::load(&cfg, GraphParams::from_config(&cfg), g)
                 .with_context(|| format!("cannot load the saved graph {}", g.display()))?,
         ),
         None => None,

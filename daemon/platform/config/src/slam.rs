@@ -30,6 +30,7 @@
 //! scans into the maps every 0.5 m or 0.5 rad instead of every scan.
 
 use crate::slam_fuzzy::FuzzySection;
+use crate::slam_graph::GraphSection;
 use crate::slam_vote::VoteSection;
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
@@ -275,6 +276,8 @@ slam_section! {
     max_blind_m: f64 = (5.0, 5.0),
     /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
     fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),
+    /// `[slam.graph]`: the graph back-end's node spacing and loop-closure search.
+    graph: GraphSection = (GraphSection::default(), GraphSection::default()),
     /// `[slam.vote]`: the members of `backend = "vote"`, the rule and the alignment.
     vote: VoteSection = (VoteSection::default(), VoteSection::default()),
 }
@@ -385,6 +388,7 @@ impl Validate for SlamSection {
             1.6,
         );
         self.fuzzy.validate(&k("fuzzy"), v);
+        self.graph.validate(&k("graph"), v);
         self.vote.validate(&k("vote"), v);
     }
 }

@@ -498,7 +498,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut slam = match &args.load_graph {
         Some(g) => {
-            let run = saved::load(&cfg, GraphParams::default(), g)
+            let run = saved::load(&cfg, GraphParams::from_config(&cfg), g)
                 .with_context(|| format!("cannot load the saved graph {}", g.display()))?;
             SlamPipeline::new(
                 &cfg,

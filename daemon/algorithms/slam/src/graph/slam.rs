@@ -162,6 +162,25 @@ impl Default for GraphParams {
     }
 }
 
+impl GraphParams {
+    /// The defaults with `[slam.graph]`'s keys applied.
+    pub fn from_config(cfg: &SlamSection) -> Self {
+        let g = &cfg.graph;
+        Self {
+            node_distance_m: g.node_distance_m,
+            node_angle_rad: g.node_angle_rad,
+            closure_search_m: g.closure_search_m,
+            closure_min_separation: g.closure_min_separation as usize,
+            closure_candidates: g.closure_candidates as usize,
+            closure_window_m: g.closure_window_m,
+            closure_window_rad: g.closure_window_rad,
+            closure_min_score: g.closure_min_score,
+            closure_max_withheld: g.closure_max_withheld,
+            ..Self::default()
+        }
+    }
+}
+
 /// Counters of the graph back-end.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct GraphStats {
@@ -1431,6 +1450,37 @@ mod tests {
         // The trajectory has a pose per scan and the map is finite.
         assert_eq!(slam.trajectory().len() as u64, stats.scans);
         assert!(slam.map().is_some());
+    }
+
+    /// `[slam.graph]` reaches the back-end: its defaults are the back-end's,
+    /// and a section that turns the closure search off (radius 0) leaves the
+    /// lap of [`drive`] open where the defaults close it.
+    #[test]
+    fn the_graph_section_of_the_config_sets_the_closure_search() {
+        assert_eq!(
+            GraphParams::from_config(&SlamSection::default()),
+            GraphParams::default()
+        );
+        let mut off = SlamSection::default();
+        off.graph.closure_search_m = 0.0;
+        let legs = [10.0, 6.0, 10.0, 6.0, 8.0];
+        let lap = |cfg: &SlamSection| {
+            let p = GraphParams {
+                closure_every: 2,
+                ..GraphParams::from_config(cfg)
+            };
+            let (slam, worst, _) =
+                drive_legs_with(GraphSlam::new(cfg, p), &legs, &[1, 2, 3], &[], &mut |_| {});
+            (slam.stats(), worst)
+        };
+        let (on, on_worst) = lap(&SlamSection::default());
+        let (shut, shut_worst) = lap(&off);
+        assert!(on.closures_accepted >= 1, "{on:?}");
+        assert_eq!(shut.closures_tried, 0, "{shut:?}");
+        assert!(
+            shut_worst > 0.5 && on_worst < 0.2,
+            "{shut_worst} / {on_worst}"
+        );
     }
 
     /// The lap of [`drive`] with the last leg's scans mostly withheld from
