@@ -14,6 +14,8 @@
 //! widen `closure_window_m` / `closure_window_rad` and `closure_search_m`
 //! with it, at the price of look-alike places matched by mistake (every
 //! closure still passes the score, rival, overlap and consistency checks).
+//! Where the chain since the last closure is uncertain (a blind stretch in
+//! smoke) the back-end widens the search by itself (`closure_wide_*`).
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
@@ -41,6 +43,17 @@ pub struct GraphSection {
     /// A node whose scan the fusion withheld more than this share (0–1) of
     /// beams from the laser (smoke) searches for no closure.
     pub closure_max_withheld: f64,
+    /// A node whose own search found nothing while its estimate is this many
+    /// σ (of the chain's covariance since the last closure) beyond the window
+    /// searches again over ± that many σ; 0 turns it off. A wide match is
+    /// only taken once a second node's agrees with it.
+    pub closure_wide_sigmas: f64,
+    /// Largest wide window, ± m …
+    pub closure_wide_max_m: f64,
+    /// … and ± rad.
+    pub closure_wide_max_rad: f64,
+    /// Score (0–1) a wide match must reach.
+    pub closure_wide_min_score: f64,
 }
 
 impl Default for GraphSection {
@@ -55,6 +68,10 @@ impl Default for GraphSection {
             closure_window_rad: 0.35,
             closure_min_score: 0.45,
             closure_max_withheld: 0.3,
+            closure_wide_sigmas: 3.0,
+            closure_wide_max_m: 4.0,
+            closure_wide_max_rad: 0.7,
+            closure_wide_min_score: 0.5,
         }
     }
 }
@@ -82,6 +99,25 @@ impl Validate for GraphSection {
         v.within(&k("closure_window_m"), self.closure_window_m, 0.0, 10.0);
         v.within(&k("closure_window_rad"), self.closure_window_rad, 0.0, 3.2);
         v.within(&k("closure_min_score"), self.closure_min_score, 0.0, 1.0);
+        v.within(
+            &k("closure_wide_sigmas"),
+            self.closure_wide_sigmas,
+            0.0,
+            10.0,
+        );
+        v.within(&k("closure_wide_max_m"), self.closure_wide_max_m, 0.0, 10.0);
+        v.within(
+            &k("closure_wide_max_rad"),
+            self.closure_wide_max_rad,
+            0.0,
+            3.2,
+        );
+        v.within(
+            &k("closure_wide_min_score"),
+            self.closure_wide_min_score,
+            0.0,
+            1.0,
+        );
         v.within(
             &k("closure_max_withheld"),
             self.closure_max_withheld,

@@ -702,6 +702,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             s.optimizations,
             s.optimization_failures
         );
+        let _ = writeln!(
+            report,
+            "wide search        {} nodes uncertain and unclosed searched wider: {} matches held for a second, {} confirmed by one",
+            s.closures_wide, s.closures_wide_held, s.closures_wide_confirmed
+        );
         if let Some(path) = &args.save_graph {
             saved::save(g, path)?;
             let _ = writeln!(

@@ -24,6 +24,8 @@ use std::time::{Duration, Instant};
 /// What the worker gets: node `node`'s closure search over a snapshot.
 pub(super) struct Job {
     pub node: usize,
+    /// The node's marginal covariance when it was made (sizes a wide search).
+    pub uncertainty: nalgebra::Matrix3<f64>,
     pub graph: PoseGraph,
     pub nodes: Vec<Arc<Node>>,
 }
@@ -72,7 +74,7 @@ impl ClosureWorker {
                     search.stats = GraphStats::default();
                     search.closure_marginal = None;
                     let before = search.graph.edges().len();
-                    let kept = search.close_loops(job.node);
+                    let kept = search.close_loops(job.node, job.uncertainty);
                     let outcome = Outcome {
                         edges: search.graph.edges()[before..].to_vec(),
                         poses: (kept > 0).then(|| search.graph.poses().to_vec()),
