@@ -14,8 +14,8 @@
 //! widen `closure_window_m` / `closure_window_rad` and `closure_search_m`
 //! with it, at the price of look-alike places matched by mistake (every
 //! closure still passes the score, rival, overlap and consistency checks).
-//! Where the chain since the last closure is uncertain (a blind stretch in
-//! smoke) the back-end widens the search by itself (`closure_wide_*`).
+//! Where its estimate is uncertain (a blind stretch in smoke, a long loop)
+//! the back-end widens the search by itself (`closure_wide_*`).
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
@@ -44,7 +44,7 @@ pub struct GraphSection {
     /// beams from the laser (smoke) searches for no closure.
     pub closure_max_withheld: f64,
     /// A node whose own search found nothing while its estimate is this many
-    /// σ (of the chain's covariance since the last closure) beyond the window
+    /// σ (of its marginal covariance) beyond the window
     /// searches again over ± that many σ; 0 turns it off. A wide match is
     /// only taken once a second node's agrees with it.
     pub closure_wide_sigmas: f64,
