@@ -1239,6 +1239,11 @@ impl SlamBackend for GraphSlam {
         emit("loop_closures_inconsistent", s.closures_inconsistent as f64);
         emit("loop_closures_ambiguous", s.closures_ambiguous as f64);
         emit("loop_closures_low_overlap", s.closures_low_overlap as f64);
+        // Wide matches a second node confirmed (each adds two closures).
+        emit(
+            "loop_closures_wide_confirmed",
+            s.closures_wide_confirmed as f64,
+        );
         emit("graph_optimizations", s.optimizations as f64);
         emit(
             "graph_optimization_failures",
