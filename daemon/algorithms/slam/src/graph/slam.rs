@@ -1631,13 +1631,14 @@ mod tests {
     /// blind legs, so the wide search looks again; its first match waits, a
     /// later node's agrees, both are added, and from then on the own window
     /// closes the loop node after node. Online too (the worker keeps the
-    /// waiting match between its jobs).
+    /// waiting match between its jobs). A match no second node confirms is
+    /// never added (searched only every 11th node, none can).
     #[test]
     fn a_return_past_the_window_is_closed_by_the_wide_search_once_two_nodes_agree() {
         let legs = [10.0, 6.0, 10.0, 6.0, 8.0];
         let run = |p: GraphParams, online: bool| {
             let p = GraphParams {
-                closure_every: 2,
+                closure_every: p.closure_every.max(2),
                 ..p
             };
             let mut slam = GraphSlam::new(&SlamSection::default(), p);
@@ -1672,6 +1673,19 @@ mod tests {
         assert!(wide.closures_wide_confirmed >= 1, "{wide:?}");
         assert!(wide.closures_accepted >= 2, "{wide:?}");
         assert!(wide_worst < 0.2, "{wide_worst}");
+        // Searched only every 11th node, no second node comes within
+        // WIDE_GROUP_NODES of a wide match: it is held, never added alone.
+        let (sparse, sparse_worst) = run(
+            GraphParams {
+                closure_every: WIDE_GROUP_NODES + 1,
+                ..GraphParams::default()
+            },
+            false,
+        );
+        eprintln!("every 11th node: {sparse_worst:.3} m\n{sparse:?}");
+        assert!(sparse.closures_wide_held >= 1, "{sparse:?}");
+        assert_eq!(sparse.closures_wide_confirmed, 0, "{sparse:?}");
+        assert_eq!(sparse.closures_accepted, 0, "{sparse:?}");
         let (online, online_worst) = run(GraphParams::default(), true);
         eprintln!("online: {online_worst:.3} m\n{online:?}");
         assert!(online.closures_wide_confirmed >= 1, "{online:?}");
