@@ -891,9 +891,13 @@ impl GraphSlam {
             d.translation_norm() <= WIDE_AGREE_M + WIDE_AGREE_SHARE * by_chain.translation_norm()
                 && d.theta.abs() <= WIDE_AGREE_RAD
         };
-        match self.wide_held.iter().rposition(agrees) {
-            Some(i) => {
-                let (_, first) = self.wide_held.remove(i).expect("index from rposition");
+        match self
+            .wide_held
+            .iter()
+            .rposition(agrees)
+            .and_then(|i| self.wide_held.remove(i))
+        {
+            Some((_, first)) => {
                 self.stats.closures_wide_confirmed += 1;
                 vec![first, edge]
             }
@@ -1114,7 +1118,6 @@ impl GraphSlam {
             &edge.measurement,
             &cov,
         );
-
         self.chain_cov[edge.to] = cov;
         self.graph.add_edge(edge);
     }
