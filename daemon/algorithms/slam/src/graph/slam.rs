@@ -1536,6 +1536,18 @@ mod tests {
         (slam, worst, truths)
     }
 
+    /// The largest position error on the last (8 m) leg of a drive, as the
+    /// graph finally has that leg (after every correction).
+    fn last_leg_worst(slam: &GraphSlam, truths: &[Pose2]) -> f64 {
+        let traj = slam.trajectory();
+        let last_leg = (8.0 / 0.25) as usize + 5;
+        traj[traj.len() - last_leg..traj.len() - 5]
+            .iter()
+            .zip(&truths[truths.len() - last_leg..])
+            .map(|(e, t)| (e.pose.x - t.x).hypot(e.pose.y - t.y))
+            .fold(0.0f64, f64::max)
+    }
+
     /// Node edges of a straight drive in `walls` (0.1 m per scan, range
     /// 5.6 m; with `sonar_every` = n, all beams but every n-th marked as sonar-painted).
     fn corridor_edges(
@@ -1649,15 +1661,7 @@ mod tests {
             let (mut slam, _, truths) =
                 drive_legs_odometry(slam, &legs, &[1, 2, 3], &[], (1.1, 1.1), &mut |_| {});
             slam.finish_closures();
-            // The last leg as the graph finally has it.
-            let traj = slam.trajectory();
-            let last_leg = (8.0 / 0.25) as usize + 5;
-            let worst = traj[traj.len() - last_leg..traj.len() - 5]
-                .iter()
-                .zip(&truths[truths.len() - last_leg..])
-                .map(|(e, t)| (e.pose.x - t.x).hypot(e.pose.y - t.y))
-                .fold(0.0f64, f64::max);
-            (slam.stats(), worst)
+            (slam.stats(), last_leg_worst(&slam, &truths))
         };
         let (narrow, narrow_worst) = run(
             GraphParams {
@@ -1813,14 +1817,8 @@ mod tests {
         assert!(stats.closure_nodes_carried >= 1, "{stats:?}");
         // The last leg, where the robot sees the start again (the trajectory
         // after the last correction): as close to the truth as inline.
-        let traj = slam.trajectory();
-        assert_eq!(traj.len(), truths.len());
-        let last_leg = (8.0 / 0.25) as usize + 5;
-        let worst = traj[traj.len() - last_leg..traj.len() - 5]
-            .iter()
-            .zip(&truths[truths.len() - last_leg..])
-            .map(|(e, t)| (e.pose.x - t.x).hypot(e.pose.y - t.y))
-            .fold(0.0f64, f64::max);
+        assert_eq!(slam.trajectory().len(), truths.len());
+        let worst = last_leg_worst(&slam, &truths);
         eprintln!("last leg after the threaded closures: {worst:.3} m; {stats:?}");
         assert!(worst < 0.2, "with threaded closures: {worst} m");
     }
