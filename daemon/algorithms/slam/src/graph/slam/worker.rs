@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 /// What the worker gets: node `node`'s closure search over a snapshot.
 pub(super) struct Job {
     pub node: usize,
-    /// The node's marginal covariance when it was made (sizes a wide search).
+    /// The newest node's marginal covariance when the job started (sizes a wide search).
     pub uncertainty: nalgebra::Matrix3<f64>,
     pub graph: PoseGraph,
     pub nodes: Vec<Arc<Node>>,
