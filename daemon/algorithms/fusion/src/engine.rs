@@ -378,6 +378,13 @@ impl FusionEngine {
                 self.blank_contradicted(l, &s, out);
             }
         }
+        // Patchy smoke also catches lone beams the sonar cannot judge (thin
+        // smoke below the witness's threshold, beams between cones). Only
+        // where smoke is measured: a silent sensor (warming up) is not
+        // evidence enough to drop thin objects.
+        if trust.mu_alcoholized > 0.0 {
+            self.blank_specks(l, out);
+        }
         let scan_gap = self.fuzzy.decide_gap(&trust);
         for g in self.sections.gaps(out.scan.len()) {
             // A gap between sections whose laser the sonar contradicted is the same smoke.
@@ -465,6 +472,46 @@ impl FusionEngine {
             {
                 blank(out, i, i + 1);
             }
+        }
+    }
+
+    /// Blanks the specks of patchy smoke: runs of at most
+    /// `v2.speck_max_beams` laser beams, each within the contradiction margin
+    /// of the next, that lie nearer than the beams on both sides by more than
+    /// the margin (a side without a range counts as farther; a run at the
+    /// scan's edge has one side only and stays).
+    fn blank_specks(&self, l: &LaserScan, out: &mut FusedScan) {
+        let p = self.fuzzy.params();
+        let (margin, max_run) = (p.contradiction_margin_m as f32, p.speck_max_beams as usize);
+        if max_run == 0 {
+            return;
+        }
+        let n = l.len().min(out.scan.len());
+        let range = |i: usize| l.beam(i).range().filter(|r| r.is_finite());
+        let mut i = 0;
+        while i < n {
+            let Some(first) = range(i) else {
+                i += 1;
+                continue;
+            };
+            let (mut end, mut far, mut prev) = (i + 1, first, first);
+            while end < n && end - i <= max_run {
+                match range(end) {
+                    Some(r) if (r - prev).abs() <= margin => {
+                        far = far.max(r);
+                        prev = r;
+                        end += 1;
+                    }
+                    _ => break,
+                }
+            }
+            let farther =
+                |j: Option<usize>| j.is_some_and(|j| range(j).is_none_or(|r| r > far + margin));
+            if end - i <= max_run && farther(i.checked_sub(1)) && farther((end < n).then_some(end))
+            {
+                blank(out, i, end);
+            }
+            i = end;
         }
     }
 

@@ -33,6 +33,7 @@
 //! | `v2.dense`                  | μ Dense over the laser's spread σ, m                                      | 0, 0, 0.6, 1.0       | Π shape                     |
 //! | `v2.contradicted`           | μ Contradicted over the share of laser ranges nearer than the sonar's arc | 0.1, 0.3, inf, inf   | Π shape                     |
 //! | `v2.contradiction_margin_m` | how much nearer a laser range must be to contradict, m                    | 0.3                  | [0, 5]                      |
+//! | `v2.speck_max_beams`        | in measured smoke, runs of up to this many laser beams nearer than both sides by the margin are dropped (0: off) | 2 | 0–16 |
 //! | `v2.output_bell`            | the consequent bell: `width` at μ = 0.5, `slope`                          | 0.2, 2.0             | [0.01, 1], [0.1, 20]        |
 //! | `v2.defuzz_samples`         | points of [0, 1] the centroid is taken over                               | 101                  | 11–10001                    |
 //!
@@ -232,6 +233,15 @@ pub struct V2Params {
     pub contradicted: PiShape,
     /// How much nearer than the sonar's arc a laser range must be to count as contradicting it, m.
     pub contradiction_margin_m: f64,
+    /// Beyond the paper: where the smoke sensor measures smoke (μ
+    /// Alcoholized > 0), a run of at most this many laser beams that lies
+    /// nearer than the beams on both sides by more than
+    /// `contradiction_margin_m` is dropped. Patchy smoke catches single
+    /// beams early; below the witness's threshold and between the sonar
+    /// cones nothing else removes them, and each became a speck of wall in
+    /// the map. 0 turns it off; it also drops objects that narrow (at 2 m
+    /// 2 beams are 2.5 cm), so only while smoke is measured.
+    pub speck_max_beams: u32,
     /// The consequent bell, used centred at 1 (trust) and at 0 (distrust) for both outputs.
     pub output_bell: BellShape,
     /// Points of [0, 1] the centroid is taken over.
@@ -247,6 +257,7 @@ impl Default for V2Params {
             dense: PiShape::new(0.0, 0.0, 0.6, 1.0),
             contradicted: PiShape::new(0.1, 0.3, f64::INFINITY, f64::INFINITY),
             contradiction_margin_m: 0.3,
+            speck_max_beams: 2,
             output_bell: BellShape {
                 width: 0.2,
                 slope: 2.0,
@@ -356,6 +367,12 @@ impl Validate for V2Params {
             self.contradiction_margin_m,
             0.0,
             5.0,
+        );
+        v.within(
+            &format!("{key}.speck_max_beams"),
+            f64::from(self.speck_max_beams),
+            0.0,
+            16.0,
         );
         v.within(
             &format!("{key}.output_bell.width"),

@@ -478,3 +478,21 @@ fn zenoh_keys_are_strict_and_name_the_problem() {
     bad("mode = \"client\"\nconnect = []", "zenoh.connect");
     bad("mode = \"router\"", "zenoh.mode");
 }
+
+#[test]
+fn speck_max_beams_is_read_and_bounded() {
+    let cfg = parse(&format!(
+        "{}\n[fusion.v2]\nspeck_max_beams = 0\n",
+        pioneer_text()
+    ))
+    .unwrap();
+    assert_eq!(cfg.fusion.v2.speck_max_beams, 0);
+    let err = parse(&format!(
+        "{}\n[fusion.v2]\nspeck_max_beams = 40\n",
+        pioneer_text()
+    ))
+    .unwrap_err();
+    let msg = err.to_string();
+    assert_eq!(err.keys(), vec!["fusion.v2.speck_max_beams"], "{msg}");
+    assert!(msg.contains("40"), "{msg}");
+}

@@ -459,6 +459,70 @@ fn v2_drops_single_contradicted_beams_of_a_kept_section() {
     }
 }
 
+/// The room with specks of thin smoke: beam 100 alone, 200–201 and 300–302
+/// read 0.5 m.
+fn specks(i: usize, a: f64) -> f32 {
+    if i == 100 || (200..=201).contains(&i) || (300..=302).contains(&i) {
+        0.5
+    } else {
+        room(0.0, 0.0, a) as f32
+    }
+}
+
+#[test]
+fn v2_drops_the_specks_of_thin_smoke_the_sonar_cannot_judge() {
+    // Smoke level 15: measured (μ Alcoholized > 0) but too thin for the
+    // sonar witness (it needs 0.5), so only the speck filter acts. Runs of
+    // one and two beams go; three beams (more than `speck_max_beams`) stay.
+    let laser = urg(0, specks);
+    let (mut e, sonar, mut out) = v2_small_room(15.0, SmokeTrend::Rising);
+    assert_eq!(e.fuzzy.params().speck_max_beams, 2);
+    e.step(
+        Some(&laser),
+        Some(&sonar),
+        Some(&smoke(0, 15.0, SmokeTrend::Rising)),
+        &mut out,
+    )
+    .unwrap();
+    for i in 0..laser.len() {
+        if i == 100 || (200..=201).contains(&i) {
+            assert_eq!(out.beam_source(i), SectionSource::Neither, "beam {i}");
+            assert_eq!(out.scan.beam(i).range(), None, "beam {i}");
+        } else {
+            assert_eq!(out.scan.beam(i), laser.beam(i), "beam {i}");
+        }
+    }
+
+    // In clean air the scan is the laser's, specks and all: a thin pole is
+    // more likely than smoke the smoke sensor does not smell.
+    let (mut e, sonar, mut out) = v2_small_room(0.0, SmokeTrend::Steady);
+    e.step(
+        Some(&laser),
+        Some(&sonar),
+        Some(&smoke(0, 0.0, SmokeTrend::Steady)),
+        &mut out,
+    )
+    .unwrap();
+    assert_eq!(bits(&out.scan), bits(&laser));
+
+    // `speck_max_beams = 0` turns the filter off.
+    let cfg = profile("pioneer-3dx.toml");
+    let mut v2 = cfg.fusion.v2.clone();
+    v2.dense = smokenav_platform_config::fusion::PiShape::new(0.0, 0.0, 0.1, 0.2);
+    v2.speck_max_beams = 0;
+    let geometry = SonarGeometry::from_config(&cfg.laser, &cfg.sonar, &cfg.fusion).unwrap();
+    let mut e = FusionEngine::new(FusionMethod::V2, geometry, cfg.fusion.v1.clone(), v2);
+    let mut out = fused();
+    e.step(
+        Some(&laser),
+        Some(&sonar),
+        Some(&smoke(0, 15.0, SmokeTrend::Rising)),
+        &mut out,
+    )
+    .unwrap();
+    assert_eq!(bits(&out.scan), bits(&laser));
+}
+
 #[test]
 fn same_inputs_give_the_same_outputs() {
     let run = || {
