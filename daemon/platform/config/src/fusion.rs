@@ -33,7 +33,7 @@
 //! | `v2.dense`                  | μ Dense over the laser's spread σ, m                                      | 0, 0, 0.6, 1.0       | Π shape                     |
 //! | `v2.contradicted`           | μ Contradicted over the share of laser ranges nearer than the sonar's arc | 0.1, 0.3, inf, inf   | Π shape                     |
 //! | `v2.contradiction_margin_m` | how much nearer a laser range must be to contradict, m                    | 0.3                  | [0, 5]                      |
-//! | `v2.speck_max_beams`        | in measured smoke, runs of up to this many laser beams nearer than both sides by the margin are dropped (0: off) | 2 | 0–16 |
+//! | `v2.speck_max_beams`        | in measured smoke, laser runs this long nearer than both sides drop (0: off) | 2                    | 0–16                        |
 //! | `v2.output_bell`            | the consequent bell: `width` at μ = 0.5, `slope`                          | 0.2, 2.0             | [0.01, 1], [0.1, 20]        |
 //! | `v2.defuzz_samples`         | points of [0, 1] the centroid is taken over                               | 101                  | 11–10001                    |
 //!
