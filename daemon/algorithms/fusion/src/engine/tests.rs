@@ -318,9 +318,19 @@ fn light_smoke_replaces_only_the_noisy_section() {
 /// structured), after one clean scan at `level` so its sections are laid out;
 /// with the room's true sonar ring and an output buffer.
 fn v2_small_room(level: f32, trend: SmokeTrend) -> (FusionEngine, SonarRing, Box<FusedScan>) {
+    v2_small_room_with(level, trend, |_| {})
+}
+
+/// [`v2_small_room`] with `[fusion.v2]` edited.
+fn v2_small_room_with(
+    level: f32,
+    trend: SmokeTrend,
+    edit: impl FnOnce(&mut smokenav_platform_config::fusion::V2Params),
+) -> (FusionEngine, SonarRing, Box<FusedScan>) {
     let cfg = profile("pioneer-3dx.toml");
     let mut v2 = cfg.fusion.v2.clone();
     v2.dense = smokenav_platform_config::fusion::PiShape::new(0.0, 0.0, 0.1, 0.2);
+    edit(&mut v2);
     let geometry = SonarGeometry::from_config(&cfg.laser, &cfg.sonar, &cfg.fusion).unwrap();
     let mut e = FusionEngine::new(FusionMethod::V2, geometry, cfg.fusion.v1.clone(), v2);
     let mut out = fused();
@@ -472,18 +482,27 @@ fn specks(i: usize, a: f64) -> f32 {
 #[test]
 fn v2_drops_the_specks_of_thin_smoke_the_sonar_cannot_judge() {
     // Smoke level 15: measured (μ Alcoholized > 0) but too thin for the
-    // sonar witness (it needs 0.5), so only the speck filter acts. Runs of
-    // one and two beams go; three beams (more than `speck_max_beams`) stay.
+    // sonar witness (it needs 0.5), so only the speck filter acts.
     let laser = urg(0, specks);
-    let (mut e, sonar, mut out) = v2_small_room(15.0, SmokeTrend::Rising);
-    assert_eq!(e.fuzzy.params().speck_max_beams, 2);
-    e.step(
-        Some(&laser),
-        Some(&sonar),
-        Some(&smoke(0, 15.0, SmokeTrend::Rising)),
-        &mut out,
-    )
-    .unwrap();
+    let fuse = |level: f32, edit: fn(&mut smokenav_platform_config::fusion::V2Params)| {
+        let trend = if level > 0.0 {
+            SmokeTrend::Rising
+        } else {
+            SmokeTrend::Steady
+        };
+        let (mut e, sonar, mut out) = v2_small_room_with(level, trend, edit);
+        e.step(
+            Some(&laser),
+            Some(&sonar),
+            Some(&smoke(0, level, trend)),
+            &mut out,
+        )
+        .unwrap();
+        out
+    };
+    // Runs of one and two beams go; three (more than the default
+    // `speck_max_beams`, 2) stay.
+    let out = fuse(15.0, |_| {});
     for i in 0..laser.len() {
         if i == 100 || (200..=201).contains(&i) {
             assert_eq!(out.beam_source(i), SectionSource::Neither, "beam {i}");
@@ -492,35 +511,12 @@ fn v2_drops_the_specks_of_thin_smoke_the_sonar_cannot_judge() {
             assert_eq!(out.scan.beam(i), laser.beam(i), "beam {i}");
         }
     }
-
     // In clean air the scan is the laser's, specks and all: a thin pole is
     // more likely than smoke the smoke sensor does not smell.
-    let (mut e, sonar, mut out) = v2_small_room(0.0, SmokeTrend::Steady);
-    e.step(
-        Some(&laser),
-        Some(&sonar),
-        Some(&smoke(0, 0.0, SmokeTrend::Steady)),
-        &mut out,
-    )
-    .unwrap();
-    assert_eq!(bits(&out.scan), bits(&laser));
-
+    assert_eq!(bits(&fuse(0.0, |_| {}).scan), bits(&laser));
     // `speck_max_beams = 0` turns the filter off.
-    let cfg = profile("pioneer-3dx.toml");
-    let mut v2 = cfg.fusion.v2.clone();
-    v2.dense = smokenav_platform_config::fusion::PiShape::new(0.0, 0.0, 0.1, 0.2);
-    v2.speck_max_beams = 0;
-    let geometry = SonarGeometry::from_config(&cfg.laser, &cfg.sonar, &cfg.fusion).unwrap();
-    let mut e = FusionEngine::new(FusionMethod::V2, geometry, cfg.fusion.v1.clone(), v2);
-    let mut out = fused();
-    e.step(
-        Some(&laser),
-        Some(&sonar),
-        Some(&smoke(0, 15.0, SmokeTrend::Rising)),
-        &mut out,
-    )
-    .unwrap();
-    assert_eq!(bits(&out.scan), bits(&laser));
+    let off = fuse(15.0, |v2| v2.speck_max_beams = 0);
+    assert_eq!(bits(&off.scan), bits(&laser));
 }
 
 #[test]
