@@ -12,7 +12,9 @@
 //! `cargo bench -p smokenav-algorithms-slam --bench backends`
 //! Environment: `CSAIL_DIR` (the folder of the log; required), `CSAIL_DRIFT=SEED` (run on the
 //! corrected log's scans with seeded drifted odometry instead, see `drift`; `CSAIL_DRIFT_PARAMS`
-//! overrides its parameters), `BACKENDS` (`rbpf,graph` by default; `fuzzy` too), `CSAIL_LOG` / `CSAIL_REFERENCE`
+//! overrides its parameters), `BACKENDS` (`rbpf,graph,frontend` by default; `fuzzy` too;
+//! `frontend` is the graph with loop closure off, `closure_search_m = 0`: the front end's own
+//! per-scan cost, which inline runs share a call with the closure search), `CSAIL_LOG` / `CSAIL_REFERENCE`
 //! (other log and reference files in that folder), `SLAM_TOML` (`[slam]` keys), `CSAIL_OUT` (folder for
 //! each back-end's map PNG and trajectory), `GRAPH_ONLINE=1` (the graph's loop closures on their
 //! own thread, as the SLAM process runs them: the per-scan figures are then the scan path's alone,
@@ -230,7 +232,7 @@ fn main() {
         }
         Err(_) => (dir, log),
     };
-    let which = std::env::var("BACKENDS").unwrap_or_else(|_| "rbpf,graph".into());
+    let which = std::env::var("BACKENDS").unwrap_or_else(|_| "rbpf,graph,frontend".into());
     // `SLAM_TOML='frontend = false\n[fuzzy]\nsearch = "correlative"'` overrides `[slam]` keys.
     let cfg = match std::env::var("SLAM_TOML") {
         Ok(text) => {
@@ -261,6 +263,13 @@ fn main() {
                 g.set_online(online);
                 Box::new(g)
             }
+            "frontend" => Box::new(GraphSlam::new(
+                &cfg,
+                GraphParams {
+                    closure_search_m: 0.0,
+                    ..graph_params()
+                },
+            )),
             "fuzzy" => Box::new(FuzzySlam::new(&cfg, true)),
             other => panic!("unknown back-end {other}"),
         };
@@ -322,7 +331,7 @@ fn main() {
             consistency_line(&consistency_at(&reference_scans, &poses))
         );
         if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
-            println!("backends {log} graph: {:?}", g.stats());
+            println!("backends {log} {name}: {:?}", g.stats());
             if g.is_online() {
                 let (max, p99) = g.closure_latency_ms();
                 println!(
