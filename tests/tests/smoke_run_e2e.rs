@@ -269,10 +269,14 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
         }
     }
     let usage = fusion_health.metric("sonar_usage").unwrap();
+    // The speck filter drops laser beams: health must say how many.
+    let specks = fusion_health
+        .metric("speck_beams")
+        .expect("health/fusion reports speck_beams");
     eprintln!(
         "fusion: {complete} complete fused scans; raw phantom sections {}: true distance kept {} \
          ({} by the sonar), dropped {}, coarse sonar arc {}, phantom through {}; before the \
-         smoke sensor read smoke: {unsensed:?}; sonar usage {:.1} %",
+         smoke sensor read smoke: {unsensed:?}; sonar usage {:.1} %; {specks} speck beams dropped",
         tally.sections,
         tally.kept_true_distance,
         tally.kept_by_sonar,

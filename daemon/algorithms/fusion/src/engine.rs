@@ -48,6 +48,8 @@ pub struct StepReport {
     /// v2 fused laser and sonar without a usable smoke reading and assumed
     /// smoke (the witness on in every section; see the `v2` module).
     pub smoke_silent: bool,
+    /// Laser beams v2 dropped as specks of patchy smoke (`v2.speck_max_beams`).
+    pub speck_beams: usize,
 }
 
 /// The layout of the last laser scan, used to shape sonar-only output.
@@ -264,6 +266,7 @@ impl FusionEngine {
             rho_laser: 1.0,
             bad_layout: false,
             smoke_silent,
+            speck_beams: 0,
         };
         let Some(shape) = ScanShape::of(l) else {
             report.bad_layout = true;
@@ -290,15 +293,26 @@ impl FusionEngine {
             out.section_count = n_sections as u32;
             return report;
         }
+        let mut specks = false;
         match self.method {
             FusionMethod::V1 => self.decide_v1(l, smoke_state, out),
             _ => {
-                report.rho_laser =
-                    self.decide_v2(l, &shape, smoke, smoke_silent, spread, out) as f32
+                let (rho, measured_smoke) =
+                    self.decide_v2(l, &shape, smoke, smoke_silent, spread, out);
+                report.rho_laser = rho as f32;
+                specks = measured_smoke;
             }
         }
         out.section_count = n_sections as u32;
         self.apply_sections(l, &shape, out);
+        // Patchy smoke also catches lone beams the sonar cannot judge (thin
+        // smoke below the witness's threshold, beams between cones). Only
+        // where smoke is measured: a silent sensor (warming up) is not
+        // evidence enough to drop thin objects. Last, so that only beams
+        // still the laser's are dropped and counted.
+        if specks {
+            report.speck_beams = self.blank_specks(l, out);
+        }
         report.sonar_sections = self.decisions[..n_sections]
             .iter()
             .filter(|d| matches!(d, SectionSource::Sonar | SectionSource::Both))
@@ -347,7 +361,7 @@ impl FusionEngine {
         smoke_silent: bool,
         spread: f64,
         out: &mut FusedScan,
-    ) -> f64 {
+    ) -> (f64, bool) {
         let level = usable_smoke_level(smoke);
         let trust: LaserTrust = self.fuzzy.laser_trust(level, spread);
         // The smoke the witness assumes: the worst when the sensor is silent.
@@ -378,13 +392,6 @@ impl FusionEngine {
                 self.blank_contradicted(l, &s, out);
             }
         }
-        // Patchy smoke also catches lone beams the sonar cannot judge (thin
-        // smoke below the witness's threshold, beams between cones). Only
-        // where smoke is measured: a silent sensor (warming up) is not
-        // evidence enough to drop thin objects.
-        if trust.mu_alcoholized > 0.0 {
-            self.blank_specks(l, out);
-        }
         let scan_gap = self.fuzzy.decide_gap(&trust);
         for g in self.sections.gaps(out.scan.len()) {
             // A gap between sections whose laser the sonar contradicted is the same smoke.
@@ -396,7 +403,7 @@ impl FusionEngine {
                 blank(out, g.first, g.end);
             }
         }
-        trust.rho
+        (trust.rho, trust.mu_alcoholized > 0.0)
     }
 
     /// The share of section `k`'s laser ranges that lie nearer than the
@@ -479,13 +486,15 @@ impl FusionEngine {
     /// `v2.speck_max_beams` laser beams, each within the contradiction margin
     /// of the next, that lie nearer than the beams on both sides by more than
     /// the margin (a side without a range counts as farther; a run at the
-    /// scan's edge has one side only and stays).
-    fn blank_specks(&self, l: &LaserScan, out: &mut FusedScan) {
+    /// scan's edge has one side only and stays). Only beams the output still
+    /// takes from the laser are blanked; returns how many.
+    fn blank_specks(&self, l: &LaserScan, out: &mut FusedScan) -> usize {
         let p = self.fuzzy.params();
         let (margin, max_run) = (p.contradiction_margin_m as f32, p.speck_max_beams as usize);
         if max_run == 0 {
-            return;
+            return 0;
         }
+        let mut blanked = 0;
         let n = l.len().min(out.scan.len());
         let range = |i: usize| l.beam(i).range().filter(|r| r.is_finite());
         let mut i = 0;
@@ -509,10 +518,16 @@ impl FusionEngine {
                 |j: Option<usize>| j.is_some_and(|j| range(j).is_none_or(|r| r > far + margin));
             if end - i <= max_run && farther(i.checked_sub(1)) && farther((end < n).then_some(end))
             {
-                blank(out, i, end);
+                for k in i..end {
+                    if out.beam_source[k] == SectionSource::Laser as u8 {
+                        blank(out, k, k + 1);
+                        blanked += 1;
+                    }
+                }
             }
             i = end;
         }
+        blanked
     }
 
     fn record_section(&self, k: usize, rho_sonar: f32, rho_laser: f32, out: &mut FusedScan) {
@@ -640,6 +655,7 @@ impl FusionEngine {
             rho_laser: 0.0,
             bad_layout: false,
             smoke_silent: false,
+            speck_beams: 0,
         }
     }
 }

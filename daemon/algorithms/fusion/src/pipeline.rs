@@ -26,6 +26,8 @@ pub struct PipelineStats {
     pub sonar_sections: u64,
     /// Laser scans whose layout was unusable (passed through untouched).
     pub bad_layouts: u64,
+    /// Laser beams v2 dropped as specks of patchy smoke.
+    pub speck_beams: u64,
 }
 
 impl PipelineStats {
@@ -85,6 +87,7 @@ impl Parts<'_> {
                 self.stats.sections += report.sections as u64;
                 self.stats.sonar_sections += report.sonar_sections as u64;
                 self.stats.bad_layouts += u64::from(report.bad_layout);
+                self.stats.speck_beams += report.speck_beams as u64;
                 *self.last = Some(report);
                 emit(self.out, &report);
             }

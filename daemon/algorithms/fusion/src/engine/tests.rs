@@ -491,18 +491,20 @@ fn v2_drops_the_specks_of_thin_smoke_the_sonar_cannot_judge() {
             SmokeTrend::Steady
         };
         let (mut e, sonar, mut out) = v2_small_room_with(level, trend, edit);
-        e.step(
-            Some(&laser),
-            Some(&sonar),
-            Some(&smoke(0, level, trend)),
-            &mut out,
-        )
-        .unwrap();
-        out
+        let report = e
+            .step(
+                Some(&laser),
+                Some(&sonar),
+                Some(&smoke(0, level, trend)),
+                &mut out,
+            )
+            .unwrap();
+        (out, report.speck_beams)
     };
     // Runs of one and two beams go; three (more than the default
     // `speck_max_beams`, 2) stay.
-    let out = fuse(15.0, |_| {});
+    let (out, specks) = fuse(15.0, |_| {});
+    assert_eq!(specks, 3, "the report counts the beams dropped");
     for i in 0..laser.len() {
         if i == 100 || (200..=201).contains(&i) {
             assert_eq!(out.beam_source(i), SectionSource::Neither, "beam {i}");
@@ -513,10 +515,11 @@ fn v2_drops_the_specks_of_thin_smoke_the_sonar_cannot_judge() {
     }
     // In clean air the scan is the laser's, specks and all: a thin pole is
     // more likely than smoke the smoke sensor does not smell.
-    assert_eq!(bits(&fuse(0.0, |_| {}).scan), bits(&laser));
+    let (clean, specks) = fuse(0.0, |_| {});
+    assert_eq!((bits(&clean.scan), specks), (bits(&laser), 0));
     // `speck_max_beams = 0` turns the filter off.
-    let off = fuse(15.0, |v2| v2.speck_max_beams = 0);
-    assert_eq!(bits(&off.scan), bits(&laser));
+    let (off, specks) = fuse(15.0, |v2| v2.speck_max_beams = 0);
+    assert_eq!((bits(&off.scan), specks), (bits(&laser), 0));
 }
 
 #[test]
