@@ -4,12 +4,13 @@
 //! [`inspect`] walks the file's top-level records (chunks are not
 //! decompressed) and, when the file has a summary, takes message counts
 //! from its statistics. With `check` (or when there is no summary, as after
-//! a killed recorder) it also decompresses every chunk, which verifies the
-//! chunk's CRC before any record in it is parsed (a flipped byte in
-//! compressed data decompresses to garbage lengths, and the crate's chunk
-//! reader, which checks the CRC only at the end, reserved them: a 140 TB
-//! allocation aborted `smokenav info --check`), and reads every record inside: a damaged chunk is listed
-//! with its number and file offset, and the walk goes on with the next one.
+//! a killed recorder) it also decompresses every chunk, verifies its CRC
+//! before any record in it is parsed, and reads every record inside: a
+//! damaged chunk is listed with its number and file offset, and the walk
+//! goes on with the next one. (A flipped byte in compressed data
+//! decompresses to garbage lengths; the crate's chunk reader, which checks
+//! the CRC only at the end, reserved them, and a 140 TB allocation aborted
+//! `smokenav info --check`.)
 //! A break in the top-level framing ends the walk, reported the same way.
 
 use crate::reader::MAX_RECORD_BYTES;
