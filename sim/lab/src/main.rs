@@ -56,7 +56,10 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
         Err(e) => {
-            eprintln!("smokenav-lab: error: {e:#}");
+            eprintln!(
+                "smokenav-lab: error: {}",
+                smokenav_platform_runtime::error_line(&e)
+            );
             std::process::ExitCode::FAILURE
         }
     }

@@ -432,7 +432,10 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                     counters.saves += 1;
                     tracing::info!("octree saved to {}", path.display());
                 }
-                Err(e) => p.health.error(&format!("cannot save the octree: {e:#}")),
+                Err(e) => p.health.error(&format!(
+                    "cannot save the octree: {}",
+                    smokenav_platform_runtime::error_line(&e)
+                )),
             }
         }
         report(p, &mapper, &counters, &scans, &rings);

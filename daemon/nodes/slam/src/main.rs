@@ -422,8 +422,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                             tracing::info!("map saved to {}", map_dir.display());
                         }
                         Err(e) => p.health.error(&format!(
-                            "cannot save the map to {}: {e:#}",
-                            map_dir.display()
+                            "cannot save the map to {}: {}",
+                            map_dir.display(),
+                            smokenav_platform_runtime::error_line(&e)
                         )),
                     }
                 }

@@ -39,6 +39,7 @@
 #![warn(missing_docs)]
 
 mod args;
+mod error_line;
 mod health;
 pub mod launch;
 mod logging;
@@ -48,6 +49,7 @@ mod shutdown;
 mod systemd;
 
 pub use args::CommonArgs;
+pub use error_line::error_line;
 pub use health::{DEFAULT_RATE_FLOOR, HealthReporter, LatencyWindow, RateId, RateMeter, Report};
 pub use logging::init_logging;
 pub use process::{ConfigFailure, EXIT_CONFIG, Process, main};

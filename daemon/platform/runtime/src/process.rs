@@ -140,7 +140,7 @@ pub fn main(
         Ok(p) => p,
         Err(e) => {
             let is_config = e.downcast_ref::<ConfigFailure>().is_some();
-            tracing::error!("{role}: {e:#}");
+            tracing::error!("{role}: {}", crate::error_line(&e));
             return ExitCode::from(if is_config { EXIT_CONFIG } else { 1 });
         }
     };
@@ -152,7 +152,7 @@ pub fn main(
             ExitCode::SUCCESS
         }
         Err(e) => {
-            tracing::error!("{role}: {e:#}");
+            tracing::error!("{role}: {}", crate::error_line(&e));
             if e.downcast_ref::<ConfigFailure>().is_some() {
                 ExitCode::from(EXIT_CONFIG)
             } else {
