@@ -48,6 +48,10 @@ use smokenav_shared_types::{FusedScan, LaserScan, Odometry, OdometryFlags};
 /// (a Pioneer with a wheel 2 % off turned 16° in its first metre while the
 /// smoke sensor warmed up). Such scans stay out of the front end's local map.
 pub const MAX_WITHHELD_TO_MATCH: f64 = 0.1;
+/// How far before a scan's stamp the odometry is read to tell how the
+/// robot moved during the sweep ([`RangeScan::deskew`]): one period of a
+/// 10 Hz base, the Pioneer's and the Scout's odometry rate.
+const TWIST_LOOKBACK_NS: u64 = 100_000_000;
 
 /// How long a scan waits for its odometry, and how much odometry is kept.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -266,11 +270,28 @@ impl SlamPipeline {
             OdomAt::Interpolated(p) | OdomAt::Held(p) | OdomAt::Oldest(p) => p,
         };
         self.pending = false;
+        let mut scan = std::mem::take(&mut self.scan);
+        if let Some(twist) = self.twist_before(scan.stamp_ns, &odom) {
+            scan.deskew(twist);
+        }
         self.last_odom = Some(odom);
-        let scan = std::mem::take(&mut self.scan);
         let update = self.process(&scan, &odom);
         self.scan = scan;
         Some(update)
+    }
+
+    /// The robot's velocity (robot frame: m/s, m/s, rad/s) over the
+    /// [`TWIST_LOOKBACK_NS`] before `stamp_ns`, where `odom` is the odometry:
+    /// how it was moving as the sweep began. `None` without odometry that far
+    /// back (the first readings) or across a reset.
+    fn twist_before(&self, stamp_ns: u64, odom: &Pose2) -> Option<(f64, f64, f64)> {
+        let back = stamp_ns.checked_sub(TWIST_LOOKBACK_NS)?;
+        let OdomAt::Interpolated(then) = self.odom.at(back, u64::MAX, 0, 0) else {
+            return None;
+        };
+        let dt = TWIST_LOOKBACK_NS as f64 * 1e-9;
+        let d = then.between(odom);
+        Some((d.x / dt, d.y / dt, d.theta / dt))
     }
 
     /// End of the input: the waiting scan with the odometry there is.

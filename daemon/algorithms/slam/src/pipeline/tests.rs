@@ -489,3 +489,67 @@ fn the_blind_stretch_counts_odometry_until_the_laser_gives_the_heading_again() {
     assert_eq!((st.blind_m, st.blind_rad), (0.0, 0.0));
     assert!((st.longest_blind_m - 1.0).abs() < 1e-6);
 }
+
+/// A robot turning through the room at 0.3 m/s and 0.8 rad/s, its laser
+/// sweeping each 180° scan in 67 ms as it goes (stamped at the first beam,
+/// with the time between beams when `time_increment`), exact odometry every
+/// 50 ms from before the first scan. Returns the front end's worst pose
+/// error (m, rad) against the truth, both relative to the first scan.
+fn turning_sweeps(time_increment: bool) -> (f64, f64) {
+    let dt = 67e-3 / 360.0;
+    let (v, w) = (0.3, 0.8);
+    let start = Pose2::new(-3.0, -1.5, 0.0);
+    // On the arc: a constant velocity in the robot's own frame.
+    let at = |t: f64| {
+        start.compose(&Pose2::new(
+            v / w * (w * t).sin(),
+            v / w * (1.0 - (w * t).cos()),
+            w * t,
+        ))
+    };
+    let mut slam = pipeline(&cfg(2), false);
+    let (mut worst_t, mut worst_r) = (0.0f64, 0.0f64);
+    let mut first = None;
+    for k in 0..60u64 {
+        let stamp = k * 50 * MS;
+        let truth = at(k as f64 * 0.05);
+        slam.push_odom(&odom(stamp, truth, 0));
+        // A scan every 100 ms from 0.2 s on.
+        if k < 4 || k % 2 == 1 {
+            continue;
+        }
+        let mut l = laser_at(&truth, stamp);
+        for i in 0..l.count as usize {
+            let a = f64::from(l.angle_min) + i as f64 * f64::from(l.angle_increment);
+            let p = at(k as f64 * 0.05 + i as f64 * dt);
+            let r = crate::testkit::cast(p.x, p.y, p.theta + a);
+            l.set_beam(
+                i,
+                r.map_or(BeamReading::NoReturn, |r| BeamReading::Range(r as f32)),
+            );
+        }
+        if time_increment {
+            l.time_increment = dt as f32;
+        }
+        slam.push_laser(&l);
+        slam.poll(stamp).expect("odometry at the stamp");
+        let pose = slam.frontend_pose().unwrap();
+        let (f_truth, f_pose) = *first.get_or_insert((truth, pose));
+        let err = f_truth.between(&truth).between(&f_pose.between(&pose));
+        worst_t = worst_t.max(err.translation_norm());
+        worst_r = worst_r.max(err.theta.abs());
+    }
+    (worst_t, worst_r)
+}
+
+#[test]
+fn a_laser_sweeping_while_the_robot_turns_is_deskewed_by_the_odometry() {
+    // Matched as if taken at once, the bent sweeps turn the tracked heading
+    // 0.04 rad off exact odometry in 2.8 s; deskewed, 0.002 rad. (The
+    // position error, 3–4 cm either way, is the front end's own on this
+    // turning route: the same without any sweep.)
+    let (_, skewed) = turning_sweeps(false);
+    let (_, deskewed) = turning_sweeps(true);
+    assert!(deskewed < 0.005, "deskewed: {deskewed} rad off");
+    assert!(skewed > 5.0 * deskewed, "skewed: {skewed} rad off");
+}
