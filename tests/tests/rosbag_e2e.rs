@@ -93,6 +93,16 @@ fn slam_with(bag: &Path, out: &Path, extra: &[&str]) -> anyhow::Result<(String, 
 }
 
 /// (stamp s, x, y, theta) per line.
+/// The summary's count of sweeps deskewed by odometry.
+fn deskewed(report: &str) -> u64 {
+    report
+        .split(" sweeps deskewed by odometry")
+        .next()
+        .and_then(|head| head.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0)
+}
+
 fn poses(text: &str) -> Vec<[f64; 4]> {
     text.lines()
         .map(|l| {
@@ -146,6 +156,9 @@ fn slam_on_rosbags_written_bags_matches_the_native_recording() -> anyhow::Result
     let (reference, native_report) = slam(&native, &dir.path().join("out-native"))?;
     let reference = poses(&reference);
     assert!(reference.len() > 100, "{native_report}");
+    // The driver's time between beams reached the SLAM: its sweeps were
+    // deskewed by the odometry, and the bags' must be too to match.
+    assert!(deskewed(&native_report) > 100, "{native_report}");
     for storage in ["mcap", "sqlite3"] {
         let (traj, report) = slam(
             &bags.join(storage),

@@ -110,6 +110,9 @@ pub struct PipelineStats {
     pub blind_rad: f64,
     /// The longest blind stretch so far, m.
     pub longest_blind_m: f64,
+    /// Scans whose sweep was deskewed ([`RangeScan::deskew`]): the laser
+    /// gave its time between beams and odometry reached 100 ms before.
+    pub deskewed: u64,
 }
 
 pub struct SlamPipeline {
@@ -271,8 +274,11 @@ impl SlamPipeline {
         };
         self.pending = false;
         let mut scan = std::mem::take(&mut self.scan);
-        if let Some(twist) = self.twist_before(scan.stamp_ns, &odom) {
+        if scan.time_increment_s > 0.0
+            && let Some(twist) = self.twist_before(scan.stamp_ns, &odom)
+        {
             scan.deskew(twist);
+            self.stats.deskewed += 1;
         }
         self.last_odom = Some(odom);
         let update = self.process(&scan, &odom);

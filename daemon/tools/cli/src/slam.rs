@@ -678,8 +678,12 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     }
     let _ = writeln!(
         report,
-        "pipeline           {} held back by the motion filter, {} front-end fallbacks to odometry, {} scans mostly withheld from the laser (heading matched, position by odometry), {} scans without ranges",
-        stats.held_back, stats.frontend_fallbacks, stats.frontend_withheld, stats.empty_scans
+        "pipeline           {} held back by the motion filter, {} front-end fallbacks to odometry, {} scans mostly withheld from the laser (heading matched, position by odometry), {} scans without ranges, {} sweeps deskewed by odometry",
+        stats.held_back,
+        stats.frontend_fallbacks,
+        stats.frontend_withheld,
+        stats.empty_scans,
+        stats.deskewed
     );
     let _ = writeln!(
         report,

@@ -539,6 +539,9 @@ fn turning_sweeps(time_increment: bool) -> (f64, f64) {
         worst_t = worst_t.max(err.translation_norm());
         worst_r = worst_r.max(err.theta.abs());
     }
+    // Every scan but none without the time increment; the first scan has
+    // odometry 100 ms before too.
+    assert_eq!(slam.stats().deskewed, if time_increment { 28 } else { 0 });
     (worst_t, worst_r)
 }
 
