@@ -15,7 +15,9 @@
 //!    interpolated to its stamp — waiting up to [`OdomPolicy::wait_ns`] for
 //!    odometry that may still arrive, holding the newest reading up to
 //!    [`OdomPolicy::max_gap_ns`] old, and the last odometry used (counted)
-//!    beyond that;
+//!    beyond that; a laser that gives its time between beams has its sweep
+//!    deskewed by the odometry's velocity over the 100 ms before the stamp
+//!    ([`RangeScan::deskew`]);
 //! 4. the front end corrects the odometry by correlative matching against the
 //!    last scans ([`FrontEnd`]); where the fusion withheld more than
 //!    [`MAX_WITHHELD_TO_MATCH`] of the scan from the laser, the match

@@ -363,8 +363,8 @@ mod tests {
 
     #[test]
     fn a_sweep_taken_while_the_robot_turns_is_put_back_at_its_first_beam() {
-        // The URG-04LX's 67 ms for 240°: 0.28 ms a step of 0.36°; here 0.5°
-        // steps, so 0.19 ms each, 67 ms over the 180°.
+        // The URG-04LX's 67 ms for 240° (0.1 ms a step of 0.35°); here
+        // 0.5° steps over 180° in the same 67 ms.
         let dt = 67e-3 / 360.0;
         let start = Pose2::new(-3.5, -1.5, 0.3);
         let twist = (0.5, 0.0, 1.0);
