@@ -124,6 +124,8 @@ pub struct SlamPipeline {
     policy: OdomPolicy,
     odom: OdomBuffer,
     frontend: Option<FrontEnd>,
+    /// `[slam] deskew`.
+    deskew: bool,
     motion_filter: MotionFilter,
     backend: Box<dyn SlamBackend>,
     /// The newest scan, waiting for its odometry while `pending`.
@@ -150,6 +152,7 @@ impl SlamPipeline {
             limits: EndpointLimits::from_config(cfg),
             policy,
             odom: OdomBuffer::new(policy.history),
+            deskew: cfg.deskew,
             frontend: cfg.frontend.then(|| {
                 FrontEnd::new(FrontEndParams {
                     resolution: cfg.resolution_m,
@@ -276,7 +279,8 @@ impl SlamPipeline {
         };
         self.pending = false;
         let mut scan = std::mem::take(&mut self.scan);
-        if scan.time_increment_s > 0.0
+        if self.deskew
+            && scan.time_increment_s > 0.0
             && let Some(twist) = self.twist_before(scan.stamp_ns, &odom)
         {
             scan.deskew(twist);

@@ -274,6 +274,11 @@ slam_section! {
     /// in the simulator drifts ~2.5°/√m, a Pioneer with one wheel 2 % off
     /// ~3°/m.
     max_blind_m: f64 = (5.0, 5.0),
+    /// Deskew each laser sweep by the odometry's motion over it, where the
+    /// laser gives its time between beams (the Hokuyo driver does; a
+    /// CARMEN log does not). Off for a driver that stamps a scan at its last
+    /// beam instead of its first (REP: the first), which would bend it twice.
+    deskew: bool = (true, true),
     /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
     fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),
     /// `[slam.graph]`: the graph back-end's node spacing and loop-closure search.

@@ -496,3 +496,13 @@ fn speck_max_beams_is_read_and_bounded() {
     assert_eq!(err.keys(), vec!["fusion.v2.speck_max_beams"], "{msg}");
     assert!(msg.contains("40"), "{msg}");
 }
+
+#[test]
+fn deskewing_is_on_by_default_and_can_be_turned_off() {
+    assert!(parse(&pioneer_text()).unwrap().slam.deskew);
+    let off = pioneer_text().replace("[slam]\n", "[slam]\ndeskew = false\n");
+    assert!(!parse(&off).unwrap().slam.deskew);
+    let err = parse(&pioneer_text().replace("[slam]\n", "[slam]\ndeskew = 1\n")).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("deskew") && msg.contains("config/test-robot.toml"), "{msg}");
+}

@@ -496,6 +496,10 @@ fn the_blind_stretch_counts_odometry_until_the_laser_gives_the_heading_again() {
 /// 50 ms from before the first scan. Returns the front end's worst pose
 /// error (m, rad) against the truth, both relative to the first scan.
 fn turning_sweeps(time_increment: bool) -> (f64, f64) {
+    turning_sweeps_with(time_increment, &cfg(2))
+}
+
+fn turning_sweeps_with(time_increment: bool, c: &SlamSection) -> (f64, f64) {
     let dt = 67e-3 / 360.0;
     let (v, w) = (0.3, 0.8);
     let start = Pose2::new(-3.0, -1.5, 0.0);
@@ -507,7 +511,7 @@ fn turning_sweeps(time_increment: bool) -> (f64, f64) {
             w * t,
         ))
     };
-    let mut slam = pipeline(&cfg(2), false);
+    let mut slam = pipeline(c, false);
     let (mut worst_t, mut worst_r) = (0.0f64, 0.0f64);
     let mut first = None;
     for k in 0..60u64 {
@@ -541,7 +545,8 @@ fn turning_sweeps(time_increment: bool) -> (f64, f64) {
     }
     // Every scan but none without the time increment; the first scan has
     // odometry 100 ms before too.
-    assert_eq!(slam.stats().deskewed, if time_increment { 28 } else { 0 });
+    let deskewed = if time_increment && c.deskew { 28 } else { 0 };
+    assert_eq!(slam.stats().deskewed, deskewed);
     (worst_t, worst_r)
 }
 
@@ -555,4 +560,13 @@ fn a_laser_sweeping_while_the_robot_turns_is_deskewed_by_the_odometry() {
     let (_, deskewed) = turning_sweeps(true);
     assert!(deskewed < 0.005, "deskewed: {deskewed} rad off");
     assert!(skewed > 5.0 * deskewed, "skewed: {skewed} rad off");
+}
+
+#[test]
+fn deskewing_can_be_turned_off() {
+    let off = SlamSection {
+        deskew: false,
+        ..cfg(2)
+    };
+    assert_eq!(turning_sweeps_with(true, &off), turning_sweeps(false));
 }
