@@ -504,5 +504,8 @@ fn deskewing_is_on_by_default_and_can_be_turned_off() {
     assert!(!parse(&off).unwrap().slam.deskew);
     let err = parse(&pioneer_text().replace("[slam]\n", "[slam]\ndeskew = 1\n")).unwrap_err();
     let msg = err.to_string();
-    assert!(msg.contains("deskew") && msg.contains("config/test-robot.toml"), "{msg}");
+    assert!(
+        msg.contains("deskew") && msg.contains("config/test-robot.toml"),
+        "{msg}"
+    );
 }
