@@ -92,7 +92,6 @@ fn slam_with(bag: &Path, out: &Path, extra: &[&str]) -> anyhow::Result<(String, 
     Ok((std::fs::read_to_string(out.join("trajectory.txt"))?, stdout))
 }
 
-/// (stamp s, x, y, theta) per line.
 /// The summary's count of sweeps deskewed by odometry.
 fn deskewed(report: &str) -> u64 {
     report
@@ -103,6 +102,7 @@ fn deskewed(report: &str) -> u64 {
         .unwrap_or(0)
 }
 
+/// (stamp s, x, y, theta) per line.
 fn poses(text: &str) -> Vec<[f64; 4]> {
     text.lines()
         .map(|l| {

@@ -277,7 +277,8 @@ slam_section! {
     /// Deskew each laser sweep by the odometry's motion over it, where the
     /// laser gives its time between beams (the Hokuyo driver does; a
     /// CARMEN log does not). Off for a driver that stamps a scan at its last
-    /// beam instead of its first (REP: the first), which would bend it twice.
+    /// beam instead of its first (`sensor_msgs/LaserScan`: the first), whose
+    /// sweeps it would bend the wrong way.
     deskew: bool = (true, true),
     /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
     fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),

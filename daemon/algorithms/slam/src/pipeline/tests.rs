@@ -543,8 +543,8 @@ fn turning_sweeps_with(time_increment: bool, c: &SlamSection) -> (f64, f64) {
         worst_t = worst_t.max(err.translation_norm());
         worst_r = worst_r.max(err.theta.abs());
     }
-    // Every scan but none without the time increment; the first scan has
-    // odometry 100 ms before too.
+    // With the time increment every scan is deskewed, the first too (the
+    // odometry runs from before it); without it, none.
     let deskewed = if time_increment && c.deskew { 28 } else { 0 };
     assert_eq!(slam.stats().deskewed, deskewed);
     (worst_t, worst_r)
