@@ -330,6 +330,13 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
     .unwrap();
     let processed = slam_health.metric("scans_processed").unwrap_or(0.0);
     let skipped = slam_health.metric("scans_skipped").unwrap_or(0.0);
+    // The Hokuyo driver's time between beams reached the SLAM process, and
+    // the base's odometry ran: the sweeps were deskewed.
+    let deskewed = slam_health.metric("scans_deskewed").unwrap_or(0.0);
+    assert!(
+        deskewed > 0.5 * processed,
+        "{deskewed} of {processed} scans deskewed"
+    );
     eprintln!(
         "slam: {} poses ({processed} scans processed, {skipped} skipped as superseded); \
          ATE RMS {:.3} m, max {:.3} m over {} poses; travelled {:.1} m",

@@ -534,6 +534,8 @@ fn report(p: &mut Process, pipeline: &SlamPipeline, c: &Counters, scans: &Scans)
     h.set_metric("heading_blind_m", stats.blind_m);
     h.set_metric("heading_blind_deg", stats.blind_rad.to_degrees());
     h.set_metric("heading_blind_longest_m", stats.longest_blind_m);
+    // Zero on a laser without a time between beams: its sweeps stay bent.
+    h.set_metric("scans_deskewed", stats.deskewed as f64);
     h.set_metric("maps_published", c.maps_published as f64);
     h.set_metric("maps_saved", c.maps_saved as f64);
     h.set_metric("publish_errors", c.publish_errors as f64);
