@@ -74,6 +74,15 @@ impl OdomBuffer {
         self.readings.back().map(|r| r.0)
     }
 
+    /// Odometry at `stamp_ns` only where two readings (or one exactly) are
+    /// there to say it: nothing is waited for, held or extrapolated.
+    pub fn interpolated(&self, stamp_ns: u64) -> Option<Pose2> {
+        match self.at(stamp_ns, u64::MAX, 0, 0) {
+            OdomAt::Interpolated(p) => Some(p),
+            _ => None,
+        }
+    }
+
     /// Odometry at `stamp_ns`. A stamp past the newest reading gives `NotYet`
     /// until `now_ns` is more than `max_wait_ns` past the stamp; then the newest
     /// reading is held if it is at most `max_gap_ns` older than the stamp.
@@ -124,6 +133,18 @@ mod tests {
             panic!()
         };
         assert!((p.x - 0.75).abs() < 1e-12 && (p.theta - 0.15).abs() < 1e-12);
+    }
+
+    #[test]
+    fn only_a_bracketed_or_exact_stamp_is_interpolated() {
+        let mut b = OdomBuffer::new(8);
+        b.push(100 * MS, Pose2::new(0.0, 0.0, 0.0));
+        b.push(200 * MS, Pose2::new(1.0, 0.0, 0.2));
+        assert!((b.interpolated(150 * MS).unwrap().x - 0.5).abs() < 1e-12);
+        assert_eq!(b.interpolated(200 * MS), Some(Pose2::new(1.0, 0.0, 0.2)));
+        assert_eq!(b.interpolated(100 * MS), Some(Pose2::new(0.0, 0.0, 0.0)));
+        assert_eq!(b.interpolated(99 * MS), None, "before the oldest");
+        assert_eq!(b.interpolated(201 * MS), None, "after the newest");
     }
 
     #[test]

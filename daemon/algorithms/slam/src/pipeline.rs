@@ -297,10 +297,9 @@ impl SlamPipeline {
     /// how it was moving as the sweep began. `None` without odometry that far
     /// back (the first readings) or across a reset.
     fn twist_before(&self, stamp_ns: u64, odom: &Pose2) -> Option<(f64, f64, f64)> {
-        let back = stamp_ns.checked_sub(TWIST_LOOKBACK_NS)?;
-        let OdomAt::Interpolated(then) = self.odom.at(back, u64::MAX, 0, 0) else {
-            return None;
-        };
+        let then = self
+            .odom
+            .interpolated(stamp_ns.checked_sub(TWIST_LOOKBACK_NS)?)?;
         let dt = TWIST_LOOKBACK_NS as f64 * 1e-9;
         let d = then.between(odom);
         Some((d.x / dt, d.y / dt, d.theta / dt))
