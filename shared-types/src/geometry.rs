@@ -113,6 +113,79 @@ impl Pose2 {
     }
 }
 
+/// A planar velocity in the robot's own frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Twist2 {
+    /// Forward, m/s.
+    pub vx: f64,
+    /// To the left, m/s.
+    pub vy: f64,
+    /// Turn rate, rad/s (counter-clockwise positive).
+    pub w: f64,
+}
+
+impl Twist2 {
+    /// A velocity from its parts.
+    pub const fn new(vx: f64, vy: f64, w: f64) -> Self {
+        Self { vx, vy, w }
+    }
+
+    /// No part is NaN or infinite.
+    pub fn is_finite(&self) -> bool {
+        self.vx.is_finite() && self.vy.is_finite() && self.w.is_finite()
+    }
+
+    /// Where `t` s at this velocity take the robot, seen from where it set
+    /// out. First order (the turn applied after the straight move): over a
+    /// laser's 0.1 s sweep it is within a millimetre of the arc.
+    pub fn motion(&self, t: f64) -> Pose2 {
+        Pose2::new(self.vx * t, self.vy * t, self.w * t)
+    }
+}
+
+/// A sensor that takes its beams one after another while the robot moves
+/// (a scanning laser: the URG-04LX sweeps its 240° in 67 ms, and turning at
+/// 1 rad/s its last beam is taken 3.8° further round than its first). Puts
+/// each beam where it would have been had the whole sweep been taken at its
+/// first beam, the stamp: the walls a turning robot maps stop bending.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sweep {
+    sensor: Pose2,
+    to_sensor: Pose2,
+    twist: Twist2,
+    time_increment_s: f64,
+}
+
+impl Sweep {
+    /// A sweep by the sensor mounted at `sensor` on the robot, `time_increment_s`
+    /// between beams, the robot moving at `twist`; `None` if either is not a
+    /// finite motion (a zero increment: the beams were taken at once).
+    pub fn new(sensor: Pose2, twist: Twist2, time_increment_s: f64) -> Option<Self> {
+        (twist.is_finite()
+            && sensor.is_finite()
+            && time_increment_s.is_finite()
+            && time_increment_s > 0.0)
+            .then(|| Self {
+                sensor,
+                to_sensor: sensor.inverse(),
+                twist,
+                time_increment_s,
+            })
+    }
+
+    /// Beam `index` (angle rad and range m in the sensor's frame) as seen
+    /// from the sensor at the sweep's first beam.
+    pub fn beam(&self, index: usize, angle: f64, range: f64) -> (f64, f64) {
+        let moved = self.twist.motion(index as f64 * self.time_increment_s);
+        let (s, c) = angle.sin_cos();
+        let end = moved
+            .compose(&self.sensor)
+            .compose(&Pose2::new(c * range, s * range, 0.0));
+        let e = self.to_sensor.compose(&end);
+        (e.y.atan2(e.x), e.x.hypot(e.y))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -193,5 +266,28 @@ mod tests {
         assert_eq!(normalize_angle(-PI), PI);
         assert!((normalize_angle(3.0 * PI) - PI).abs() < 1e-12);
         assert!((normalize_angle(-0.5 - TAU) + 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_sweep_puts_a_beam_taken_later_where_the_first_beam_sees_it() {
+        // A laser 0.1 m ahead of the axle; the robot turns at 1 rad/s and
+        // drives at 0.5 m/s. A point 2 m ahead of the robot as it starts.
+        let mount = Pose2::new(0.1, 0.0, 0.0);
+        let twist = Twist2::new(0.5, 0.0, 1.0);
+        let dt = 0.001;
+        let sweep = Sweep::new(mount, twist, dt).unwrap();
+        let point = Point2::new(2.0, 0.3);
+        for i in [0usize, 10, 66] {
+            // Where the laser saw the point from, 'i' beams in.
+            let laser = twist.motion(i as f64 * dt).compose(&mount);
+            let local = laser.inverse().transform_point(&point);
+            let (a, r) = sweep.beam(i, local.y.atan2(local.x), local.coords.norm());
+            let seen = mount.transform_point(&Point2::new(r * a.cos(), r * a.sin()));
+            assert!((seen - point).norm() < 1e-12, "beam {i}: {seen} ≠ {point}");
+        }
+        // The first beam is left as it is; no motion, no sweep.
+        assert_eq!(sweep.beam(0, 0.25, 3.0).0, 0.25);
+        assert!(Sweep::new(mount, twist, 0.0).is_none());
+        assert!(Sweep::new(mount, Twist2::new(f64::NAN, 0.0, 0.0), dt).is_none());
     }
 }

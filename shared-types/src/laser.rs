@@ -61,6 +61,10 @@ impl BeamReading {
 
 /// One planar laser sweep, laid out like ROS `sensor_msgs/LaserScan`.
 ///
+/// The longest sweep a scan's `time_increment` is believed for, s: no
+/// laser this handles takes half a second over one scan.
+pub const MAX_SWEEP_S: f64 = 0.5;
+
 /// Beam `i` points at `angle_min + i * angle_increment` in the laser frame
 /// (counter-clockwise positive, 0 = straight ahead) and was measured at
 /// `header.stamp_ns + i * time_increment`.
@@ -144,6 +148,14 @@ impl LaserScan {
     /// Angle of the last beam in use, rad.
     pub fn angle_max(&self) -> f32 {
         self.angle(self.len().saturating_sub(1))
+    }
+
+    /// The time between beams if it describes a sweep: finite, positive and
+    /// the whole scan within [`MAX_SWEEP_S`]; `None` otherwise (a log
+    /// without it, a driver's garbage), when the beams count as taken at once.
+    pub fn sweep_time_increment(&self) -> Option<f64> {
+        let dt = f64::from(self.time_increment);
+        (dt.is_finite() && dt > 0.0 && dt * f64::from(self.count) <= MAX_SWEEP_S).then_some(dt)
     }
 
     /// Iterates `(angle, reading)` over the beams in use.

@@ -35,7 +35,7 @@ pub mod voxels;
 pub use catalog::{AnyMessage, AnyMessageRef, Cataloged, Message, MessageKind, MessageVisitor};
 pub use clock::{Clock, MockClock, MonotonicClock, Stamp};
 pub use fused::{FusedScan, FusionMethod, SectionDecision, SectionSource, SyncState};
-pub use geometry::{Pose2, normalize_angle};
+pub use geometry::{Pose2, Sweep, Twist2, normalize_angle};
 pub use header::Header;
 pub use health::{Health, HealthState, Metric};
 pub use identical::BitIdentical;

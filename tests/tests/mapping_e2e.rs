@@ -18,10 +18,12 @@
 use smokenav_algorithms_mapping::{ClampLogOdds, Clamping, Octree};
 use smokenav_platform_bus::{Publisher, Waiter, topics};
 use smokenav_platform_map::OCCUPIED;
-use smokenav_shared_types::{Header, LaserScan, MapInfo, PoseEstimate, SonarRing, VoxelCloud};
+use smokenav_shared_types::{
+    Header, Health, LaserScan, MapInfo, Odometry, PoseEstimate, SonarRing, VoxelCloud,
+};
 use smokenav_sim_link::{DirectDrivers, DirectMessage};
 use smokenav_sim_world::{Pose2, Position, Scenario, StepOutput, World};
-use smokenav_tests::{Child, bin, open_bus, unique_instance};
+use smokenav_tests::{Child, bin, open_bus, unique_instance, wait_for};
 use std::collections::VecDeque;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -54,6 +56,20 @@ impl Grid {
                     && self.cells[cy as usize * self.info.width as usize + cx as usize] > 50
             })
         })
+    }
+
+    /// Centres of the cells over 50.
+    fn occupied_points(&self) -> Vec<(f64, f64)> {
+        let (w, r) = (self.info.width as usize, self.info.resolution as f64);
+        (0..self.cells.len())
+            .filter(|&i| self.cells[i] > 50)
+            .map(|i| {
+                (
+                    self.info.origin_x + ((i % w) as f64 + 0.5) * r,
+                    self.info.origin_y + ((i / w) as f64 + 0.5) * r,
+                )
+            })
+            .collect()
     }
 
     fn recall(&self, cells: &[(f64, f64)]) -> f64 {
@@ -101,6 +117,7 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
     let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
     let mut rings: Publisher<SonarRing> = bus.publisher(topics::BASE_SONAR)?;
     let mut poses: Publisher<PoseEstimate> = bus.publisher(topics::SLAM_POSE)?;
+    let mut odometry: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
     let projected_sub = bus.map_subscriber(topics::MAPPING_PROJECTED)?;
     let grid_sub = bus.map_subscriber(topics::MAPPING_GRID)?;
     let voxel_sub = bus.subscriber::<VoxelCloud>(topics::MAPPING_VOXELS)?;
@@ -154,8 +171,9 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
         drivers.convert(&out, |_, msg| {
             let r = match &msg {
                 DirectMessage::Laser(s) => {
-                    // The pose at mid-sweep, stamped as its scan (SLAM's convention).
-                    let sim_ns = s.header.stamp_ns - T0_NS + 50_000_000;
+                    // The pose at the scan's stamp, its first beam: SLAM's
+                    // convention, as it deskews the sweep to that instant.
+                    let sim_ns = s.header.stamp_ns - T0_NS;
                     let p = pose_at(&history, sim_ns);
                     last_scan_stamp = s.header.stamp_ns;
                     sent_scans += 1;
@@ -167,6 +185,7 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
                     })
                 }
                 DirectMessage::Sonar(r) => rings.publish(r),
+                DirectMessage::Odometry(o) => odometry.publish(o),
                 _ => Ok(0),
             };
             if let Err(e) = r {
@@ -245,6 +264,39 @@ fn mapping_process_maps_out_of_plane_obstacles_and_saves_its_octree() -> anyhow:
     assert!(
         p_walls >= 0.8,
         "projected map found {p_walls:.3} of the walls"
+    );
+    // Every sweep deskewed by the odometry (the robot turns at every
+    // waypoint). How many of the fused grid's walls lie on the arena's is
+    // printed, not checked: sonar arcs in the laser plane dominate it (this
+    // run: 0.449 of 2841 cells without deskewing, 0.485 of 2719 with).
+    let occupied = grid.occupied_points();
+    let near = occupied
+        .iter()
+        .filter(|&&(x, y)| {
+            wall_cells
+                .iter()
+                .any(|&(wx, wy)| (wx - x).hypot(wy - y) <= 1.5 * res)
+        })
+        .count();
+    let precision = near as f64 / occupied.len().max(1) as f64;
+    let health = wait_for::<Health>(
+        &bus,
+        topics::health("mapping"),
+        Duration::from_secs(5),
+        |h| h.metric("scans_mapped").is_some_and(|n| n > 0.0),
+    )?
+    .pop()
+    .expect("a health report");
+    let mapped = health.metric("scans_mapped").unwrap_or(0.0);
+    let deskewed = health.metric("scans_deskewed").unwrap_or(0.0);
+    eprintln!(
+        "mapping_e2e: {deskewed} of {mapped} scans deskewed; {:.3} of the laser-plane grid's {} wall cells within 1.5 cells of a wall",
+        precision,
+        occupied.len()
+    );
+    assert!(
+        deskewed > 0.9 * mapped,
+        "{deskewed} of {mapped} mapped scans deskewed"
     );
 
     // The voxels: 3D, some under the laser plane (the sonar's out-of-plane obstacles).

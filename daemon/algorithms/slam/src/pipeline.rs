@@ -37,8 +37,8 @@ use crate::odom_buffer::{OdomAt, OdomBuffer};
 use crate::scan::{BeamKind, Endpoint, EndpointLimits, RangeScan};
 use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
-use smokenav_shared_types::Pose2;
 use smokenav_shared_types::{FusedScan, LaserScan, Odometry, OdometryFlags};
+use smokenav_shared_types::{Pose2, Twist2};
 
 /// A scan the fusion withheld more than this share of beams from the laser
 /// (painted from the sonar or dropped as smoke) corrects only the heading in
@@ -296,13 +296,13 @@ impl SlamPipeline {
     /// [`TWIST_LOOKBACK_NS`] before `stamp_ns`, where `odom` is the odometry:
     /// how it was moving as the sweep began. `None` without odometry that far
     /// back (the first readings) or across a reset.
-    fn twist_before(&self, stamp_ns: u64, odom: &Pose2) -> Option<(f64, f64, f64)> {
+    fn twist_before(&self, stamp_ns: u64, odom: &Pose2) -> Option<Twist2> {
         let then = self
             .odom
             .interpolated(stamp_ns.checked_sub(TWIST_LOOKBACK_NS)?)?;
         let dt = TWIST_LOOKBACK_NS as f64 * 1e-9;
         let d = then.between(odom);
-        Some((d.x / dt, d.y / dt, d.theta / dt))
+        Some(Twist2::new(d.x / dt, d.y / dt, d.theta / dt))
     }
 
     /// End of the input: the waiting scan with the odometry there is.

@@ -2,7 +2,7 @@
 //! log record, with a noise level per beam.
 
 use smokenav_platform_config::SlamSection;
-use smokenav_shared_types::Pose2;
+use smokenav_shared_types::geometry::{Pose2, Sweep, Twist2};
 use smokenav_shared_types::{BeamReading, FusedScan, LaserScan, SectionSource};
 
 /// Where a beam's range came from, which sets its noise.
@@ -44,9 +44,6 @@ pub struct RangeScan {
     /// log): a laser that sweeps takes its beams while the robot moves.
     pub time_increment_s: f64,
 }
-
-/// The longest sweep [`RangeScan::deskew`] corrects, s.
-const MAX_SWEEP_S: f64 = 0.5;
 
 /// Which beams' endpoints the scan matchers use.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -135,35 +132,20 @@ impl RangeScan {
 
     /// Puts every laser beam where it would have been had the whole sweep
     /// been taken at the scan's stamp (its first beam), the robot moving at
-    /// `twist` meanwhile (robot frame: m/s forward, m/s left, rad/s). The
-    /// URG-04LX sweeps its 240° in 67 ms: turning at 1 rad/s, its last beam
-    /// is taken 3.8° further round than its first, and a scan matched as if
-    /// taken at once bends every wall, so the tracked pose and each wall
-    /// drawn from it are off by centimetres. No-op without a time increment.
-    pub fn deskew(&mut self, twist: (f64, f64, f64)) {
-        let dt = self.time_increment_s;
-        let (vx, vy, w) = twist;
-        if dt <= 0.0 || !(vx.is_finite() && vy.is_finite() && w.is_finite()) {
+    /// `twist` meanwhile ([`Sweep`]). A scan matched as if taken at once
+    /// bends every wall, so the tracked pose and each wall drawn from it are
+    /// off by centimetres. No-op without a time increment.
+    pub fn deskew(&mut self, twist: Twist2) {
+        let Some(sweep) = Sweep::new(self.sensor_pose, twist, self.time_increment_s) else {
             return;
-        }
-        let sensor = self.sensor_pose;
-        let to_sensor = sensor.inverse();
+        };
         for (i, beam) in self.beams.iter_mut().enumerate() {
             let Some(r) = beam.range.filter(|_| beam.kind == BeamKind::Laser) else {
                 continue;
             };
-            let t = i as f64 * dt;
-            // Where the robot was at the beam's time, seen from the stamp's pose.
-            let moved = Pose2::new(vx * t, vy * t, w * t);
-            let (s, c) = f64::from(beam.angle).sin_cos();
-            let end = moved.compose(&sensor).compose(&Pose2::new(
-                c * f64::from(r),
-                s * f64::from(r),
-                0.0,
-            ));
-            let e = to_sensor.compose(&end);
-            beam.angle = e.y.atan2(e.x) as f32;
-            beam.range = Some(e.x.hypot(e.y) as f32);
+            let (angle, range) = sweep.beam(i, f64::from(beam.angle), f64::from(r));
+            beam.angle = angle as f32;
+            beam.range = Some(range as f32);
         }
     }
 
@@ -187,11 +169,7 @@ impl RangeScan {
         } else {
             f32::INFINITY
         };
-        let dt = f64::from(scan.time_increment);
-        // A sweep longer than half a second is no laser this handles.
-        if dt.is_finite() && dt > 0.0 && dt * f64::from(scan.count) <= MAX_SWEEP_S {
-            self.time_increment_s = dt;
-        }
+        self.time_increment_s = scan.sweep_time_increment().unwrap_or(0.0);
         for (angle, reading) in scan.beams() {
             let range = match reading {
                 BeamReading::Range(r) if r.is_finite() && r >= range_min && r < range_max => {
@@ -326,7 +304,7 @@ mod tests {
     /// A 361-beam, 180° sweep of the test room, beam `i` taken `i × dt`
     /// after the first while the robot moves from `start` at `twist`; the
     /// laser 0.2 m ahead of the robot's centre.
-    fn swept(start: &Pose2, twist: (f64, f64, f64), dt: f64) -> RangeScan {
+    fn swept(start: &Pose2, twist: Twist2, dt: f64) -> RangeScan {
         let sensor = Pose2::new(0.2, 0.0, 0.0);
         let mut s = RangeScan {
             sensor_pose: sensor,
@@ -336,9 +314,7 @@ mod tests {
         for i in 0..361 {
             let a = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 360.0;
             let t = i as f64 * dt;
-            let at = start
-                .compose(&Pose2::new(twist.0 * t, twist.1 * t, twist.2 * t))
-                .compose(&sensor);
+            let at = start.compose(&twist.motion(t)).compose(&sensor);
             s.beams.push(Beam {
                 angle: a as f32,
                 range: crate::testkit::cast(at.x, at.y, at.theta + a).map(|r| r as f32),
@@ -367,7 +343,7 @@ mod tests {
         // 0.5° steps over 180° in the same 67 ms.
         let dt = 67e-3 / 360.0;
         let start = Pose2::new(-3.5, -1.5, 0.3);
-        let twist = (0.5, 0.0, 1.0);
+        let twist = Twist2::new(0.5, 0.0, 1.0);
         let mut s = swept(&start, twist, dt);
         let skewed = worst_end(&s, &start);
         assert!(skewed > 0.05, "the sweep bends the walls by {skewed} m");
@@ -382,16 +358,16 @@ mod tests {
     #[test]
     fn a_scan_without_a_time_increment_or_sonar_beams_are_left_as_they_are() {
         let start = Pose2::new(-3.5, -1.5, 0.3);
-        let mut s = swept(&start, (0.0, 0.0, 0.0), 0.0);
+        let mut s = swept(&start, Twist2::default(), 0.0);
         let before = s.beams.clone();
-        s.deskew((0.5, 0.0, 1.0));
+        s.deskew(Twist2::new(0.5, 0.0, 1.0));
         assert_eq!(s.beams, before, "no time increment: nothing to correct");
         s.time_increment_s = 1e-4;
         for b in s.beams.iter_mut().step_by(2) {
             b.kind = BeamKind::Sonar;
         }
         let before = s.beams.clone();
-        s.deskew((0.5, 0.0, 1.0));
+        s.deskew(Twist2::new(0.5, 0.0, 1.0));
         for (b, a) in s.beams.iter().zip(&before) {
             assert_eq!(b == a, b.kind == BeamKind::Sonar, "{b:?} {a:?}");
         }

@@ -1,9 +1,11 @@
 //! `smokenav-mapping`: the 2D/3D occupancy mapping library as a process.
 //!
-//! Subscribes to `slam/pose`, `laser/scan` and `base/sonar`; pairs every
-//! scan and sonar ring with the SLAM pose nearest to it in time (the pose of
-//! a scan carries that scan's stamp, so a scan usually finds its own), and
-//! inserts them into the mapper of `smokenav-algorithms-mapping`: the Bayes
+//! Subscribes to `slam/pose`, `laser/scan`, `base/sonar` and `base/odom`;
+//! pairs every scan and sonar ring with the SLAM pose nearest to it in time
+//! (the pose of a scan carries that scan's stamp, so a scan usually finds
+//! its own), deskews each laser sweep by the odometry's velocity at its
+//! stamp (as the SLAM pipeline does; `[slam] deskew`), and inserts them
+//! into the mapper of `smokenav-algorithms-mapping`: the Bayes
 //! octree and the fused 2D grid in the laser plane. At `[mapping]
 //! publish_rate_hz` it publishes the fused grid on `mapping/grid`, the
 //! octree projected to 2D (everything under the robot's height) on
@@ -33,9 +35,9 @@ use smokenav_algorithms_mapping::{
 use smokenav_platform_bus::{MapPublisher, Publisher, WaitOutcome, Waiter, topics};
 use smokenav_platform_config::{MappingRule, MappingSection};
 use smokenav_platform_runtime::{CommonArgs, Process};
-use smokenav_shared_types::geometry::Pose2;
+use smokenav_shared_types::geometry::{Pose2, Twist2};
 use smokenav_shared_types::{
-    Header, LaserScan, MAX_VOXELS, MapInfo, PoseEstimate, SonarRing, VoxelCloud,
+    Header, LaserScan, MAX_VOXELS, MapInfo, Odometry, PoseEstimate, SonarRing, VoxelCloud,
 };
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -46,7 +48,7 @@ use std::time::{Duration, Instant};
 #[derive(Parser)]
 #[command(
     version,
-    about = "Mapping: slam/pose, laser and sonar in; mapping/grid, mapping/projected, mapping/voxels out"
+    about = "Mapping: slam/pose, laser, sonar and odometry in; mapping/grid, mapping/projected, mapping/voxels out"
 )]
 struct Args {
     #[command(flatten)]
@@ -63,6 +65,11 @@ const POLL: Duration = Duration::from_millis(50);
 const PENDING: usize = 10;
 /// A scan or ring farther than this in time from every pose is not mapped.
 const POSE_TOLERANCE_NS: u64 = 150_000_000;
+/// Odometry velocities kept for deskewing (over a second and a half at the
+/// drivers' 10–20 Hz: longer than a scan waits for its pose).
+const VELOCITIES: usize = 32;
+/// A scan takes the odometry velocity nearest its stamp within this.
+const VELOCITY_TOLERANCE_NS: u64 = 100_000_000;
 /// The file SIGUSR1 writes in `--map-dir`.
 const BT_NAME: &str = "octree.bt";
 
@@ -187,9 +194,49 @@ impl Poses {
     }
 }
 
+/// The odometry's recent velocities, newest last, in a ring allocated once.
+struct Velocities {
+    ring: [(u64, Twist2); VELOCITIES],
+    len: usize,
+    next: usize,
+}
+
+impl Default for Velocities {
+    fn default() -> Self {
+        Self {
+            ring: [(0, Twist2::default()); VELOCITIES],
+            len: 0,
+            next: 0,
+        }
+    }
+}
+
+impl Velocities {
+    fn push(&mut self, o: &Odometry) {
+        let twist = Twist2::new(o.linear, 0.0, o.angular);
+        if !twist.is_finite() {
+            return;
+        }
+        self.ring[self.next] = (o.header.stamp_ns, twist);
+        self.next = (self.next + 1) % VELOCITIES;
+        self.len = (self.len + 1).min(VELOCITIES);
+    }
+
+    /// The velocity stamped nearest `stamp`, if within the tolerance.
+    fn at(&self, stamp: u64) -> Option<Twist2> {
+        self.ring[..self.len]
+            .iter()
+            .map(|(t, v)| (t.abs_diff(stamp), *v))
+            .filter(|(d, _)| *d <= VELOCITY_TOLERANCE_NS)
+            .min_by_key(|(d, _)| *d)
+            .map(|(_, v)| v)
+    }
+}
+
 #[derive(Default)]
 struct Counters {
     scans_mapped: u64,
+    scans_deskewed: u64,
     rings_mapped: u64,
     unpaired: u64,
     maps_published: u64,
@@ -339,6 +386,8 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let pose_sub = p.bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
     let scan_sub = p.bus.subscriber::<LaserScan>(topics::LASER_SCAN)?;
     let sonar_sub = p.bus.subscriber::<SonarRing>(topics::BASE_SONAR)?;
+    let odom_sub = p.bus.subscriber::<Odometry>(topics::BASE_ODOM)?;
+    let deskew = p.config.slam.deskew;
     let mut out = Outputs {
         grid: p.bus.map_publisher(topics::MAPPING_GRID)?,
         projected: p.bus.map_publisher(topics::MAPPING_PROJECTED)?,
@@ -350,11 +399,13 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         waiter.attach(&pose_sub)?,
         waiter.attach(&scan_sub)?,
         waiter.attach(&sonar_sub)?,
+        waiter.attach(&odom_sub)?,
     ];
 
     let mut scans: Pending<LaserScan> = Pending::new(PENDING);
     let mut rings: Pending<SonarRing> = Pending::new(PENDING);
     let mut poses = Poses::default();
+    let mut velocities = Velocities::default();
     let mut counters = Counters::default();
     let mut newest_mapped = None;
     let period = Duration::from_secs_f64(1.0 / cfg.publish_rate_hz);
@@ -364,11 +415,16 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         .health
         .add_rate("maps_hz", Some(cfg.publish_rate_hz.max(1.0)));
     p.ready(&format!(
-        "{rule} maps at {} m from {} + {} + {}, published every {:.1} s, octree saved to {}",
+        "{rule} maps at {} m from {} + {} + {}, {}, published every {:.1} s, octree saved to {}",
         cfg.resolution_m,
         topics::SLAM_POSE.name(),
         topics::LASER_SCAN.name(),
         topics::BASE_SONAR.name(),
+        if deskew {
+            format!("sweeps deskewed by {}", topics::BASE_ODOM.name())
+        } else {
+            "sweeps not deskewed ([slam] deskew = false)".to_owned()
+        },
         period.as_secs_f64(),
         map_dir.display()
     ));
@@ -384,6 +440,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         while let Some(r) = sonar_sub.receive()? {
             rings.push(r.header.stamp_ns, &r);
         }
+        while let Some(o) = odom_sub.receive()? {
+            velocities.push(&o);
+        }
         while let Some(pose) = pose_sub.receive()? {
             poses.push(&pose);
         }
@@ -394,7 +453,13 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             let t0 = Instant::now();
             scans.take_until(until, |stamp, scan| match poses.at(stamp) {
                 Some(pose) => {
-                    mapper.insert_scan(&pose, scan);
+                    match velocities.at(stamp).filter(|_| deskew) {
+                        Some(twist) if mapper.insert_sweep(&pose, scan, twist) => {
+                            counters.scans_deskewed += 1;
+                        }
+                        Some(_) => {} // no time increment: inserted as taken at once
+                        None => mapper.insert_scan(&pose, scan),
+                    }
                     counters.scans_mapped += 1;
                     newest_mapped = newest_mapped.max(Some(stamp));
                     p.health.mark(scan_rate);
@@ -453,6 +518,7 @@ fn report(
 ) {
     let h = &mut p.health;
     h.set_metric("scans_mapped", c.scans_mapped as f64);
+    h.set_metric("scans_deskewed", c.scans_deskewed as f64);
     h.set_metric("rings_mapped", c.rings_mapped as f64);
     h.set_metric("unpaired", c.unpaired as f64);
     h.set_metric("dropped_waiting", (scans.dropped + rings.dropped) as f64);
@@ -487,6 +553,31 @@ mod tests {
         assert_eq!(poses.at(1_240_000_000).map(|p| p.x), Some(2.0));
         assert_eq!(poses.at(1_300_000_000), None);
         assert_eq!(poses.at(800_000_000), None);
+    }
+
+    fn odometry(stamp: u64, linear: f64, angular: f64) -> Odometry {
+        Odometry {
+            header: Header::new(stamp, 0, "odom"),
+            linear,
+            angular,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_scan_takes_the_odometry_velocity_nearest_its_stamp_within_the_tolerance() {
+        let mut v = Velocities::default();
+        assert_eq!(v.at(1_000_000_000), None);
+        // More than the ring holds: the oldest go.
+        for i in 0..VELOCITIES as u64 + 8 {
+            v.push(&odometry(1_000_000_000 + i * 50_000_000, i as f64, -0.5));
+        }
+        v.push(&odometry(9_000_000_000, f64::NAN, 0.0)); // ignored
+        assert_eq!(v.at(1_000_000_000), None, "pushed out of the ring");
+        let last = 1_000_000_000 + (VELOCITIES as u64 + 7) * 50_000_000;
+        assert_eq!(v.at(last + 10_000_000), Some(Twist2::new(39.0, 0.0, -0.5)));
+        assert_eq!(v.at(last - 30_000_000).map(|t| t.vx), Some(38.0));
+        assert_eq!(v.at(last + VELOCITY_TOLERANCE_NS + 1), None);
     }
 
     #[test]

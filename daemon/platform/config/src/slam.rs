@@ -278,7 +278,8 @@ slam_section! {
     /// laser gives its time between beams (the Hokuyo driver does; a
     /// CARMEN log does not). Off for a driver that stamps a scan at its last
     /// beam instead of its first (`sensor_msgs/LaserScan`: the first), whose
-    /// sweeps it would bend the wrong way.
+    /// sweeps it would bend the wrong way. The mapping process reads it too:
+    /// it deskews the scans it maps by `base/odom`'s velocities.
     deskew: bool = (true, true),
     /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
     fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),
