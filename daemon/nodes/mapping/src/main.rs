@@ -194,7 +194,7 @@ impl Poses {
     }
 }
 
-/// The odometry's recent velocities, newest last, in a ring allocated once.
+/// The odometry's recent velocities, in a ring allocated once (the oldest overwritten).
 struct Velocities {
     ring: [(u64, Twist2); VELOCITIES],
     len: usize,

@@ -131,8 +131,12 @@ fn commanded_velocity_is_visible_to_the_owner_and_moves_odometry() {
     host.send(Command::Enable(true));
     host.send(Command::Vel(300));
     host.send(Command::RVel(-20));
+    // Two packets: the emulator may have taken the first and not yet the
+    // second when it reports (a flake seen once in `./test`).
     let st = h
-        .wait_for(Duration::from_secs(1), |s| s.robot.commanded.trans == 300.0)
+        .wait_for(Duration::from_secs(1), |s| {
+            s.robot.commanded.trans == 300.0 && s.robot.commanded.rot == -20.0
+        })
         .unwrap();
     assert_eq!(st.robot.commanded.rot, -20.0);
     let sips = host.sips_for(Duration::from_millis(1000));
