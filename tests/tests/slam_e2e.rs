@@ -371,9 +371,10 @@ fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> a
         "slam_e2e fuzzy: {confident} cells ≥ 0.65 confidence, {nav_occupied} occupied in slam/map"
     );
     assert!(confident > 0);
-    // The walls seen only from afar are in the nav2 map too.
+    // The walls seen only from afar are in the nav2 map too (312 against
+    // 166; 584 before the walls' flanks went to unknown).
     assert!(
-        nav_occupied > 2 * confident,
+        2 * nav_occupied > 3 * confident,
         "{nav_occupied} vs {confident}"
     );
 
