@@ -16,7 +16,10 @@
 //!
 //! Run: `cargo bench -p smokenav-sim-lab --bench live_path` (builds the two
 //! processes in the same profile first; `LIVE_BENCH_SECONDS` of the trial
-//! per back-end, default 60; `LIVE_BENCH_BACKENDS`, default `rbpf,graph`).
+//! per back-end, default 60; `LIVE_BENCH_BACKENDS`, default `rbpf/1,rbpf,graph`:
+//! `NAME/N` runs that back-end with `[slam] threads = N`, so the particle
+//! filter on one thread and on its default pool, one per core, are measured
+//! side by side in one run).
 
 use smokenav_platform_bus::{Bus, BusOptions, Waiter, topics};
 use smokenav_platform_config::RobotConfig;
@@ -124,7 +127,12 @@ fn run_backend(
     backend: &str,
     stream: &[(u64, DirectMessage)],
 ) -> Figures {
-    let instance = format!("live_bench_{}_{backend}", std::process::id());
+    // One bus per run: `rbpf/1` and `rbpf` differ only in their profile's file.
+    let stem = profile_path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("robot");
+    let instance = format!("live_bench_{}_{backend}_{stem}", std::process::id());
     let bus = Bus::open(&BusOptions::new(&instance, "live-bench")).expect("bus");
     let mut laser = bus.publisher(topics::LASER_SCAN).expect("publisher");
     let mut sonar = bus.publisher(topics::BASE_SONAR).expect("publisher");
@@ -265,7 +273,8 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(60.0);
-    let backends = std::env::var("LIVE_BENCH_BACKENDS").unwrap_or_else(|_| "rbpf,graph".into());
+    let backends =
+        std::env::var("LIVE_BENCH_BACKENDS").unwrap_or_else(|_| "rbpf/1,rbpf,graph".into());
     let bins = build_processes();
     let scenario = Scenario::builtin("r32-dense-crossing").expect("scenario");
     let mut profile = scenario.profile.clone();
@@ -283,8 +292,20 @@ fn main() {
         scenario.name,
         stream.len()
     );
-    for backend in backends.split(',').map(str::trim).filter(|b| !b.is_empty()) {
-        let f = run_backend(&bins, &profile_path, backend, &stream);
+    for label in backends.split(',').map(str::trim).filter(|b| !b.is_empty()) {
+        let (backend, path) = match label.split_once('/') {
+            Some((backend, threads)) => {
+                let mut p = profile.clone();
+                p.slam.threads = threads
+                    .parse()
+                    .unwrap_or_else(|_| panic!("{label}: threads must be a number"));
+                let path = dir.join(format!("robot-{threads}.toml"));
+                std::fs::write(&path, p.to_toml()).expect("write profile");
+                (backend, path)
+            }
+            None => (label, profile_path.clone()),
+        };
+        let f = run_backend(&bins, &path, backend, &stream);
         let target_ms = match backend {
             "graph" => Some(15.0),
             "rbpf" => Some(30.0),
@@ -294,7 +315,7 @@ fn main() {
         v.sort_unstable();
         if v.is_empty() {
             println!(
-                "  {backend:<6} no pose arrived ({} scans, {} misses)",
+                "  {label:<8} no pose arrived ({} scans, {} misses)",
                 f.scans, f.misses
             );
             continue;
@@ -302,7 +323,7 @@ fn main() {
         let at = |p: f64| v[((v.len() as f64 * p) as usize).min(v.len() - 1)] as f64 / 1e3;
         let over = target_ms.map_or(0, |t| v.iter().filter(|&&x| x as f64 / 1e3 > t).count());
         println!(
-            "  {backend:<6} scans {:>5}  p50 {:>6.2} ms  p99 {:>6.2} ms  max {:>7.2} ms  missed (no pose) {}  over {} ms {}  (fused {}, skipped by slam {})",
+            "  {label:<8} scans {:>5}  p50 {:>6.2} ms  p99 {:>6.2} ms  max {:>7.2} ms  missed (no pose) {}  over {} ms {}  (fused {}, skipped by slam {})",
             f.scans,
             at(0.5),
             at(0.99),

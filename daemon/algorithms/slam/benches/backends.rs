@@ -234,13 +234,18 @@ fn main() {
     };
     let which = std::env::var("BACKENDS").unwrap_or_else(|_| "rbpf,graph,frontend".into());
     // `SLAM_TOML='frontend = false\n[fuzzy]\nsearch = "correlative"'` overrides `[slam]` keys.
-    let cfg = match std::env::var("SLAM_TOML") {
+    let mut cfg = match std::env::var("SLAM_TOML") {
         Ok(text) => {
             smokenav_platform_config::parse_toml::<SlamSection>(&text, "SLAM_TOML".as_ref())
                 .unwrap_or_else(|e| panic!("{e}"))
         }
         Err(_) => SlamSection::default(),
     };
+    // One core: the figures are this thread's CPU, which the particle
+    // filter's pool (`threads`, default one per core) would hide work from.
+    if cfg.threads == 0 {
+        cfg.threads = 1;
+    }
     let reference_stamps: Vec<u64> = reference
         .iter()
         .map(|r| (r.t * 1e6).round() as u64 * 1000)

@@ -67,6 +67,10 @@ fn main() {
         .unwrap_or_default()
         .replace(';', "\n");
     let mut cfg: SlamSection = parse_toml(&extra, Path::new("CSAIL_PARAMS")).expect("CSAIL_PARAMS");
+    // One core: per-scan figures are this thread's CPU (see `[slam] threads`).
+    if cfg.threads == 0 {
+        cfg.threads = 1;
+    }
     if let Some(n) = std::env::var("CSAIL_PARTICLES")
         .ok()
         .and_then(|v| v.parse().ok())

@@ -162,6 +162,11 @@ macro_rules! slam_section {
 slam_section! {
     /// Number of particles (Table 3: particles).
     particles: usize = (30, 30),
+    /// Threads that scan-match, weigh and write the particles of one scan side
+    /// by side (each particle's work is its own, so the result does not
+    /// depend on it); 0 = one per core the computer has. Cuts the time from a
+    /// scan to its pose, not the CPU time.
+    threads: usize = (0, 0),
     /// Map cell size, m (Table 3: delta).
     resolution_m: f64 = (0.05, 0.01),
     /// How often the SLAM process publishes the best particle's map, Hz.
@@ -302,6 +307,12 @@ impl Validate for SlamSection {
             v.fail(
                 k("particles"),
                 format!("must be 1–1000, got {}", self.particles),
+            );
+        }
+        if self.threads > 256 {
+            v.fail(
+                k("threads"),
+                format!("must be 0 (one per core) to 256, got {}", self.threads),
             );
         }
         v.within(&k("resolution_m"), self.resolution_m, 0.005, 1.0);

@@ -509,3 +509,16 @@ fn deskewing_is_on_by_default_and_can_be_turned_off() {
         "{msg}"
     );
 }
+
+#[test]
+fn particle_filter_threads_default_to_one_per_core_and_are_bounded() {
+    assert_eq!(parse(&pioneer_text()).unwrap().slam.threads, 0);
+    let two = pioneer_text().replace("[slam]\n", "[slam]\nthreads = 2\n");
+    assert_eq!(parse(&two).unwrap().slam.threads, 2);
+    let err = parse(&pioneer_text().replace("[slam]\n", "[slam]\nthreads = 1000\n")).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("slam.threads") && msg.contains("config/test-robot.toml"),
+        "{msg}"
+    );
+}

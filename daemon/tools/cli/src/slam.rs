@@ -218,15 +218,17 @@ struct Run {
 impl Run {
     /// Times `f` (one scan through the pipeline) and keeps its update.
     fn timed(&mut self, f: impl FnOnce() -> Option<SlamUpdate>) {
+        // The process's clock, not this thread's: the particle filter's pool
+        // and the vote's members work on the scan on threads of their own.
         let (c0, w0) = (
-            cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID),
+            cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID),
             Instant::now(),
         );
         let Some(update) = f() else {
             return;
         };
         let wall = w0.elapsed().as_nanos() as u64;
-        let cpu = cpu_ns(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).saturating_sub(c0);
+        let cpu = cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID).saturating_sub(c0);
         self.cpu_per_scan.push(cpu);
         self.wall_per_scan.push(wall);
         self.processed += usize::from(update.processed);
