@@ -1,7 +1,8 @@
 //! Live == offline for SLAM: the same recording of fused scans and odometry
 //! through the real `smokenav-slam` process over iceoryx2 and through the
 //! offline path (`offline::replay` into a `SlamPipeline`, what the demo's
-//! comparison runs) gives the same poses, bit for bit.
+//! comparison runs) gives the same poses, bit for bit — the process with its
+//! particles matched on a pool of two threads, the offline path on one.
 //!
 //! The recording is the first 200 scans of the MIT CSAIL log made into what
 //! the robot's bus carries: each laser scan as a fused scan (a smoke level
@@ -82,6 +83,8 @@ fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()>
         c.slam.input = SlamInput::Fused;
         // Few particles keep a debug build quick.
         c.slam.particles = 10;
+        // The process matches them on a pool; offline below on one thread.
+        c.slam.threads = 2;
         // The CARMEN laser pose is the robot pose.
         c.laser.mount = MountPose {
             x: 0.0,
@@ -95,7 +98,7 @@ fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()>
         &instance,
     )?;
     slam.wait_for_line(
-        "rbpf with 10 particles on fusion/scan",
+        "rbpf with 10 particles (2 threads) on fusion/scan",
         Duration::from_secs(30),
     )?;
 
@@ -127,8 +130,9 @@ fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()>
         "lock step skips nothing"
     );
 
-    // Offline: the profile the process read, the pipeline the process runs.
-    let cfg = RobotConfig::load(&cfg_path)?;
+    // Offline: the profile the process read (but one thread), the pipeline the process runs.
+    let mut cfg = RobotConfig::load(&cfg_path)?;
+    cfg.slam.threads = 1;
     let m = &cfg.laser.mount;
     let mut pipeline = SlamPipeline::from_config(&cfg.slam, &BackendOptions::default())
         .with_sensor_pose(Pose2::new(m.x, m.y, m.yaw_rad()));

@@ -33,6 +33,7 @@ use clap::Parser;
 use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
 use smokenav_algorithms_slam::pipeline::PipelineStats;
 use smokenav_algorithms_slam::projected::SensorRig;
+use smokenav_algorithms_slam::rbpf::Rbpf;
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::vote::member::MemberFault;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
@@ -327,7 +328,15 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let rate = p.health.add_rate("pose_hz", Some(10.0));
     // Only the particle filter has particles to speak of.
     let mut backend = match cfg.backend {
-        SlamBackendKind::Rbpf => format!("rbpf with {} particles", cfg.particles),
+        SlamBackendKind::Rbpf => format!(
+            "rbpf with {} particles ({} threads)",
+            cfg.particles,
+            pipeline
+                .backend()
+                .as_any()
+                .downcast_ref::<Rbpf>()
+                .map_or(1, Rbpf::threads)
+        ),
         _ => pipeline.backend().name().to_string(),
     };
     if let Some(g) = &args.load_graph {

@@ -215,6 +215,12 @@ impl Rbpf {
         }
     }
 
+    /// Threads the particles are matched on: the pool's, or 1 without one
+    /// (asked for one, or the pool could not be started).
+    pub fn threads(&self) -> usize {
+        self.pool.as_ref().map_or(1, |p| p.current_num_threads())
+    }
+
     pub fn particles(&self) -> &[Particle] {
         &self.particles
     }
@@ -650,7 +656,7 @@ mod tests {
                 ..cfg(12)
             };
             let mut slam = rbpf(&c);
-            assert_eq!(slam.pool.is_some(), threads > 1);
+            assert_eq!(slam.threads(), threads);
             let mut truth = Pose2::new(-3.5, -1.5, 0.0);
             for k in 0..12 {
                 // The wheels claim 10 % more than the robot drove: matching has work.
