@@ -98,7 +98,7 @@ fn slam_process_and_offline_pipeline_give_the_same_poses() -> anyhow::Result<()>
         &instance,
     )?;
     slam.wait_for_line(
-        "rbpf with 10 particles (2 threads) on fusion/scan",
+        "rbpf with 10 particles on fusion/scan + base/odom, map every 1.0 s, particles matched on 2 threads",
         Duration::from_secs(30),
     )?;
 

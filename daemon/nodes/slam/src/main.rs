@@ -328,15 +328,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let rate = p.health.add_rate("pose_hz", Some(10.0));
     // Only the particle filter has particles to speak of.
     let mut backend = match cfg.backend {
-        SlamBackendKind::Rbpf => format!(
-            "rbpf with {} particles ({} threads)",
-            cfg.particles,
-            pipeline
-                .backend()
-                .as_any()
-                .downcast_ref::<Rbpf>()
-                .map_or(1, Rbpf::threads)
-        ),
+        SlamBackendKind::Rbpf => format!("rbpf with {} particles", cfg.particles),
         _ => pipeline.backend().name().to_string(),
     };
     if let Some(g) = &args.load_graph {
@@ -346,8 +338,12 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         };
         backend = format!("{backend} {what} {}", g.display());
     }
+    let threads = match pipeline.backend().as_any().downcast_ref::<Rbpf>() {
+        Some(rbpf) => format!(", particles matched on {} threads", rbpf.threads()),
+        None => String::new(),
+    };
     p.ready(&format!(
-        "{backend} on {} + {}, map every {:.1} s",
+        "{backend} on {} + {}, map every {:.1} s{threads}",
         scans.topic(),
         topics::BASE_ODOM,
         map_period.as_secs_f64()
