@@ -339,6 +339,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         backend = format!("{backend} {what} {}", g.display());
     }
     let threads = match pipeline.backend().as_any().downcast_ref::<Rbpf>() {
+        Some(rbpf) if rbpf.threads() == 1 => ", particles matched on 1 thread".to_string(),
         Some(rbpf) => format!(", particles matched on {} threads", rbpf.threads()),
         None => String::new(),
     };
