@@ -386,3 +386,22 @@ fn without_a_route_the_drivers_velocity_commands_move_the_world() {
     );
     assert!((last.x - start_pose.x).abs() < 0.05, "{last:?}");
 }
+
+/// Sped up, the emulated URG sweeps faster in host time than the period it
+/// reports, so the profile a sped-up link writes turns the SLAM's deskewing
+/// off (deskewed by the reported beam time, every sweep was corrected twice
+/// over at 2×, and `slam_loop_e2e`'s drift grew until a false closure was
+/// accepted in half its runs); at real time it stays on.
+#[test]
+fn a_sped_up_link_writes_a_profile_that_does_not_deskew() {
+    let profile = |speed: f64| {
+        let dir = tempfile::tempdir().unwrap();
+        let scenario = Scenario::builtin("r32-dense-crossing").unwrap();
+        let mut cfg = SimLinkConfig::new(scenario, dir.path().join("dev"));
+        cfg.speed = speed;
+        let link = SimLink::start(cfg).unwrap();
+        link.driver_profile(None)
+    };
+    assert!(profile(1.0).slam.deskew);
+    assert!(!profile(2.0).slam.deskew);
+}

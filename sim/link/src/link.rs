@@ -275,6 +275,13 @@ impl SimLink {
         if let Some(i) = instance {
             p.robot.instance = i.to_owned();
         }
+        // Sped up, the emulated URG sweeps `speed` times faster in host time
+        // than the period it reports, from which the driver derives each
+        // beam's time: deskewed by it, every sweep would be corrected `speed`
+        // times over, bending the walls the other way.
+        if (self.speed - 1.0).abs() > 1e-9 {
+            p.slam.deskew = false;
+        }
         p
     }
 
