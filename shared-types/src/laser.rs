@@ -59,12 +59,12 @@ impl BeamReading {
     }
 }
 
-/// One planar laser sweep, laid out like ROS `sensor_msgs/LaserScan`.
-///
 /// The longest sweep a scan's `time_increment` is believed for, s: no
 /// laser this handles takes half a second over one scan.
 pub const MAX_SWEEP_S: f64 = 0.5;
 
+/// One planar laser sweep, laid out like ROS `sensor_msgs/LaserScan`.
+///
 /// Beam `i` points at `angle_min + i * angle_increment` in the laser frame
 /// (counter-clockwise positive, 0 = straight ahead) and was measured at
 /// `header.stamp_ns + i * time_increment`.
