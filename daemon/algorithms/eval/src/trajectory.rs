@@ -344,6 +344,13 @@ pub enum TrajectoryMetricError {
         "only {pairs} estimated pose(s) fall within the ground truth's time span (need at least 2)"
     )]
     TooFewPairs { pairs: usize },
+    /// Same-stamp pairing found too few poses at the reference's stamps: a
+    /// reference sampled on its own clock (a simulator's truth) needs
+    /// [`Pairing::Interpolate`].
+    #[error(
+        "only {pairs} estimated pose(s) lie within {tolerance_ms} ms of a reference pose's stamp (need at least 2)"
+    )]
+    TooFewAtSameStamps { pairs: usize, tolerance_ms: f64 },
 }
 
 fn wrap(a: f64) -> f64 {
@@ -413,7 +420,13 @@ pub fn evaluate_trajectories(
         })
         .collect();
     if pairs.len() < 2 {
-        return Err(TrajectoryMetricError::TooFewPairs { pairs: pairs.len() });
+        return Err(match opts.pairing {
+            Pairing::Interpolate => TrajectoryMetricError::TooFewPairs { pairs: pairs.len() },
+            Pairing::SameStamp { tolerance_s } => TrajectoryMetricError::TooFewAtSameStamps {
+                pairs: pairs.len(),
+                tolerance_ms: tolerance_s * 1e3,
+            },
+        });
     }
     // Closed-form least-squares rigid alignment (Horn/Umeyama, no scale).
     let (mut dth, mut tx, mut ty) = (0.0, 0.0, 0.0);
@@ -690,7 +703,10 @@ mod tests {
         assert!(r.ate_m.rmse < r.ate_m.max);
         assert_eq!(
             evaluate_trajectories(&reference, &estimate, &near(1e-9)),
-            Err(TrajectoryMetricError::TooFewPairs { pairs: 0 }),
+            Err(TrajectoryMetricError::TooFewAtSameStamps {
+                pairs: 0,
+                tolerance_ms: 1e-6
+            }),
             "stamps 3 ns apart do not pair at 1 ns"
         );
     }

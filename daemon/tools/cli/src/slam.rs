@@ -9,8 +9,8 @@
 
 use anyhow::Context;
 use smokenav_algorithms_eval::{
-    TrajectoryFormat, TrajectoryOptions, evaluate_trajectories, format_trajectory_as,
-    load_trajectory,
+    TrajectoryFormat, TrajectoryMetricError, TrajectoryOptions, TrajectoryReport,
+    evaluate_trajectories, format_trajectory_as, load_trajectory,
 };
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_slam::fuzzy::FuzzySlam;
@@ -77,8 +77,10 @@ pub struct SlamArgs {
     /// SLAM back-end (overrides `[slam] backend`).
     #[arg(long, value_enum)]
     backend: Option<SlamBackendKind>,
-    /// Reference poses (`timestamp x y theta`) at some of the log's stamps to
-    /// compare the trajectory with (paired by stamp, not interpolated).
+    /// Reference poses (`timestamp x y theta`) to compare the trajectory with:
+    /// paired by stamp where they sit at the log's stamps (GMapping's
+    /// corrected CARMEN poses), else interpolated at the estimate's stamps (a
+    /// simulator's truth, sampled on its own clock; the report says which).
     #[arg(long, value_name = "FILE")]
     reference: Option<PathBuf>,
     /// Stop after this many scans.
@@ -743,11 +745,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     }
     if let Some(reference) = &reference {
         for (name, est) in [("trajectory", &trajectory), ("online", &online)] {
-            match evaluate_trajectories(reference, est, &TrajectoryOptions::same_stamp()) {
-                Ok(r) => {
+            match evaluate_against_reference(reference, est) {
+                Ok((r, pairing)) => {
                     let _ = writeln!(
                         report,
-                        "ATE {name:<14} RMS {:.3} m, max {:.3} m (at {:.6}), {} poses matched; RPE {:.3} m, {:.2}° per {} s; relations {:.4} ± {:.4} m, {:.3} ± {:.3}° ({})",
+                        "ATE {name:<14} RMS {:.3} m, max {:.3} m (at {:.6}), {} poses {pairing}; RPE {:.3} m, {:.2}° per {} s; relations {:.4} ± {:.4} m, {:.3} ± {:.3}° ({})",
                         r.ate_m.rmse,
                         r.ate_m.max,
                         r.ate_max_at_s,
@@ -783,6 +785,24 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     write(&args.out.join("stats.txt"), &report)?;
     print!("{report}");
     Ok(())
+}
+
+/// The trajectory against `--reference`: paired at equal stamps when the
+/// reference lies at the log's stamps, else (no two poses within 1 ms of a
+/// reference stamp) with the reference interpolated at the estimate's stamps.
+/// Returns the report and how the poses were paired.
+fn evaluate_against_reference(
+    reference: &[smokenav_algorithms_eval::StampedPose],
+    est: &[smokenav_algorithms_eval::StampedPose],
+) -> Result<(TrajectoryReport, &'static str), TrajectoryMetricError> {
+    match evaluate_trajectories(reference, est, &TrajectoryOptions::same_stamp()) {
+        Ok(r) => Ok((r, "matched")),
+        Err(TrajectoryMetricError::TooFewAtSameStamps { .. }) => {
+            evaluate_trajectories(reference, est, &TrajectoryOptions::default())
+                .map(|r| (r, "paired with the reference interpolated"))
+        }
+        Err(e) => Err(e),
+    }
 }
 
 /// The log's scans drawn at the reference poses (where the reference has a
