@@ -526,29 +526,40 @@ fn conditions(members_out: &[String], stats: &PipelineStats, max_blind_m: f64) -
 
 fn report(p: &mut Process, pipeline: &SlamPipeline, c: &Counters, scans: &Scans) {
     let h = &mut p.health;
+    metrics(pipeline, c, scans.lost(), &mut |name, value| {
+        h.set_metric(name, value)
+    });
+}
+
+/// Metrics of `health/slam` besides its rate (`pose_hz`) and a configured
+/// `rate_floor`: the pipeline's counters, then the back-end's own.
+fn metrics(
+    pipeline: &SlamPipeline,
+    c: &Counters,
+    lost_on_bus: u64,
+    emit: &mut dyn FnMut(&'static str, f64),
+) {
     let stats = pipeline.stats();
-    h.set_metric("scans_processed", c.processed as f64);
-    h.set_metric("scans_skipped", (stats.superseded + scans.lost()) as f64);
-    h.set_metric("scans_lost_on_bus", scans.lost() as f64);
-    h.set_metric("scans_without_odometry", stats.no_odometry as f64);
-    h.set_metric("scans_without_ranges", stats.empty_scans as f64);
-    h.set_metric("scans_held_back", stats.held_back as f64);
-    h.set_metric("odom_resets", stats.odom_resets as f64);
-    h.set_metric("odom_out_of_order", stats.odom_out_of_order as f64);
-    h.set_metric("frontend_fallbacks", stats.frontend_fallbacks as f64);
-    h.set_metric("frontend_withheld", stats.frontend_withheld as f64);
-    h.set_metric("heading_blind_m", stats.blind_m);
-    h.set_metric("heading_blind_deg", stats.blind_rad.to_degrees());
-    h.set_metric("heading_blind_longest_m", stats.longest_blind_m);
+    emit("scans_processed", c.processed as f64);
+    emit("scans_skipped", (stats.superseded + lost_on_bus) as f64);
+    emit("scans_lost_on_bus", lost_on_bus as f64);
+    emit("scans_without_odometry", stats.no_odometry as f64);
+    emit("scans_without_ranges", stats.empty_scans as f64);
+    emit("scans_held_back", stats.held_back as f64);
+    emit("odom_resets", stats.odom_resets as f64);
+    emit("odom_out_of_order", stats.odom_out_of_order as f64);
+    emit("frontend_fallbacks", stats.frontend_fallbacks as f64);
+    emit("frontend_withheld", stats.frontend_withheld as f64);
+    emit("heading_blind_m", stats.blind_m);
+    emit("heading_blind_deg", stats.blind_rad.to_degrees());
+    emit("heading_blind_longest_m", stats.longest_blind_m);
     // Zero on a laser without a time between beams: its sweeps stay bent.
-    h.set_metric("scans_deskewed", stats.deskewed as f64);
-    h.set_metric("maps_published", c.maps_published as f64);
-    h.set_metric("maps_saved", c.maps_saved as f64);
-    h.set_metric("publish_errors", c.publish_errors as f64);
+    emit("scans_deskewed", stats.deskewed as f64);
+    emit("maps_published", c.maps_published as f64);
+    emit("maps_saved", c.maps_saved as f64);
+    emit("publish_errors", c.publish_errors as f64);
     // The back-end's own figures (the particle filter's resamples and N_eff).
-    pipeline
-        .backend()
-        .metrics(&mut |name, value| h.set_metric(name, value));
+    pipeline.backend().metrics(emit);
 }
 
 #[cfg(test)]
@@ -592,6 +603,60 @@ mod tests {
         let r = conditions(&out, &blind(6.2), 5.0);
         assert_eq!(r.len(), 2);
         assert_eq!(r[0], "vote: member rbpf stalled");
+    }
+
+    /// A health report holds `MAX_METRICS`; one past it is lost. Every
+    /// back-end as the process runs it (the graph online, with its closure
+    /// thread's figures), with the rate and a configured floor, must fit.
+    #[test]
+    fn every_backends_health_fits_one_report() {
+        use smokenav_platform_config::RobotConfig;
+        use smokenav_shared_types::health::MAX_METRICS;
+        let config = RobotConfig::builtin("nomad-scout").unwrap();
+        for kind in [
+            SlamBackendKind::Rbpf,
+            SlamBackendKind::Graph,
+            SlamBackendKind::Fuzzy,
+            SlamBackendKind::Vote,
+        ] {
+            let mut cfg = config.slam.clone();
+            cfg.backend = kind;
+            let opts = BackendOptions {
+                online: true,
+                sensors: Some(Arc::new(SensorRig::from_config(&config))),
+                ..BackendOptions::default()
+            };
+            let pipeline = if kind == SlamBackendKind::Vote {
+                cfg.vote.lockstep = false;
+                SlamPipeline::new(&cfg, Box::new(VoteSlam::new(&cfg, &opts, None).unwrap()))
+            } else {
+                SlamPipeline::from_config(&cfg, &opts)
+            };
+            let mut names = Vec::new();
+            metrics(&pipeline, &Counters::default(), 0, &mut |n, _| {
+                names.push(n)
+            });
+            let mut unique = names.clone();
+            unique.sort_unstable();
+            unique.dedup();
+            assert_eq!(
+                unique.len(),
+                names.len(),
+                "{kind:?}: a name twice in {names:?}"
+            );
+            for n in &names {
+                assert!(
+                    n.len() <= smokenav_shared_types::health::METRIC_NAME_LEN,
+                    "{n}"
+                );
+            }
+            // + pose_hz + rate_floor.
+            assert!(
+                names.len() + 2 <= MAX_METRICS,
+                "{kind:?}: {} metrics and 2 more do not fit {MAX_METRICS}: {names:?}",
+                names.len()
+            );
+        }
     }
 
     #[test]

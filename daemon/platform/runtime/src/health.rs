@@ -134,6 +134,8 @@ pub struct HealthReporter {
     rate_floor: f64,
     /// `last_error` holds this reporter's low-rate message (cleared on recovery).
     rate_error: bool,
+    /// A metric did not fit the report (warned once).
+    table_full_logged: bool,
 }
 
 /// Fraction of its expected rate below which a rate counts as low, unless configured.
@@ -156,6 +158,7 @@ impl HealthReporter {
             ok_since: None,
             rate_floor: DEFAULT_RATE_FLOOR,
             rate_error: false,
+            table_full_logged: false,
         })
     }
 
@@ -190,8 +193,14 @@ impl HealthReporter {
 
     /// Sets a named value (a counter, gauge, or setting worth showing).
     pub fn set_metric(&mut self, name: &str, value: f64) {
-        if !self.health.set_metric(name, value, None) {
-            tracing::debug!(name, "health metric table full");
+        if !self.health.set_metric(name, value, None) && !self.table_full_logged {
+            // Once: the report goes out every period with the same names.
+            self.table_full_logged = true;
+            tracing::warn!(
+                name,
+                max = smokenav_shared_types::health::MAX_METRICS,
+                "health metric table full: this metric and any later new one are not reported"
+            );
         }
     }
 

@@ -187,7 +187,13 @@ fn a_reference_on_its_own_clock_is_interpolated_not_refused() {
     let log = data().join("csail-prefix-200.clf");
     let run = |out: &str, extra: &[&str]| {
         let o = Command::new(env!("CARGO_BIN_EXE_smokenav"))
-            .args(["slam", "--backend", "graph", "--carmen", log.to_str().unwrap()])
+            .args([
+                "slam",
+                "--backend",
+                "graph",
+                "--carmen",
+                log.to_str().unwrap(),
+            ])
             .args(extra)
             .arg("--out")
             .arg(dir.path().join(out))
