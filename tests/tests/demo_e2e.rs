@@ -93,6 +93,18 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
         v["clean_reference"]["scenario"],
         "r32-dense-crossing (no smoke)"
     );
+    // Judged beam by beam against the twin: laser-only hands SLAM every
+    // beam; in the clean air of the first 30 s v2 withholds almost none.
+    for m in ["laser-only", "v1", "v2"] {
+        let j = &v["methods"][m]["laser_verdict"];
+        assert!(j["scans"].as_u64().unwrap() >= 290, "{m}: {j}");
+        assert!(j["clean_beams"].as_u64().unwrap() > 100_000, "{m}: {j}");
+    }
+    let lo = &v["methods"]["laser-only"]["laser_verdict"];
+    assert_eq!(lo["clean_beams_withheld"], 0, "{lo}");
+    assert_eq!(lo["smoke_beams_kept"], lo["smoke_beams"], "{lo}");
+    let v2 = &v["methods"]["v2"]["laser_verdict"];
+    assert!(v2["clean_withheld_share"].as_f64().unwrap() < 0.05, "{v2}");
     // The file holds what stdout printed.
     let file: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("comparison.json")).unwrap())
@@ -212,6 +224,21 @@ fn full_dense_trial_v2_maps_far_better_than_laser_only_and_no_worse_in_clean_air
     );
     assert!(v2 < 0.5 * laser, "v2 {v2} vs laser-only {laser}");
     assert!(v1 < laser, "v1 {v1} vs laser-only {laser}");
+    // The fusion's own verdict against the smoke-free twin: how many of the
+    // beams the smoke changed each method still handed to SLAM.
+    let kept = |m: &str| {
+        smoke[m]["laser_verdict"]["smoke_kept_share"]
+            .as_f64()
+            .unwrap()
+    };
+    eprintln!(
+        "smoke-changed beams handed to SLAM: laser-only {:.3}, v1 {:.3}, v2 {:.3}",
+        kept("laser-only"),
+        kept("v1"),
+        kept("v2")
+    );
+    assert_eq!(kept("laser-only"), 1.0);
+    assert!(kept("v2") < 0.25, "v2 kept {}", kept("v2"));
     let clean = &v["clean_reference"]["methods"];
     let base = err(clean, "laser-only");
     for m in ["v1", "v2"] {

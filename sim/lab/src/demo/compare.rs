@@ -12,7 +12,7 @@ use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, StampedPose};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_map::OccupancyGrid;
-use smokenav_shared_types::{FusedScan, FusionMethod};
+use smokenav_shared_types::{FusedScan, FusionMethod, LaserScan, SectionSource};
 use smokenav_sim_link::TruthTrack;
 use std::sync::Arc;
 
@@ -51,6 +51,106 @@ pub struct MethodResult {
     pub trajectory_report: Result<TrajectoryReport, String>,
     /// (map error, ATE) of every SLAM run, one per random seed; the median by map error is the one above.
     pub runs: Vec<(Option<f64>, Option<f64>)>,
+    /// What the method did with the beams the smoke changed and those it left
+    /// alone, against the smoke-free twin (set when the twin ran).
+    pub laser_verdict: Option<LaserVerdict>,
+}
+
+/// A range moved by more than this between a scan and the same scan of the
+/// smoke-free twin is the smoke's doing (the twin has the same noise).
+pub const SMOKE_CHANGED_M: f32 = 0.1;
+
+/// What a fusion method did with the laser's beams, judged against the
+/// scenario's smoke-free twin (same seed, same route and noise: the smoke is
+/// the only difference). A beam the smoke changed (its range moved by more
+/// than [`SMOKE_CHANGED_M`], or it returned where the twin's did not) and
+/// that the method handed to SLAM as the laser's is a phantom SLAM saw; a
+/// beam the smoke left alone that the method withheld is a wall SLAM lost.
+/// The fusion's own confusion matrix, beside the map error it leads to.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct LaserVerdict {
+    /// Fused scans paired with a scan of the twin.
+    pub scans: u64,
+    /// Beams with a return the smoke changed.
+    pub smoke_beams: u64,
+    /// … that reached SLAM as the laser's.
+    pub smoke_beams_kept: u64,
+    /// Beams with a return within [`SMOKE_CHANGED_M`] of the twin's.
+    pub clean_beams: u64,
+    /// … that did not reach SLAM as the laser's.
+    pub clean_beams_withheld: u64,
+}
+
+impl LaserVerdict {
+    /// Share of the smoke-changed beams that reached SLAM (`None` without any).
+    pub fn smoke_kept_share(&self) -> Option<f64> {
+        (self.smoke_beams > 0).then(|| self.smoke_beams_kept as f64 / self.smoke_beams as f64)
+    }
+
+    /// Share of the smoke-free beams the method withheld (`None` without any).
+    pub fn clean_withheld_share(&self) -> Option<f64> {
+        (self.clean_beams > 0).then(|| self.clean_beams_withheld as f64 / self.clean_beams as f64)
+    }
+}
+
+/// Scans of `log` by their time since its first, in tenths of a second (how
+/// a recording and its twin's are paired: their clocks start apart).
+pub fn scans_by_tick(log: &SensorLog) -> std::collections::HashMap<i64, &LaserScan> {
+    let Some(t0) = log.lasers.first().map(|s| s.header.stamp_ns) else {
+        return Default::default();
+    };
+    log.lasers
+        .iter()
+        .map(|s| (tick(s.header.stamp_ns, t0), &**s))
+        .collect()
+}
+
+/// Tenths of a second from `t0` to `stamp`, rounded.
+pub fn tick(stamp: u64, t0: u64) -> i64 {
+    (stamp.saturating_sub(t0) as f64 / 1e8).round() as i64
+}
+
+/// The [`LaserVerdict`] of `fused` (fused from `smoky`) against the twin's scans.
+pub fn laser_verdict(fused: &[Emitted], smoky: &SensorLog, twin: &SensorLog) -> LaserVerdict {
+    let mut v = LaserVerdict::default();
+    let Some(t0) = smoky.lasers.first().map(|s| s.header.stamp_ns) else {
+        return v;
+    };
+    let raw: std::collections::HashMap<u64, &LaserScan> = smoky
+        .lasers
+        .iter()
+        .map(|s| (s.header.stamp_ns, &**s))
+        .collect();
+    let twin = scans_by_tick(twin);
+    for (_, f) in fused {
+        let stamp = f.scan.header.stamp_ns;
+        let (Some(s), Some(c)) = (raw.get(&stamp), twin.get(&tick(stamp, t0))) else {
+            continue;
+        };
+        v.scans += 1;
+        let n = s.len().min(c.len()).min(f.scan.len());
+        for i in 0..n {
+            let Some(r) = s.beam(i).range() else { continue };
+            // Handed to SLAM as the laser's: a laser beam, or a beam where
+            // the laser was nearer than the sonar superimposed on it.
+            let kept = match f.beam_source(i) {
+                SectionSource::Laser => true,
+                SectionSource::Both => f.scan.beam(i).range() == Some(r),
+                _ => false,
+            } && f.scan.beam(i).range().is_some();
+            match c.beam(i).range() {
+                Some(t) if (r - t).abs() <= SMOKE_CHANGED_M => {
+                    v.clean_beams += 1;
+                    v.clean_beams_withheld += u64::from(!kept);
+                }
+                _ => {
+                    v.smoke_beams += 1;
+                    v.smoke_beams_kept += u64::from(kept);
+                }
+            }
+        }
+    }
+    v
 }
 
 /// The fuzzy map against the truth: the mean eq. 7 confidence on true wall
@@ -569,6 +669,7 @@ pub fn run_all(
             map_report: o.map_report,
             trajectory_report: o.trajectory_report,
             runs,
+            laser_verdict: None,
         });
     }
     Ok(results)
@@ -577,6 +678,71 @@ pub fn run_all(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use smokenav_shared_types::BeamReading;
+
+    /// A 6-beam scan at `stamp_ns` with these ranges (`None`: no return).
+    fn scan(stamp_ns: u64, ranges: [Option<f32>; 6]) -> Box<LaserScan> {
+        let mut s = Box::new(LaserScan::default());
+        s.header.stamp_ns = stamp_ns;
+        s.count = 6;
+        for (i, r) in ranges.into_iter().enumerate() {
+            s.set_beam(i, r.map_or(BeamReading::NoReturn, BeamReading::Range));
+        }
+        s
+    }
+
+    /// The beams of a scan the smoke changed or left alone, kept or withheld,
+    /// are counted as such; the twin is paired by time since its own start.
+    #[test]
+    fn the_laser_verdict_counts_phantoms_kept_and_walls_withheld() {
+        let mut smoky = SensorLog::default();
+        let mut twin = SensorLog::default();
+        // Beams: 0 untouched and kept; 1 untouched, withheld; 2 a smoke
+        // return kept (a phantom); 3 a smoke return withheld; 4 a return
+        // where the twin had none, kept; 5 no return in the smoky scan.
+        let smoky_scan = scan(
+            5_000_000_000,
+            [Some(2.0), Some(3.0), Some(0.8), Some(0.9), Some(1.2), None],
+        );
+        smoky.lasers.push(smoky_scan.clone());
+        // The twin's clock started 1 s later; its ranges differ by the noise only.
+        twin.lasers.push(scan(
+            6_000_000_000,
+            [
+                Some(2.05),
+                Some(2.95),
+                Some(2.5),
+                Some(2.6),
+                None,
+                Some(4.0),
+            ],
+        ));
+        let mut f = FusedScan {
+            scan: *smoky_scan,
+            ..FusedScan::default()
+        };
+        for i in [1, 3] {
+            f.beam_source[i] = SectionSource::Neither as u8;
+            f.scan.set_beam(i, BeamReading::BeyondMax);
+        }
+        let v = laser_verdict(&[(0, f)], &smoky, &twin);
+        assert_eq!(
+            v,
+            LaserVerdict {
+                scans: 1,
+                smoke_beams: 3,
+                smoke_beams_kept: 2,
+                clean_beams: 2,
+                clean_beams_withheld: 1,
+            }
+        );
+        assert_eq!(v.smoke_kept_share(), Some(2.0 / 3.0));
+        assert_eq!(v.clean_withheld_share(), Some(0.5));
+        // A fused scan without a twin scan at its time is not judged.
+        let mut late = f;
+        late.scan.header.stamp_ns += 1_000_000_000;
+        assert_eq!(laser_verdict(&[(0, late)], &smoky, &twin).scans, 0);
+    }
 
     #[test]
     fn the_run_shown_is_the_median_by_map_error() {

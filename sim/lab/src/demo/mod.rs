@@ -377,22 +377,14 @@ fn compare_recording(
 /// scan of the smoke-free twin (same seed ⇒ same noise; the smoke is the only
 /// difference), counting beams whose range moved by more than 10 cm or that
 /// gained or lost their return. Scans are matched by time since the first.
-fn laser_damage(smoky: &Path, clean: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
-    let a = recording::SensorLog::read(smoky)?;
-    let b = recording::SensorLog::read(clean)?;
-    let (Some(a0), Some(b0)) = (a.lasers.first(), b.lasers.first()) else {
-        return Ok(Vec::new());
+fn laser_damage(a: &recording::SensorLog, b: &recording::SensorLog) -> Vec<(f64, f64)> {
+    let Some(a0) = a.lasers.first().map(|s| s.header.stamp_ns) else {
+        return Vec::new();
     };
-    let (a0, b0) = (a0.header.stamp_ns, b0.header.stamp_ns);
-    let index = |stamp: u64, t0: u64| ((stamp.saturating_sub(t0)) as f64 / 1e8).round() as i64;
-    let twin: std::collections::HashMap<i64, &smokenav_shared_types::LaserScan> = b
-        .lasers
-        .iter()
-        .map(|s| (index(s.header.stamp_ns, b0), &**s))
-        .collect();
+    let twin = compare::scans_by_tick(b);
     let mut out = Vec::with_capacity(a.lasers.len());
     for s in &a.lasers {
-        let k = index(s.header.stamp_ns, a0);
+        let k = compare::tick(s.header.stamp_ns, a0);
         let Some(c) = twin.get(&k) else { continue };
         let n = s.len().min(c.len());
         if n == 0 {
@@ -400,14 +392,33 @@ fn laser_damage(smoky: &Path, clean: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
         }
         let changed = (0..n)
             .filter(|&i| match (s.beam(i).range(), c.beam(i).range()) {
-                (Some(x), Some(y)) => (x - y).abs() > 0.1,
+                (Some(x), Some(y)) => (x - y).abs() > compare::SMOKE_CHANGED_M,
                 (None, None) => false,
                 _ => true,
             })
             .count();
         out.push((k as f64 * 0.1, changed as f64 * 100.0 / n as f64));
     }
-    Ok(out)
+    out
+}
+
+/// The smoke's damage over time, and each method's [`compare::LaserVerdict`]:
+/// the recording fused again with every method (as the comparison did),
+/// judged beam by beam against the clean twin's recording.
+fn judge_against_twin(
+    main: &mut Comparison,
+    profile: &RobotConfig,
+    smoky: &Path,
+    clean: &Path,
+) -> anyhow::Result<()> {
+    let a = recording::SensorLog::read(smoky)?;
+    let b = recording::SensorLog::read(clean)?;
+    main.laser_damage = laser_damage(&a, &b);
+    for r in &mut main.results {
+        let (fused, _) = compare::fuse(&a, profile, r.method)?;
+        r.laser_verdict = Some(compare::laser_verdict(&fused, &a, &b));
+    }
+    Ok(())
 }
 
 /// The vote back-end over the trial's recording and its clean twin's.
@@ -542,7 +553,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     };
     let mut main = main;
     if clean.is_some() {
-        main.laser_damage = laser_damage(
+        judge_against_twin(
+            &mut main,
+            &profile,
             &args.out.join("recording.mcap"),
             &args.out.join("clean-reference").join("recording.mcap"),
         )?;

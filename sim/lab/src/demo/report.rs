@@ -45,6 +45,14 @@ fn methods_json(c: &Comparison) -> Value {
         if let Some(w) = &r.fuzzy_walls {
             o.insert("fuzzy_walls".into(), json!(w));
         }
+        if let Some(v) = &r.laser_verdict {
+            let mut j = json!(v);
+            if let Some(obj) = j.as_object_mut() {
+                obj.insert("smoke_kept_share".into(), num(v.smoke_kept_share()));
+                obj.insert("clean_withheld_share".into(), num(v.clean_withheld_share()));
+            }
+            o.insert("laser_verdict".into(), j);
+        }
         if let Some(m) = r.same_slam_input_as {
             o.insert("same_slam_input_as".into(), json!(m.as_str()));
         }
@@ -133,6 +141,7 @@ fn table_rows(s: &mut String, c: &Comparison) {
             v2 / l
         );
     }
+    laser_verdict_rows(s, c);
     if c.seeds > 1 {
         let _ = writeln!(
             s,
@@ -168,6 +177,40 @@ fn table_rows(s: &mut String, c: &Comparison) {
             let _ = writeln!(s, "  {}: trajectory not scored: {e}", method_label(r));
         }
     }
+}
+
+/// Against the smoke-free twin: how many of the beams the smoke changed each
+/// method handed to SLAM, and how many untouched beams it withheld.
+fn laser_verdict_rows(s: &mut String, c: &Comparison) {
+    let verdicts: Vec<(&MethodResult, &super::compare::LaserVerdict)> = c
+        .results
+        .iter()
+        .filter_map(|r| r.laser_verdict.as_ref().map(|v| (r, v)))
+        .collect();
+    let Some((_, first)) = verdicts.first() else {
+        return;
+    };
+    let pct = |x: Option<f64>| x.map_or("—".into(), |x| format!("{:.1} %", x * 100.0));
+    let kept: Vec<String> = verdicts
+        .iter()
+        .map(|(r, v)| format!("{} {}", method_label(r), pct(v.smoke_kept_share())))
+        .collect();
+    let lost: Vec<String> = verdicts
+        .iter()
+        .map(|(r, v)| format!("{} {}", method_label(r), pct(v.clean_withheld_share())))
+        .collect();
+    let _ = writeln!(
+        s,
+        "  laser beams the smoke changed (vs the smoke-free twin, {} of {} returns): handed to SLAM by {}",
+        first.smoke_beams,
+        first.smoke_beams + first.clean_beams,
+        kept.join(", ")
+    );
+    let _ = writeln!(
+        s,
+        "  laser beams the smoke left alone, withheld from SLAM: {}",
+        lost.join(", ")
+    );
 }
 
 /// With the fuzzy back-end: its confidence on true walls by who painted them,
