@@ -16,7 +16,7 @@ pub use map::{Alignment, DistanceStats, MapMetricError, MapOptions, MapReport, e
 pub use trajectory::{
     ErrorStats, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryFormat,
     TrajectoryMetricError, TrajectoryOptions, TrajectoryReport, evaluate_trajectories,
-    format_trajectory, format_trajectory_as, load_trajectory, parse_trajectory,
+    format_trajectory, format_trajectory_as, load_trajectory, parse_trajectory, truth_at,
 };
 
 use std::path::{Path, PathBuf};

@@ -362,8 +362,9 @@ fn wrap(a: f64) -> f64 {
     }
 }
 
-/// Truth at time `t`, interpolated between the samples around it.
-fn truth_at(truth: &[StampedPose], t: f64, max_gap: f64) -> Option<StampedPose> {
+/// Truth at time `t`, interpolated between the samples around it (none
+/// across a gap longer than `max_gap` s, or outside the samples' span).
+pub fn truth_at(truth: &[StampedPose], t: f64, max_gap: f64) -> Option<StampedPose> {
     let i = truth.partition_point(|p| p.t < t);
     if i < truth.len() && truth[i].t == t {
         return Some(truth[i]);

@@ -343,7 +343,14 @@ fn run_bag(
     slam: &mut SlamPipeline,
     run: &mut Run,
     mut fusion: Option<(FusionPipeline, RobotConfig)>,
+    mut reference_map: Option<&mut ReferenceMap>,
 ) -> anyhow::Result<String> {
+    // The reference's map draws each scan as the pipeline converted it.
+    let mut draw = |slam: &SlamPipeline| {
+        if let Some(rm) = reference_map.as_deref_mut() {
+            rm.add(slam.scan());
+        }
+    };
     let total: u64 = bag
         .topics()
         .iter()
@@ -377,7 +384,10 @@ fn run_bag(
                 n_laser += 1;
                 match &mut fusion {
                     Some((f, _)) => f.push_laser(l, p.log_time, &mut |s, _| fused.push(*s)),
-                    None => slam.push_laser(l),
+                    None => {
+                        slam.push_laser(l);
+                        draw(slam);
+                    }
                 }
             }
             AnyMessage::SonarRing(r) if fusion.is_some() => {
@@ -395,6 +405,7 @@ fn run_bag(
             AnyMessage::FusedScan(f) if p.topic == laser_topic => {
                 n_laser += 1;
                 slam.push_fused(f);
+                draw(slam);
             }
             _ => continue,
         }
@@ -403,6 +414,7 @@ fn run_bag(
             for s in fused.drain(..) {
                 n_fused += 1;
                 slam.push_fused(&s);
+                draw(slam);
             }
         }
         run.timed(|| slam.poll(p.log_time));
@@ -416,6 +428,7 @@ fn run_bag(
             for s in fused.drain(..) {
                 n_fused += 1;
                 slam.push_fused(&s);
+                draw(slam);
                 run.timed(|| slam.poll(s.scan.header.stamp_ns));
             }
         }
@@ -572,7 +585,15 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
                 }
                 None => None,
             };
-            let mut text = run_bag(&args, &bag, &roles, &mut slam, &mut run, fusion)?;
+            let mut text = run_bag(
+                &args,
+                &bag,
+                &roles,
+                &mut slam,
+                &mut run,
+                fusion,
+                reference_map.as_mut(),
+            )?;
             let _ = writeln!(text, "laser mount        {}", mount.1);
             Ok(text)
         }
@@ -770,7 +791,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             }
         }
     }
-    let truth = truth_map.or_else(|| reference_map.map(|r| r.grid.to_occupancy_grid()));
+    let truth = truth_map.or_else(|| reference_map.map(|r| r.grid()));
     if let Some(vote) = slam.backend().as_any().downcast_ref::<VoteSlam>() {
         vote_report(
             vote,
@@ -805,14 +826,22 @@ fn evaluate_against_reference(
     }
 }
 
-/// The log's scans drawn at the reference poses (where the reference has a
-/// pose at the scan's stamp): the map a reference trajectory implies, the
-/// truth a map is scored against when the log has no ground-truth map.
+/// The log's scans drawn at the reference poses: the map a reference
+/// trajectory implies, the truth a map is scored against when the log has no
+/// ground-truth map. Drawn twice over: at the reference poses whose stamps
+/// are the scans' (GMapping's corrected CARMEN poses), and at the reference
+/// interpolated to every scan's stamp (a simulator's truth, sampled on its
+/// own clock); the first is the map unless fewer than two scans had a pose
+/// at their stamp, as [`evaluate_against_reference`] pairs poses.
 struct ReferenceMap {
     poses: HashMap<u64, smokenav_shared_types::Pose2>,
+    reference: Vec<smokenav_algorithms_eval::StampedPose>,
     limits: EndpointLimits,
     model: LogOddsModel,
-    grid: TiledGrid,
+    /// Scans drawn at a reference pose of their own stamp, and the grid.
+    at_stamps: (usize, TiledGrid),
+    /// Scans drawn at the interpolated reference, and the grid.
+    interpolated: (usize, TiledGrid),
     ends: Vec<BeamEnd>,
     endpoints: Vec<smokenav_algorithms_slam::scan::Endpoint>,
 }
@@ -829,9 +858,11 @@ impl ReferenceMap {
                     )
                 })
                 .collect(),
+            reference: reference.to_vec(),
             limits: EndpointLimits::from_config(cfg),
             model: LogOddsModel::new(cfg.hit_logodds, cfg.miss_logodds, cfg.max_logodds),
-            grid: TiledGrid::new(cfg.resolution_m),
+            at_stamps: (0, TiledGrid::new(cfg.resolution_m)),
+            interpolated: (0, TiledGrid::new(cfg.resolution_m)),
             ends: Vec::new(),
             endpoints: Vec::new(),
         }
@@ -840,19 +871,47 @@ impl ReferenceMap {
     fn add(&mut self, scan: &RangeScan) {
         // Stamps are matched to the microsecond (the reference file's precision).
         let key = (scan.stamp_ns as f64 / 1e3).round() as u64;
-        let Some(pose) = self.poses.get(&key) else {
+        let exact = self.poses.get(&key).copied();
+        // Once scans sit at reference stamps, the interpolated map is not the one.
+        let interpolated = (self.at_stamps.0 < 2)
+            .then(|| {
+                smokenav_algorithms_eval::truth_at(
+                    &self.reference,
+                    scan.stamp_ns as f64 * 1e-9,
+                    TrajectoryOptions::default().max_gap_s,
+                )
+            })
+            .flatten()
+            .map(|p| smokenav_shared_types::Pose2::new(p.x, p.y, p.theta));
+        if exact.is_none() && interpolated.is_none() {
             return;
-        };
+        }
         scan.endpoints(&self.limits, &mut self.endpoints);
-        let (s, c) = pose.theta.sin_cos();
-        self.ends.clear();
-        self.ends.extend(self.endpoints.iter().map(|e| BeamEnd {
-            ex: pose.x + c * e.x - s * e.y,
-            ey: pose.y + s * e.x + c * e.y,
-            hit: e.range <= self.limits.max_urange,
-        }));
-        let sensor = pose.compose(&scan.sensor_pose);
-        self.grid.integrate(&sensor, &self.ends, &self.model);
+        for (pose, (drawn, grid)) in [
+            (exact, &mut self.at_stamps),
+            (interpolated, &mut self.interpolated),
+        ] {
+            let Some(pose) = pose else { continue };
+            let (s, c) = pose.theta.sin_cos();
+            self.ends.clear();
+            self.ends.extend(self.endpoints.iter().map(|e| BeamEnd {
+                ex: pose.x + c * e.x - s * e.y,
+                ey: pose.y + s * e.x + c * e.y,
+                hit: e.range <= self.limits.max_urange,
+            }));
+            let sensor = pose.compose(&scan.sensor_pose);
+            grid.integrate(&sensor, &self.ends, &self.model);
+            *drawn += 1;
+        }
+    }
+
+    /// The reference's map (see the type's docs).
+    fn grid(&self) -> OccupancyGrid {
+        if self.at_stamps.0 >= 2 {
+            self.at_stamps.1.to_occupancy_grid()
+        } else {
+            self.interpolated.1.to_occupancy_grid()
+        }
     }
 }
 

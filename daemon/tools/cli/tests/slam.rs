@@ -244,4 +244,10 @@ fn a_reference_on_its_own_clock_is_interpolated_not_refused() {
         .and_then(|t| t.parse().ok())
         .unwrap_or_else(|| panic!("no RMS in {line}"));
     assert!(rms < 0.02, "{line}");
+    // Without a ground-truth map the scans drawn at the reference are the truth.
+    let map = report
+        .lines()
+        .find(|l| l.starts_with("map error"))
+        .unwrap_or_else(|| panic!("no map error line:\n{report}"));
+    assert!(map.contains("k-NN"), "{map}");
 }
