@@ -38,7 +38,7 @@ use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::vote::member::MemberFault;
 use smokenav_algorithms_slam::{BackendOptions, Pose2, SlamPipeline, SlamUpdate};
 use smokenav_platform_bus::{Publisher, Subscriber, WaitOutcome, Waiter, topics};
-use smokenav_platform_config::{SlamBackendKind, SlamInput, SlamMode};
+use smokenav_platform_config::{ResumeAt, SlamBackendKind, SlamInput, SlamMode};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_runtime::{CommonArgs, Process};
 use smokenav_shared_types::HealthState;
@@ -78,6 +78,10 @@ struct Args {
     /// Localise on `--load-graph`'s map without changing it (as `[slam] mode = "localization"`).
     #[arg(long)]
     localization: bool,
+    /// Where `--load-graph`'s run starts: `last` (where it ended) or `first`
+    /// (where it began: a robot back at its dock). Overrides `[slam] resume_at`.
+    #[arg(long, value_enum, value_name = "WHERE")]
+    resume_at: Option<ResumeAt>,
 }
 
 /// Longest wait on the bus, so signals and the map timer are served promptly.
@@ -205,6 +209,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     }
     if args.localization {
         cfg.mode = SlamMode::Localization;
+    }
+    if let Some(at) = args.resume_at {
+        cfg.resume_at = at;
     }
     // Checked before the bus is touched: a profile asking to localise must
     // not quietly start a fresh map instead.

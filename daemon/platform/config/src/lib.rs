@@ -31,7 +31,7 @@ pub use fusion::{FusionMethod, FusionSection, SyncParams};
 pub use laser::{LaserSection, ScanLayout};
 pub use mapping::{MappingRule, MappingSection};
 pub use robot::{BusSection, Platform, RobotSection};
-pub use slam::{SlamBackendKind, SlamInput, SlamMode, SlamSection};
+pub use slam::{ResumeAt, SlamBackendKind, SlamInput, SlamMode, SlamSection};
 pub use slam_fuzzy::{FuzzyReference, FuzzySearch, FuzzySection};
 pub use slam_graph::GraphSection;
 pub use slam_vote::{VoteRule, VoteSection};

@@ -116,6 +116,23 @@ pub enum SlamMode {
     Localization,
 }
 
+/// Where a run continued from a saved graph (`--load-graph`) places its first
+/// scan before matching it against the saved map (`[slam] resume_at`, and
+/// `--resume-at` of `smokenav slam` and `smokenav-slam`): where the saved
+/// run ended (the robot carries on from there), or where it began (a robot
+/// that starts each run from its dock, as slam_toolbox's `map_start_at_dock`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum ResumeAt {
+    /// The saved run's last pose.
+    #[default]
+    #[serde(rename = "last")]
+    Last,
+    /// The saved run's first node (its start).
+    #[serde(rename = "first")]
+    First,
+}
+
 /// Declares the section once: each field with its doc, type, default value and
 /// Table-3 value. Generates the public struct, the all-optional raw form
 /// serde reads, and the preset resolution.
@@ -177,6 +194,9 @@ slam_section! {
     backend: SlamBackendKind = (SlamBackendKind::Rbpf, SlamBackendKind::Rbpf),
     /// `mapping`, or `localization` on a saved graph (needs `--load-graph` and the graph back-end).
     mode: SlamMode = (SlamMode::Mapping, SlamMode::Mapping),
+    /// Where a run from a saved graph starts: `last` (where it ended) or
+    /// `first` (where it began, e.g. a dock); matched there within the closure window.
+    resume_at: ResumeAt = (ResumeAt::Last, ResumeAt::Last),
     /// Seed of the filter's random numbers: the same input and seed give the same output.
     seed: u64 = (42, 42),
     /// Readings at or beyond this are "no return" and are ignored, m (GMapping maxRange).
@@ -501,6 +521,19 @@ mod tests {
             err.contains("mode") && err.contains("localisation"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn resume_at_names_are_strict() {
+        assert_eq!(section("").resume_at, ResumeAt::Last);
+        assert_eq!(
+            section("resume_at = \"first\"\n").resume_at,
+            ResumeAt::First
+        );
+        let err = parse_toml::<SlamSection>("resume_at = \"start\"\n", Path::new("slam.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("resume_at") && err.contains("start"), "{err}");
     }
 
     #[test]

@@ -22,7 +22,7 @@ use smokenav_algorithms_slam::scan::{EndpointLimits, RangeScan};
 use smokenav_algorithms_slam::vote::VoteSlam;
 use smokenav_algorithms_slam::{BackendOptions, Rbpf, SlamPipeline, SlamUpdate, StampedPose};
 use smokenav_platform_config::{
-    RobotConfig, SlamBackendKind, SlamMode, SlamSection, VoteRule, parse_toml,
+    ResumeAt, RobotConfig, SlamBackendKind, SlamMode, SlamSection, VoteRule, parse_toml,
 };
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_platform_recording::bag::{Bag, RoleMap};
@@ -99,6 +99,11 @@ pub struct SlamArgs {
     /// the same as `[slam] mode = "localization"`).
     #[arg(long)]
     localization: bool,
+    /// Where `--load-graph`'s run starts: `last`, where the saved run ended
+    /// (carrying on), or `first`, where it began (a robot back at its dock).
+    /// Overrides `[slam] resume_at`.
+    #[arg(long, value_enum, value_name = "WHERE")]
+    resume_at: Option<ResumeAt>,
     /// Ground-truth map (map_server YAML) to score the map with (with
     /// `--backend vote`: the vote's and every member's). Without it but with
     /// `--reference`, the log's scans drawn at the reference poses are the truth.
@@ -181,6 +186,9 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     }
     if args.localization {
         cfg.mode = SlamMode::Localization;
+    }
+    if let Some(at) = args.resume_at {
+        cfg.resume_at = at;
     }
     // Offline the vote waits for every member at every scan: nothing dropped, reproducible.
     cfg.vote.lockstep = true;

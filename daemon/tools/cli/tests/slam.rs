@@ -251,3 +251,76 @@ fn a_reference_on_its_own_clock_is_interpolated_not_refused() {
         .unwrap_or_else(|| panic!("no map error line:\n{report}"));
     assert!(map.contains("k-NN"), "{map}");
 }
+
+/// A robot that starts every run from its dock: the same log localised on
+/// the graph it mapped, from the saved run's first node (`--resume-at
+/// first`), is matched scan after scan and follows the mapping run's poses
+/// within centimetres; placed where that run ended (the default) its first
+/// scan finds nothing to match (the route ends metres from its start) and
+/// the pose only follows the odometry.
+#[test]
+fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = data().join("csail-prefix-200.clf");
+    let d = |p: &str| dir.path().join(p).to_string_lossy().into_owned();
+    let slam = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
+            .args(["slam", "--carmen", log.to_str().unwrap()])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    slam(&[
+        "--backend",
+        "graph",
+        "--save-graph",
+        &d("run.g2o"),
+        "--out",
+        &d("map"),
+    ]);
+    let mapped = d("map/trajectory.txt");
+    let localise = |out: &str, at: &[&str]| {
+        let (graph, out) = (d("run.g2o"), d(out));
+        let mut args = vec![
+            "--load-graph",
+            graph.as_str(),
+            "--localization",
+            "--reference",
+            mapped.as_str(),
+            "--out",
+            out.as_str(),
+        ];
+        args.extend_from_slice(at);
+        let report = slam(&args);
+        let loc = report
+            .lines()
+            .find(|l| l.starts_with("localization"))
+            .unwrap_or_else(|| panic!("no localization line in\n{report}"))
+            .to_owned();
+        let matched: u64 = loc
+            .split(": ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("{loc}"));
+        let ate = report
+            .lines()
+            .find(|l| l.starts_with("ATE trajectory"))
+            .and_then(|l| l.split("RMS ").nth(1))
+            .and_then(|t| t.split(' ').next())
+            .and_then(|t| t.parse::<f64>().ok())
+            .unwrap_or_else(|| panic!("no ATE in\n{report}"));
+        (matched, ate, loc)
+    };
+    let (matched, ate, loc) = localise("dock", &["--resume-at", "first"]);
+    assert!(matched >= 190, "{loc}");
+    assert!(ate < 0.03, "{ate} m from the mapping run: {loc}");
+    let (matched_last, _, loc_last) = localise("end", &[]);
+    assert!(matched_last < 20, "{loc_last}");
+}

@@ -24,7 +24,9 @@
 //! [`MAX_LINE_BYTES`] is an error naming the file and line.
 //!
 //! Going on from a saved run, the first scan is placed where the run ended
-//! (or at [`SlamBackend::set_initial_pose`]) and matched against the saved
+//! (`[slam] resume_at = "last"`), where it began (`"first"`: a robot that
+//! starts every run from its dock), or at [`SlamBackend::set_initial_pose`],
+//! and matched against the saved
 //! map around it (the loop-closure search window, branch and bound); then:
 //! - **mapping**: that scan becomes a new node tied to the last saved node by
 //!   a robust edge (a loose one if the match failed), and mapping goes on as
@@ -42,7 +44,7 @@ use crate::graph::pose_graph::{Edge, PoseGraph};
 use crate::rbpf::matcher::RobotBeam;
 use crate::scan::RangeScan;
 use nalgebra::Matrix3;
-use smokenav_platform_config::SlamSection;
+use smokenav_platform_config::{ResumeAt, SlamSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
 use std::fmt::Write as _;
@@ -303,10 +305,12 @@ fn read_scans<R: BufRead>(input: R, file: &Path) -> Result<SavedScans, SavedGrap
     })
 }
 
-/// A saved run read back: the graph back-end as it ended, and where it ended.
+/// A saved run read back: the graph back-end as it ended, where it ended and
+/// where it began (its first node, as optimised).
 pub struct SavedRun {
     pub slam: GraphSlam,
     pub last_pose: Pose2,
+    pub first_pose: Pose2,
 }
 
 /// Reads `path` (g2o) and its `.scans` sidecar into a graph back-end with `cfg`'s and `params`' settings.
@@ -383,9 +387,16 @@ pub fn load(
     }
     // Where the run ended, also for a save of the graph before any new scan.
     slam.initial = saved.last_pose;
+    let first_pose = slam
+        .graph
+        .poses()
+        .first()
+        .copied()
+        .unwrap_or(saved.last_pose);
     Ok(SavedRun {
         slam,
         last_pose: saved.last_pose,
+        first_pose,
     })
 }
 
@@ -417,11 +428,17 @@ pub struct ResumedGraph {
 }
 
 impl ResumedGraph {
+    /// Starts at the saved run's last or first pose, as its settings'
+    /// `resume_at` say (the first scan is matched against the saved map there).
     pub fn new(run: SavedRun, localization: bool, keep_trajectory: bool) -> Self {
+        let start = match run.slam.cfg.resume_at {
+            ResumeAt::Last => run.last_pose,
+            ResumeAt::First => run.first_pose,
+        };
         Self {
             inner: run.slam,
             localization,
-            start: run.last_pose,
+            start,
             started: false,
             keep_trajectory,
             pose: None,
