@@ -14,10 +14,12 @@ use smokenav_algorithms_slam::carmen::LaserRecord;
 use smokenav_platform_bus::{Publisher, Waiter, topics};
 use smokenav_platform_config::MountPose;
 use smokenav_platform_config::slam::SlamInput;
-use smokenav_shared_types::{Clock, LaserScan, MonotonicClock, Odometry, PoseEstimate};
+use smokenav_shared_types::{
+    Clock, Health, HealthState, LaserScan, MonotonicClock, Odometry, PoseEstimate,
+};
 use smokenav_tests::{
     Child, bin, carmen_odometry, csail_prefix, csail_prefix_path, fill_carmen_scan, open_bus,
-    profile, python, unique_instance, workspace_root,
+    profile, python, unique_instance, wait_for, workspace_root,
 };
 use std::time::{Duration, Instant};
 
@@ -484,13 +486,58 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
             map_dir,
             "--load-graph",
             graph.to_str().unwrap(),
+            // The same scans again: the robot is back where the saved run began.
+            "--resume-at",
+            "first",
         ],
         &instance,
     )?;
     slam.wait_for_line("localizing on", Duration::from_secs(30))?;
     let bus = open_bus(&instance);
     let estimate = replay_in_lock_step(&bus, usize::MAX)?;
+    // Tracked on the map, not only carried by the odometry: health counts
+    // the scans matched to the saved map (placed at the run's end, none were).
+    let pid = slam.pid();
+    wait_for::<Health>(&bus, topics::health("slam"), Duration::from_secs(10), |h| {
+        h.pid == pid && h.metric("localization_matched").is_some_and(|m| m >= 150.0)
+    })
+    .map_err(|e| anyhow::anyhow!("{e}\n{}", slam.output()))?;
     slam.terminate(Duration::from_secs(10))?;
+
+    // The same replay with the robot placed where the saved run ended (the
+    // default), metres from where the scans are: nothing matches, and
+    // health says the localisation is lost rather than staying OK.
+    let instance = unique_instance("slam_loc_lost");
+    let mut lost = Child::spawn(
+        &bin("smokenav-slam"),
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--map-dir",
+            map_dir,
+            "--load-graph",
+            graph.to_str().unwrap(),
+        ],
+        &instance,
+    )?;
+    lost.wait_for_line("localizing on", Duration::from_secs(30))?;
+    let bus_lost = open_bus(&instance);
+    replay_in_lock_step(&bus_lost, usize::MAX)?;
+    let pid = lost.pid();
+    wait_for::<Health>(
+        &bus_lost,
+        topics::health("slam"),
+        Duration::from_secs(10),
+        |h| {
+            h.pid == pid
+                && h.state() == HealthState::Degraded
+                && h.last_error
+                    .as_str()
+                    .contains("localization: over 30 scans")
+        },
+    )
+    .map_err(|e| anyhow::anyhow!("{e}\n{}", lost.output()))?;
+    lost.terminate(Duration::from_secs(10))?;
     let reference = smokenav_algorithms_eval::load_trajectory(
         &workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"),
     )?;

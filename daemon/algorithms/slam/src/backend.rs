@@ -137,6 +137,12 @@ pub trait SlamBackend: Send {
     /// The back-end's own counters (cheap: called for every health report),
     /// as `(name, value)`.
     fn metrics(&self, emit: &mut dyn FnMut(&'static str, f64));
+    /// A condition the back-end is in that its process's health should name
+    /// (and be degraded for), e.g. a localisation that matches nothing;
+    /// `None` while all is well. The same text while the condition lasts.
+    fn health_condition(&self) -> Option<String> {
+        None
+    }
     /// For tools that know the concrete back-end (benches, summaries).
     fn as_any(&self) -> &dyn std::any::Any;
 }

@@ -496,7 +496,8 @@ fn flag_conditions(
             .map(|m| format!("{} {}", m.name, m.health))
             .collect()
     });
-    let reasons = conditions(&out, &pipeline.stats(), max_blind_m);
+    let mut reasons = conditions(&out, &pipeline.stats(), max_blind_m);
+    reasons.extend(pipeline.backend().health_condition());
     if !reasons.is_empty() {
         p.health.error(&reasons.join("; "));
         if p.health.state() == HealthState::Ok {

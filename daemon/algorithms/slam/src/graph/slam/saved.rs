@@ -408,7 +408,14 @@ pub struct LocalizationStats {
     pub matched: u64,
     /// Scans whose match was refused or impossible (the pose follows the motion).
     pub unmatched: u64,
+    /// Unmatched scans since the last matched one: a long run of them is a
+    /// robot lost on the map (or started at the wrong end, `resume_at`).
+    pub unmatched_streak: u64,
 }
+
+/// Scans in a row that matched nothing on the saved map before a localising
+/// run says it is lost (3 s at 10 Hz: a doorway or a crowd passes).
+pub const LOST_AFTER_SCANS: u64 = 30;
 
 /// The graph back-end going on from a saved run ([`load`]): mapping on, or localising only.
 pub struct ResumedGraph {
@@ -581,10 +588,12 @@ impl ResumedGraph {
             match self.match_saved(&guess, window) {
                 Some((m, _)) => {
                     self.loc.matched += 1;
+                    self.loc.unmatched_streak = 0;
                     m
                 }
                 None => {
                     self.loc.unmatched += 1;
+                    self.loc.unmatched_streak += 1;
                     guess
                 }
             }
@@ -689,6 +698,14 @@ impl SlamBackend for ResumedGraph {
     /// The graph back-end itself ([`GraphSlam`]), so tools that read its
     /// graph and counters work on a resumed run too; this wrapper is
     /// reached through [`ResumedGraph::graph_slam`]'s owner.
+    fn health_condition(&self) -> Option<String> {
+        (self.localization && self.loc.unmatched_streak >= LOST_AFTER_SCANS).then(|| {
+            format!(
+                "localization: over {LOST_AFTER_SCANS} scans in a row matched nothing on the saved map (robot lost, or not where [slam] resume_at puts it)"
+            )
+        })
+    }
+
     fn as_any(&self) -> &dyn std::any::Any {
         self.inner.as_any()
     }
