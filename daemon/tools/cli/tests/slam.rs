@@ -323,4 +323,40 @@ fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
     assert!(ate < 0.03, "{ate} m from the mapping run: {loc}");
     let (matched_last, _, loc_last) = localise("end", &[]);
     assert!(matched_last < 20, "{loc_last}");
+
+    // Mapping on from the dock: the first new node is tied to a saved node
+    // near the start, not to the last one metres away where the run ended.
+    slam(&[
+        "--load-graph",
+        &d("run.g2o"),
+        "--resume-at",
+        "first",
+        "--save-graph",
+        &d("again.g2o"),
+        "--out",
+        &d("again"),
+    ]);
+    let saved = std::fs::read_to_string(d("run.g2o")).unwrap();
+    let n = saved
+        .lines()
+        .filter(|l| l.starts_with("VERTEX_SE2"))
+        .count();
+    let again = std::fs::read_to_string(d("again.g2o")).unwrap();
+    let tie: Vec<usize> = again
+        .lines()
+        .filter(|l| l.starts_with("EDGE_SE2"))
+        .map(|l| {
+            l.split_whitespace()
+                .skip(1)
+                .take(2)
+                .map(|t| t.parse().unwrap())
+                .collect::<Vec<usize>>()
+        })
+        .find(|e| e[1] == n)
+        .unwrap_or_else(|| panic!("no edge to vertex {n}"));
+    assert!(
+        tie[0] <= 2,
+        "the new node is tied to vertex {} of {n}",
+        tie[0]
+    );
 }

@@ -537,9 +537,26 @@ impl ResumedGraph {
         g.shared = None;
         g.stats.scans += 1;
         let pose = matched.map_or(start, |m| m.0);
+        // Tied to the saved node nearest the start: the last one when the
+        // run carries on where it ended, the first when it starts from the dock.
+        let anchor = g
+            .graph
+            .poses()
+            .iter()
+            .enumerate()
+            .min_by(|a, b| {
+                let d = |p: &Pose2| (p.x - pose.x).hypot(p.y - pose.y);
+                d(a.1).total_cmp(&d(b.1)).then(b.0.cmp(&a.0))
+            })
+            .map(|(i, _)| i);
+        // The new node's covariance is carried from its anchor's marginal
+        // (load() left the last node's; taken before the node is added,
+        // which no edge ties down yet).
+        if let Some(anchor) = anchor.filter(|&a| a + 1 != g.graph.len()) {
+            g.newest_cov = g.exact_marginal(anchor).unwrap_or_else(Matrix3::zeros);
+        }
         let k = g.add_node(pose, 0.0);
-        if k > 0 {
-            let last = k - 1;
+        if let Some(anchor) = anchor {
             // A matched start is as sure as a loop closure; an unmatched one is a guess.
             let (st, sr) = if matched.is_some() {
                 g.p.closure_sigma
@@ -547,9 +564,9 @@ impl ResumedGraph {
                 (1.0, 0.5)
             };
             g.add_chain_edge(Edge {
-                from: last,
+                from: anchor,
                 to: k,
-                measurement: g.graph.poses()[last].between(&pose),
+                measurement: g.graph.poses()[anchor].between(&pose),
                 information: super::diagonal(st, sr),
                 robust: true,
             });
@@ -864,6 +881,55 @@ mod tests {
             e_split < 0.15 && apart < 0.15,
             "{e_split} m, {apart} m apart"
         );
+    }
+
+    /// `resume_at = "first"`: the first half driven again from its start is
+    /// tracked on the saved map (localising) and, mapping, its first node is
+    /// tied to the saved run's first node, where it is, not to the last.
+    #[test]
+    fn a_run_resumed_at_the_first_node_starts_where_the_saved_run_began() {
+        let dir = tempfile::tempdir().unwrap();
+        let (path, r, half) = first_half_saved(dir.path());
+        let cfg = SlamSection {
+            resume_at: ResumeAt::First,
+            ..SlamSection::default()
+        };
+        let saved = load(&cfg, GraphParams::default(), &path).unwrap();
+        let first = saved.first_pose;
+        assert_eq!(first, saved.slam.graph.poses()[0]);
+        let mut loc = ResumedGraph::new(saved, true, true);
+        let est = run(&mut loc, &r[..half]);
+        let worst = worst_error(&est, &r[..half]);
+        let s = loc.localization_stats();
+        eprintln!("the first half again, from its first node: worst {worst:.3} m; {s:?}");
+        assert!(worst < 0.1, "{worst} m off the truth");
+        assert!(s.matched as usize > half * 9 / 10, "{s:?}");
+        assert_eq!(loc.health_condition(), None);
+
+        let saved = load(&cfg, GraphParams::default(), &path).unwrap();
+        let n = saved.slam.graph.len();
+        let mut mapping = ResumedGraph::new(saved, false, true);
+        run(&mut mapping, &r[..1]);
+        let g = mapping.graph_slam();
+        let tie = g
+            .graph
+            .edges()
+            .iter()
+            .find(|e| e.to == n)
+            .expect("the new node's edge");
+        let p = g.graph.poses()[n];
+        assert!(
+            (p.x - first.x).hypot(p.y - first.y) < 0.1,
+            "{p:?} vs {first:?}"
+        );
+        // The hall's first half comes back past its start: the nearest saved
+        // node may be a later one, never one far away (the last, on another route).
+        let d = |q: &Pose2| (q.x - p.x).hypot(q.y - p.y);
+        let nearest = g.graph.poses()[..n]
+            .iter()
+            .map(d)
+            .fold(f64::INFINITY, f64::min);
+        assert!(d(&g.graph.poses()[tie.from]) <= nearest + 0.05, "{tie:?}");
     }
 
     #[test]
