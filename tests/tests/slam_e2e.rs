@@ -476,6 +476,45 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
         refused.output()
     );
 
+    // The robot maps live with the graph back-end and SIGUSR1 saves the
+    // pose graph beside the map: what the localising run below loads.
+    let mapping_dir = dir.path().join("mapping");
+    std::fs::create_dir_all(&mapping_dir)?;
+    let mapping_cfg = profile(&mapping_dir, "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Laser;
+        c.slam.backend = smokenav_platform_config::SlamBackendKind::Graph;
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
+    let live_maps = dir.path().join("live-maps");
+    let instance = unique_instance("slam_live_graph");
+    let mut mapping = Child::spawn(
+        &bin("smokenav-slam"),
+        &[
+            "--config",
+            mapping_cfg.to_str().unwrap(),
+            "--map-dir",
+            live_maps.to_str().unwrap(),
+        ],
+        &instance,
+    )?;
+    mapping.wait_for_line("graph on laser/scan", Duration::from_secs(30))?;
+    let bus = open_bus(&instance);
+    replay_in_lock_step(&bus, usize::MAX)?;
+    mapping.signal(nix::sys::signal::Signal::SIGUSR1);
+    mapping.wait_for_line("map saved", Duration::from_secs(10))?;
+    mapping.terminate(Duration::from_secs(10))?;
+    let graph = live_maps.join("graph.g2o");
+    let vertices = std::fs::read_to_string(&graph)?
+        .lines()
+        .filter(|l| l.starts_with("VERTEX_SE2"))
+        .count();
+    assert!(vertices > 30, "{vertices} nodes in the live run's graph");
+    assert!(live_maps.join("graph.g2o.scans").exists());
+
     let instance = unique_instance("slam_loc");
     let mut slam = Child::spawn(
         &bin("smokenav-slam"),

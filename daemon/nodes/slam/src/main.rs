@@ -13,7 +13,10 @@
 //! newest scan and counts the others as skipped: nothing queues without bound
 //! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
 //! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
-//! map.png (`smokenav map save DIR` saves the published map from anywhere);
+//! map.png (`smokenav map save DIR` saves the published map from anywhere)
+//! and, with the graph back-end, the pose graph as graph.g2o + graph.g2o.scans
+//! (what `--load-graph` continues or localises on, and `smokenav graph
+//! optimize` reads);
 //! the folder defaults to `$SMOKENAV_MAP_DIR`, else systemd's
 //! `$STATE_DIRECTORY/maps` (the unit's `StateDirectory=`), else `./maps`.
 //!
@@ -30,7 +33,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
+use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam, ResumedGraph, saved};
 use smokenav_algorithms_slam::pipeline::PipelineStats;
 use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::rbpf::Rbpf;
@@ -190,6 +193,23 @@ fn save_map(grid: &OccupancyGrid, fuzzy: Option<&OccupancyGrid>, dir: &Path) -> 
     if let Some(f) = fuzzy {
         smokenav_platform_map::save_fuzzy(f, dir)?;
     }
+    Ok(())
+}
+
+/// With the graph back-end (mapping, continued or localising): the pose
+/// graph and its nodes' scans as `dir/graph.g2o` + `.scans`, so the run can
+/// be continued or localised on (`--load-graph`). Written beside, then
+/// renamed over the last save: a reader never sees half a graph.
+fn save_graph(pipeline: &SlamPipeline, dir: &Path) -> anyhow::Result<()> {
+    let Some(g) = pipeline.backend().as_any().downcast_ref::<GraphSlam>() else {
+        return Ok(());
+    };
+    let (tmp, path) = (dir.join("graph.g2o.tmp"), dir.join("graph.g2o"));
+    saved::save(g, &tmp)?;
+    let scans = saved::scans_path(&path);
+    std::fs::rename(saved::scans_path(&tmp), &scans)
+        .with_context(|| format!("cannot write {}", scans.display()))?;
+    std::fs::rename(&tmp, &path).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }
 
@@ -429,7 +449,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                     }
                 }
                 if save {
-                    match save_map(grid, fuzzy.as_ref(), &map_dir) {
+                    match save_map(grid, fuzzy.as_ref(), &map_dir)
+                        .and_then(|()| save_graph(&pipeline, &map_dir))
+                    {
                         Ok(()) => {
                             counters.maps_saved += 1;
                             tracing::info!("map saved to {}", map_dir.display());
