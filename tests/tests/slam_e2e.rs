@@ -546,17 +546,23 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     // The same replay with the robot placed where the saved run ended (the
     // default), metres from where the scans are: nothing matches, and
     // health says the localisation is lost rather than staying OK.
+    // The graph named by the profile alone (`[slam] load_graph`), as a service would.
+    let lost_dir = dir.path().join("lost");
+    std::fs::create_dir_all(&lost_dir)?;
+    let lost_cfg = profile(&lost_dir, "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Laser;
+        c.slam.mode = smokenav_platform_config::SlamMode::Localization;
+        c.slam.load_graph = Some(graph.clone());
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    });
     let instance = unique_instance("slam_loc_lost");
     let mut lost = Child::spawn(
         &bin("smokenav-slam"),
-        &[
-            "--config",
-            cfg.to_str().unwrap(),
-            "--map-dir",
-            map_dir,
-            "--load-graph",
-            graph.to_str().unwrap(),
-        ],
+        &["--config", lost_cfg.to_str().unwrap(), "--map-dir", map_dir],
         &instance,
     )?;
     lost.wait_for_line("localizing on", Duration::from_secs(30))?;

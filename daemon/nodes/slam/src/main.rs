@@ -222,9 +222,13 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         );
         cfg.particles = n;
     }
+    // `--load-graph` over the profile's `[slam] load_graph`; either means the graph back-end.
+    if let Some(g) = &args.load_graph {
+        cfg.load_graph = Some(g.clone());
+    }
     if let Some(b) = args.backend {
         cfg.backend = b;
-    } else if args.load_graph.is_some() {
+    } else if cfg.load_graph.is_some() {
         cfg.backend = SlamBackendKind::Graph;
     }
     if args.localization {
@@ -236,15 +240,15 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     // Checked before the bus is touched: a profile asking to localise must
     // not quietly start a fresh map instead.
     anyhow::ensure!(
-        args.load_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
+        cfg.load_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
         "--load-graph needs the graph back-end, not backend {}",
         cfg.backend.as_str()
     );
     anyhow::ensure!(
-        cfg.mode == SlamMode::Mapping || args.load_graph.is_some(),
-        "[slam] mode = \"localization\" tracks the robot on a saved map: give --load-graph G (saved with smokenav slam --save-graph)"
+        cfg.mode == SlamMode::Mapping || cfg.load_graph.is_some(),
+        "[slam] mode = \"localization\" tracks the robot on a saved map: give --load-graph G or [slam] load_graph (saved with SIGUSR1 or smokenav slam --save-graph)"
     );
-    let resumed = match &args.load_graph {
+    let resumed = match &cfg.load_graph {
         Some(g) => Some(
             saved::load(&cfg, GraphParams::from_config(&cfg), g)
                 .with_context(|| format!("cannot load the saved graph {}", g.display()))?,
@@ -358,7 +362,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         SlamBackendKind::Rbpf => format!("rbpf with {} particles", cfg.particles),
         _ => pipeline.backend().name().to_string(),
     };
-    if let Some(g) = &args.load_graph {
+    if let Some(g) = &cfg.load_graph {
         let what = match cfg.mode {
             SlamMode::Localization => "localizing on",
             SlamMode::Mapping => "continuing",

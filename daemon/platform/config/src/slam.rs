@@ -197,6 +197,10 @@ slam_section! {
     /// Where a run from a saved graph starts: `last` (where it ended) or
     /// `first` (where it began, e.g. a dock); matched there within the closure window.
     resume_at: ResumeAt = (ResumeAt::Last, ResumeAt::Last),
+    /// A graph saved by `smokenav slam --save-graph` or the SLAM process's
+    /// SIGUSR1 (`G` and `G.scans`) to continue or localise on, as
+    /// `--load-graph` (which overrides it); an absolute path.
+    load_graph: Option<std::path::PathBuf> = (None, None),
     /// Seed of the filter's random numbers: the same input and seed give the same output.
     seed: u64 = (42, 42),
     /// Readings at or beyond this are "no return" and are ignored, m (GMapping maxRange).
@@ -333,6 +337,17 @@ impl Validate for SlamSection {
             v.fail(
                 k("threads"),
                 format!("must be 0 (one per core) to 256, got {}", self.threads),
+            );
+        }
+        if let Some(g) = &self.load_graph
+            && !g.is_absolute()
+        {
+            v.fail(
+                k("load_graph"),
+                format!(
+                    "must be an absolute path (a service runs in /), got {}",
+                    g.display()
+                ),
             );
         }
         v.within(&k("resolution_m"), self.resolution_m, 0.005, 1.0);
@@ -534,6 +549,23 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("resume_at") && err.contains("start"), "{err}");
+    }
+
+    #[test]
+    fn a_graph_to_load_is_an_absolute_path() {
+        assert_eq!(section("").load_graph, None);
+        let s = section("load_graph = \"/var/lib/smokenav/maps/graph.g2o\"\n");
+        assert_eq!(
+            s.load_graph.as_deref(),
+            Some(Path::new("/var/lib/smokenav/maps/graph.g2o"))
+        );
+        let mut v = Validator::default();
+        section("load_graph = \"maps/graph.g2o\"\n").validate("slam", &mut v);
+        let e = format!("{v:?}");
+        assert!(
+            e.contains("slam.load_graph") && e.contains("absolute"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -179,9 +179,13 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     if let Some(s) = args.seed {
         cfg.seed = s;
     }
+    // `--load-graph` over the profile's `[slam] load_graph`; either means the graph back-end.
+    if let Some(g) = &args.load_graph {
+        cfg.load_graph = Some(g.clone());
+    }
     if let Some(b) = args.backend {
         cfg.backend = b;
-    } else if args.load_graph.is_some() {
+    } else if cfg.load_graph.is_some() {
         cfg.backend = SlamBackendKind::Graph;
     }
     if args.localization {
@@ -486,12 +490,12 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         "--save-graph needs --backend graph (the particle filter keeps no pose graph)"
     );
     anyhow::ensure!(
-        args.load_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
+        cfg.load_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
         "--load-graph needs the graph back-end, not --backend {}",
         cfg.backend.as_str()
     );
     anyhow::ensure!(
-        cfg.mode == SlamMode::Mapping || args.load_graph.is_some(),
+        cfg.mode == SlamMode::Mapping || cfg.load_graph.is_some(),
         "localization mode tracks the robot on a saved map: give --load-graph G (saved with --save-graph)"
     );
     let reference = match &args.reference {
@@ -521,7 +525,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let mut slam = match &args.load_graph {
+    let mut slam = match &cfg.load_graph {
         Some(g) => {
             let run = saved::load(&cfg, GraphParams::from_config(&cfg), g)
                 .with_context(|| format!("cannot load the saved graph {}", g.display()))?;
@@ -763,7 +767,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             let _ = writeln!(
                 report,
                 "localization       on {} (unchanged): {} scans matched to its map, {} followed the motion only",
-                args.load_graph
+                cfg.load_graph
                     .as_deref()
                     .unwrap_or(Path::new("?"))
                     .display(),
