@@ -28,8 +28,9 @@
 //! starts every run from its dock), or at [`SlamBackend::set_initial_pose`],
 //! and matched against the saved
 //! map around it (the loop-closure search window, branch and bound); then:
-//! - **mapping**: that scan becomes a new node tied to the last saved node by
-//!   a robust edge (a loose one if the match failed), and mapping goes on as
+//! - **mapping**: that scan becomes a new node tied to the saved node nearest
+//!   it (the last one carrying on, the first from the dock) by a robust edge
+//!   (a loose one if the match failed), and mapping goes on as
 //!   in one run — later loop closures reach the saved nodes like any others;
 //! - **localization**: no node, edge or map cell is added. Each scan moves the
 //!   pose by the front end's motion and is then matched against the saved
@@ -712,9 +713,6 @@ impl SlamBackend for ResumedGraph {
         }
     }
 
-    /// The graph back-end itself ([`GraphSlam`]), so tools that read its
-    /// graph and counters work on a resumed run too; this wrapper is
-    /// reached through [`ResumedGraph::graph_slam`]'s owner.
     fn health_condition(&self) -> Option<String> {
         (self.localization && self.loc.unmatched_streak >= LOST_AFTER_SCANS).then(|| {
             format!(
@@ -723,6 +721,9 @@ impl SlamBackend for ResumedGraph {
         })
     }
 
+    /// The graph back-end itself ([`GraphSlam`]), so tools that read its
+    /// graph and counters work on a resumed run too; this wrapper is
+    /// reached through [`ResumedGraph::graph_slam`]'s owner.
     fn as_any(&self) -> &dyn std::any::Any {
         self.inner.as_any()
     }
