@@ -13,6 +13,7 @@ use smokenav_algorithms_slam::Pose2;
 use smokenav_algorithms_slam::carmen::LaserRecord;
 use smokenav_platform_bus::{Publisher, Waiter, topics};
 use smokenav_platform_config::MountPose;
+use smokenav_platform_config::SlamMode;
 use smokenav_platform_config::slam::SlamInput;
 use smokenav_shared_types::{
     Clock, Health, HealthState, LaserScan, MonotonicClock, Odometry, PoseEstimate,
@@ -408,6 +409,28 @@ fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> a
     Ok(())
 }
 
+/// A Pioneer profile in `dir` for the CSAIL replay (laser scans, the laser
+/// at the robot's centre) with the graph back-end in `mode`, loading `graph`
+/// if given (`[slam] load_graph`).
+fn graph_profile(
+    dir: &std::path::Path,
+    mode: SlamMode,
+    graph: Option<std::path::PathBuf>,
+) -> anyhow::Result<std::path::PathBuf> {
+    std::fs::create_dir_all(dir)?;
+    Ok(profile(dir, "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Laser;
+        c.slam.backend = smokenav_platform_config::SlamBackendKind::Graph;
+        c.slam.mode = mode;
+        c.slam.load_graph = graph;
+        c.laser.mount = MountPose {
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+    }))
+}
+
 /// Localisation in the SLAM process: a graph saved offline by `smokenav slam
 /// --save-graph` is loaded with `--load-graph G --localization`, the same scans
 /// replayed over the bus are tracked on it (close to the reference poses), and
@@ -449,16 +472,7 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
         "{line}"
     );
 
-    let cfg = profile(dir.path(), "pioneer-3dx.toml", |c| {
-        c.slam.input = SlamInput::Laser;
-        c.slam.backend = smokenav_platform_config::SlamBackendKind::Graph;
-        c.slam.mode = smokenav_platform_config::SlamMode::Localization;
-        c.laser.mount = MountPose {
-            x: 0.0,
-            y: 0.0,
-            yaw_deg: 0.0,
-        };
-    });
+    let cfg = graph_profile(dir.path(), SlamMode::Localization, None)?;
     let map_dir = dir.path().join("maps");
     let map_dir = map_dir.to_str().unwrap();
 
@@ -478,17 +492,7 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
 
     // The robot maps live with the graph back-end and SIGUSR1 saves the
     // pose graph beside the map: what the localising run below loads.
-    let mapping_dir = dir.path().join("mapping");
-    std::fs::create_dir_all(&mapping_dir)?;
-    let mapping_cfg = profile(&mapping_dir, "pioneer-3dx.toml", |c| {
-        c.slam.input = SlamInput::Laser;
-        c.slam.backend = smokenav_platform_config::SlamBackendKind::Graph;
-        c.laser.mount = MountPose {
-            x: 0.0,
-            y: 0.0,
-            yaw_deg: 0.0,
-        };
-    });
+    let mapping_cfg = graph_profile(&dir.path().join("mapping"), SlamMode::Mapping, None)?;
     let live_maps = dir.path().join("live-maps");
     let instance = unique_instance("slam_live_graph");
     let mut mapping = Child::spawn(
@@ -547,18 +551,11 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     // default), metres from where the scans are: nothing matches, and
     // health says the localisation is lost rather than staying OK.
     // The graph named by the profile alone (`[slam] load_graph`), as a service would.
-    let lost_dir = dir.path().join("lost");
-    std::fs::create_dir_all(&lost_dir)?;
-    let lost_cfg = profile(&lost_dir, "pioneer-3dx.toml", |c| {
-        c.slam.input = SlamInput::Laser;
-        c.slam.mode = smokenav_platform_config::SlamMode::Localization;
-        c.slam.load_graph = Some(graph.clone());
-        c.laser.mount = MountPose {
-            x: 0.0,
-            y: 0.0,
-            yaw_deg: 0.0,
-        };
-    });
+    let lost_cfg = graph_profile(
+        &dir.path().join("lost"),
+        SlamMode::Localization,
+        Some(graph.clone()),
+    )?;
     let instance = unique_instance("slam_loc_lost");
     let mut lost = Child::spawn(
         &bin("smokenav-slam"),
