@@ -179,13 +179,10 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     if let Some(s) = args.seed {
         cfg.seed = s;
     }
-    // `--load-graph` over the profile's `[slam] load_graph`; either means the graph back-end.
-    if let Some(g) = &args.load_graph {
-        cfg.load_graph = Some(g.clone());
-    }
+    // `--load-graph` or the profile's `[slam] load_graph` means the graph back-end.
     if let Some(b) = args.backend {
         cfg.backend = b;
-    } else if cfg.load_graph.is_some() {
+    } else if args.load_graph.is_some() || cfg.load_graph.is_some() {
         cfg.backend = SlamBackendKind::Graph;
     }
     if args.localization {
@@ -200,6 +197,11 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     smokenav_platform_config::Validate::validate(&cfg, "slam", &mut v);
     if let Some(issue) = v.issues.first() {
         anyhow::bail!("invalid SLAM parameters: {issue}");
+    }
+    // After the check: the profile's key must be absolute (a service runs in
+    // /), a path given here is the user's, relative to where they are.
+    if let Some(g) = &args.load_graph {
+        cfg.load_graph = Some(g.clone());
     }
     Ok(cfg)
 }
@@ -496,7 +498,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     );
     anyhow::ensure!(
         cfg.mode == SlamMode::Mapping || cfg.load_graph.is_some(),
-        "localization mode tracks the robot on a saved map: give --load-graph G (saved with --save-graph)"
+        "localization mode tracks the robot on a saved map: give --load-graph G or [slam] load_graph (saved with --save-graph)"
     );
     let reference = match &args.reference {
         Some(p) => Some(load_trajectory(p).context("bad reference file")?),

@@ -359,4 +359,25 @@ fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
         "the new node is tied to vertex {} of {n}",
         tie[0]
     );
+
+    // A path on the command line is the user's, relative to where they are
+    // (only the profile's `[slam] load_graph` must be absolute).
+    let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
+        .current_dir(dir.path())
+        .args(["slam", "--carmen", log.to_str().unwrap()])
+        .args([
+            "--load-graph",
+            "run.g2o",
+            "--localization",
+            "--max-scans",
+            "5",
+        ])
+        .args(["--out", "relative"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
