@@ -263,8 +263,10 @@ fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
     let dir = tempfile::tempdir().unwrap();
     let log = data().join("csail-prefix-200.clf");
     let d = |p: &str| dir.path().join(p).to_string_lossy().into_owned();
+    // `smokenav slam` on the log, run in the test's folder.
     let slam = |args: &[&str]| {
         let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
+            .current_dir(dir.path())
             .args(["slam", "--carmen", log.to_str().unwrap()])
             .args(args)
             .output()
@@ -362,22 +364,13 @@ fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
 
     // A path on the command line is the user's, relative to where they are
     // (only the profile's `[slam] load_graph` must be absolute).
-    let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
-        .current_dir(dir.path())
-        .args(["slam", "--carmen", log.to_str().unwrap()])
-        .args([
-            "--load-graph",
-            "run.g2o",
-            "--localization",
-            "--max-scans",
-            "5",
-        ])
-        .args(["--out", "relative"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    slam(&[
+        "--load-graph",
+        "run.g2o",
+        "--localization",
+        "--max-scans",
+        "5",
+        "--out",
+        "relative",
+    ]);
 }
