@@ -60,6 +60,17 @@ pub struct MethodResult {
 /// smoke-free twin is the smoke's doing (the twin has the same noise).
 pub const SMOKE_CHANGED_M: f32 = 0.1;
 
+/// Whether the smoke changed a beam: its range (`smoky`) against the same
+/// beam of the smoke-free twin moved by more than [`SMOKE_CHANGED_M`], or
+/// one of them returned and the other did not.
+pub fn smoke_changed(smoky: Option<f32>, twin: Option<f32>) -> bool {
+    match (smoky, twin) {
+        (Some(x), Some(y)) => (x - y).abs() > SMOKE_CHANGED_M,
+        (None, None) => false,
+        _ => true,
+    }
+}
+
 /// What a fusion method did with the laser's beams, judged against the
 /// scenario's smoke-free twin (same seed, same route and noise: the smoke is
 /// the only difference). A beam the smoke changed (its range moved by more
@@ -138,15 +149,12 @@ pub fn laser_verdict(fused: &[Emitted], smoky: &SensorLog, twin: &SensorLog) -> 
                 SectionSource::Both => f.scan.beam(i).range() == Some(r),
                 _ => false,
             } && f.scan.beam(i).range().is_some();
-            match c.beam(i).range() {
-                Some(t) if (r - t).abs() <= SMOKE_CHANGED_M => {
-                    v.clean_beams += 1;
-                    v.clean_beams_withheld += u64::from(!kept);
-                }
-                _ => {
-                    v.smoke_beams += 1;
-                    v.smoke_beams_kept += u64::from(kept);
-                }
+            if smoke_changed(Some(r), c.beam(i).range()) {
+                v.smoke_beams += 1;
+                v.smoke_beams_kept += u64::from(kept);
+            } else {
+                v.clean_beams += 1;
+                v.clean_beams_withheld += u64::from(!kept);
             }
         }
     }

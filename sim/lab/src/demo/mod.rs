@@ -391,11 +391,7 @@ fn laser_damage(a: &recording::SensorLog, b: &recording::SensorLog) -> Vec<(f64,
             continue;
         }
         let changed = (0..n)
-            .filter(|&i| match (s.beam(i).range(), c.beam(i).range()) {
-                (Some(x), Some(y)) => (x - y).abs() > compare::SMOKE_CHANGED_M,
-                (None, None) => false,
-                _ => true,
-            })
+            .filter(|&i| compare::smoke_changed(s.beam(i).range(), c.beam(i).range()))
             .count();
         out.push((k as f64 * 0.1, changed as f64 * 100.0 / n as f64));
     }
