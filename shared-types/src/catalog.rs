@@ -155,12 +155,12 @@ macro_rules! for_each_message {
                     latched: false,
                 }
                 PoseEstimate {
-                    doc: "The robot pose in the map frame, one per processed scan.",
+                    doc: "The robot pose in the map frame: SLAM's, one per processed scan (slam/pose); an operator's, where localisation should search (slam/initial_pose, ROS's /initialpose).",
                     rust: $crate::slam::PoseEstimate,
                     header: [header],
                     owned: $crate::slam::PoseEstimate,
                     json: $crate::record::PoseEstimateRecord,
-                    topics: [SLAM_POSE = "slam/pose"],
+                    topics: [SLAM_POSE = "slam/pose", SLAM_INITIAL_POSE = "slam/initial_pose"],
                     family: [],
                     ros2: "geometry_msgs/msg/PoseStamped",
                     companion: Some(("/extras", "smokenav_msgs/msg/PoseExtras")),

@@ -67,6 +67,15 @@ fn replay_in_lock_step(
     bus: &smokenav_platform_bus::Bus,
     n: usize,
 ) -> anyhow::Result<Vec<StampedPose>> {
+    replay_records(bus, 0..n)
+}
+
+/// [`replay_in_lock_step`] of the records in `range` (stamps go on rising
+/// from one call to the next: they are the log's offsets from now).
+fn replay_records(
+    bus: &smokenav_platform_bus::Bus,
+    range: std::ops::Range<usize>,
+) -> anyhow::Result<Vec<StampedPose>> {
     let mut odom: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM)?;
     let mut scans: Publisher<LaserScan> = bus.publisher(topics::LASER_SCAN)?;
     let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE)?;
@@ -76,7 +85,8 @@ fn replay_in_lock_step(
     let base_ns = MonotonicClock.now_ns();
     let ipc0 = records[0].ipc_timestamp_ns;
     let mut estimate = Vec::new();
-    for rec in records.iter().take(n) {
+    let end = range.end.min(records.len());
+    for rec in &records[range.start.min(end)..end] {
         let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
         publish(&mut odom, &mut scans, rec, stamp)?;
         let (p, _) = pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
@@ -507,7 +517,7 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     )?;
     mapping.wait_for_line("graph on laser/scan", Duration::from_secs(30))?;
     let bus = open_bus(&instance);
-    replay_in_lock_step(&bus, usize::MAX)?;
+    let mapped = replay_in_lock_step(&bus, usize::MAX)?;
     mapping.signal(nix::sys::signal::Signal::SIGUSR1);
     mapping.wait_for_line("map saved", Duration::from_secs(10))?;
     mapping.terminate(Duration::from_secs(10))?;
@@ -564,7 +574,8 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     )?;
     lost.wait_for_line("localizing on", Duration::from_secs(30))?;
     let bus_lost = open_bus(&instance);
-    replay_in_lock_step(&bus_lost, usize::MAX)?;
+    const FOUND_AT: usize = 80;
+    replay_records(&bus_lost, 0..FOUND_AT)?;
     let pid = lost.pid();
     wait_for::<Health>(
         &bus_lost,
@@ -579,6 +590,61 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
         },
     )
     .map_err(|e| anyhow::anyhow!("{e}\n{}", lost.output()))?;
+    // The operator says where the robot is (as RViz's 2D Pose Estimate
+    // would), 0.3 m and 6° off where the mapping run had it: from there
+    // it is tracked on the saved map again, in the map's own frame.
+    let at = Pose2::new(
+        mapped[FOUND_AT].x,
+        mapped[FOUND_AT].y,
+        mapped[FOUND_AT].theta,
+    );
+    let said = at.compose(&Pose2::new(0.3, -0.2, 0.1));
+    let out = std::process::Command::new(bin("smokenav"))
+        .args([
+            "initial-pose",
+            "--instance",
+            &instance,
+            "--rad",
+            "--wait",
+            "10",
+        ])
+        .args([said.x, said.y, said.theta].map(|v| v.to_string()))
+        .output()?;
+    let said_back = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && said_back.contains("taken"),
+        "{said_back}\n{}",
+        lost.output()
+    );
+    let found = replay_records(&bus_lost, FOUND_AT..usize::MAX)?;
+    let off: Vec<f64> = found
+        .iter()
+        .zip(&mapped[FOUND_AT..])
+        .map(|(f, m)| (f.x - m.x).hypot(f.y - m.y))
+        .collect();
+    let near = off.iter().filter(|&&d| d < 0.15).count();
+    eprintln!(
+        "slam_e2e: found again from the operator's pose: {near} of {} poses within 0.15 m of the mapping run's, worst {:.3} m",
+        off.len(),
+        off.iter().copied().fold(0.0, f64::max)
+    );
+    assert!(near * 10 >= off.len() * 9, "{off:?}");
+    wait_for::<Health>(
+        &bus_lost,
+        topics::health("slam"),
+        Duration::from_secs(10),
+        |h| {
+            h.pid == pid
+                && h.state() == HealthState::Ok
+                && h.metric("localization_poses_given") == Some(1.0)
+        },
+    )
+    .map_err(|e| anyhow::anyhow!("{e}\n{}", lost.output()))?;
+    assert!(
+        lost.output().contains("initial pose taken"),
+        "{}",
+        lost.output()
+    );
     lost.terminate(Duration::from_secs(10))?;
     let reference = smokenav_algorithms_eval::load_trajectory(
         &workspace_root().join("daemon/algorithms/slam/tests/data/csail-reference-poses.txt"),

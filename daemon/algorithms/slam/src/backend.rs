@@ -112,6 +112,22 @@ pub trait SlamBackend: Send {
     /// Where the first scan is placed in the map frame (default: the origin).
     /// Only has an effect before the first scan.
     fn set_initial_pose(&mut self, pose: Pose2);
+    /// An operator says where the robot is now (map frame), give or take
+    /// `sigma` (m, rad; zero: not said): RViz's "2D Pose Estimate" on
+    /// `/initialpose`, or `smokenav initial-pose`. A back-end localising on
+    /// a saved map searches around it from its next scan until a scan
+    /// matches; before the first scan any back-end starts there
+    /// ([`SlamBackend::set_initial_pose`], the default). A back-end that is
+    /// mapping refuses it after its first scan: moving the robot in a map
+    /// half built from where it thought it was would tear that map.
+    fn relocalize(&mut self, pose: Pose2, sigma: (f64, f64)) -> Result<(), RelocalizeError> {
+        let _ = sigma;
+        if self.pose().is_some() {
+            return Err(RelocalizeError::Mapping(self.name()));
+        }
+        self.set_initial_pose(pose);
+        Ok(())
+    }
     /// The current best pose, once a scan was processed.
     fn pose(&self) -> Option<Pose2>;
     /// Changes whenever the map would export differently (a write, a
@@ -145,6 +161,17 @@ pub trait SlamBackend: Send {
     }
     /// For tools that know the concrete back-end (benches, summaries).
     fn as_any(&self) -> &dyn std::any::Any;
+}
+
+/// Why a pose given by an operator was not taken ([`SlamBackend::relocalize`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RelocalizeError {
+    #[error(
+        "the {0} back-end is building its map: a pose is taken before its first scan, or while localising on a saved map ([slam] mode = \"localization\")"
+    )]
+    Mapping(&'static str),
+    #[error("the pose or its uncertainty is not a finite number")]
+    NotFinite,
 }
 
 /// How a back-end is built beyond its `[slam]` keys.

@@ -44,7 +44,7 @@ pub mod scan;
 mod testkit;
 pub mod vote;
 
-pub use backend::{BackendOptions, SlamBackend, SlamUpdate, StampedPose};
+pub use backend::{BackendOptions, RelocalizeError, SlamBackend, SlamUpdate, StampedPose};
 pub use pipeline::SlamPipeline;
 pub use rbpf::Rbpf;
 pub use scan::{Beam, BeamKind, RangeScan};

@@ -29,7 +29,7 @@
 //! Time is passed in (`now_ns`), never read: a replay at any speed gives the
 //! same result as the live run when the same scans were processed.
 
-use crate::backend::{self, BackendOptions, SlamBackend, SlamUpdate, StampedPose};
+use crate::backend::{self, BackendOptions, RelocalizeError, SlamBackend, SlamUpdate, StampedPose};
 use crate::frontend::{FrontEnd, FrontEndParams, MAP_RANGE_MARGIN};
 use crate::motion_filter::{MotionFilter, MotionFilterParams};
 use crate::noise::LaserNoiseModel;
@@ -381,6 +381,16 @@ impl SlamPipeline {
     /// Where the first scan is placed in the map frame (before the first scan only).
     pub fn set_initial_pose(&mut self, pose: Pose2) {
         self.backend.set_initial_pose(pose);
+    }
+
+    /// An operator's pose for the robot now ([`SlamBackend::relocalize`]):
+    /// a localising back-end searches around it, any back-end starts there
+    /// before its first scan, a mapping one refuses it later.
+    pub fn relocalize(&mut self, pose: Pose2, sigma: (f64, f64)) -> Result<(), RelocalizeError> {
+        if !(pose.is_finite() && sigma.0.is_finite() && sigma.1.is_finite()) {
+            return Err(RelocalizeError::NotFinite);
+        }
+        self.backend.relocalize(pose, sigma)
     }
 
     pub fn stats(&self) -> PipelineStats {

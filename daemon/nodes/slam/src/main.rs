@@ -275,6 +275,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         SlamInput::Laser => Scans::Laser(p.bus.subscriber::<LaserScan>(topics::LASER_SCAN)?),
     };
     let odom_sub = p.bus.subscriber::<Odometry>(topics::BASE_ODOM)?;
+    let given_poses = p
+        .bus
+        .subscriber::<PoseEstimate>(topics::SLAM_INITIAL_POSE)?;
     let mut poses: Publisher<PoseEstimate> = p.bus.publisher(topics::SLAM_POSE)?;
     let mut maps = p.bus.map_publisher(topics::SLAM_MAP)?;
     let mut probability_maps = p.bus.map_publisher(topics::SLAM_MAP_PROBABILITY)?;
@@ -288,8 +291,16 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let mut trinary: Vec<i8> = Vec::new();
     let waiter = Waiter::new()?;
     let _attached = match &scans {
-        Scans::Fused(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],
-        Scans::Laser(s) => [waiter.attach(s)?, waiter.attach(&odom_sub)?],
+        Scans::Fused(s) => [
+            waiter.attach(s)?,
+            waiter.attach(&odom_sub)?,
+            waiter.attach(&given_poses)?,
+        ],
+        Scans::Laser(s) => [
+            waiter.attach(s)?,
+            waiter.attach(&odom_sub)?,
+            waiter.attach(&given_poses)?,
+        ],
     };
 
     let mut pipeline = if cfg.backend == SlamBackendKind::Vote {
@@ -388,6 +399,10 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         while let Some(o) = odom_sub.receive()? {
             pipeline.push_odom(&o);
         }
+        // Before the scans: the pose is where the robot is now.
+        while let Some(given) = given_poses.receive()? {
+            take_given_pose(&mut pipeline, &given);
+        }
         scans.drain(&mut pipeline)?;
         let t0 = Instant::now();
         if let Some(update) = pipeline.poll(clock.now_ns()) {
@@ -478,6 +493,34 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         p.tick()?;
     }
     Ok(())
+}
+
+/// An operator's pose from `slam/initial_pose` (`smokenav initial-pose`,
+/// RViz's 2D Pose Estimate through smokenav-zenoh): handed to the
+/// back-end, which searches around it (localising) or starts there (before
+/// its first scan). A pose in another frame, or one a mapping back-end
+/// cannot take, is refused with a warning; nothing else changes.
+fn take_given_pose(pipeline: &mut SlamPipeline, given: &PoseEstimate) {
+    let frame = given.header.frame_id.as_str();
+    if !(frame.is_empty() || frame == "map") {
+        tracing::warn!("initial pose refused: it is in frame `{frame}`, SLAM's poses are in `map`");
+        return;
+    }
+    let pose = Pose2::new(given.x, given.y, given.theta);
+    let c = &given.covariance;
+    // Row-major (x, y, θ): the larger position σ and the heading's.
+    let sigma = (c[0].max(c[4]).max(0.0).sqrt(), c[8].max(0.0).sqrt());
+    match pipeline.relocalize(pose, sigma) {
+        Ok(()) => tracing::info!(
+            "initial pose taken: x {:.2} m, y {:.2} m, heading {:.1}° (σ {:.2} m, {:.1}°)",
+            pose.x,
+            pose.y,
+            pose.theta.to_degrees(),
+            sigma.0,
+            sigma.1.to_degrees()
+        ),
+        Err(e) => tracing::warn!("initial pose refused: {e}"),
+    }
 }
 
 /// Each member's last exported map on its own topic.

@@ -231,6 +231,14 @@ pub fn qos(topic: &str) -> Qos {
             max_publishers: 8,
             max_subscribers: 8,
         },
+        // An operator's pose is for the SLAM running now: none is kept for
+        // a process that starts later (it would put the robot where it was).
+        t if t == SLAM_INITIAL_POSE.name() => Qos {
+            history: 0,
+            buffer: 4,
+            max_publishers: 4,
+            max_subscribers: 8,
+        },
         // Maps are large and only the newest matters.
         t if t == SLAM_MAP.name()
             || t == SLAM_MAP_PROBABILITY.name()

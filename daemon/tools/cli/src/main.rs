@@ -13,6 +13,7 @@ mod fleet;
 mod fuse;
 mod graph;
 mod info;
+mod initial_pose;
 mod mapsave;
 mod mapvote;
 mod play;
@@ -61,6 +62,8 @@ enum Command {
     Arcos(arcos::ArcosCommand),
     /// Publish `base/cmd_vel` at 10 Hz for a while, then stop (Pioneer or Scout).
     Drive(drive::DriveArgs),
+    /// Tell SLAM where the robot is on its map (RViz's 2D Pose Estimate): a lost localisation searches there.
+    InitialPose(initial_pose::InitialPoseArgs),
     /// Hokuyo SCIP tools: decode a capture to JSON.
     #[command(subcommand)]
     Scip(scip::ScipCommand),
@@ -136,6 +139,7 @@ fn run(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
         Command::Topic(cmd) => topic::run(cmd),
         Command::Arcos(cmd) => arcos::run(cmd),
         Command::Drive(args) => drive::run(args),
+        Command::InitialPose(args) => initial_pose::run(args),
         Command::Scip(cmd) => scip::run(cmd),
         Command::Record(args) => record::run(args),
         Command::Play(args) => play::run(args),

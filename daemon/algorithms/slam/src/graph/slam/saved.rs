@@ -27,7 +27,10 @@
 //! (`[slam] resume_at = "last"`), where it began (`"first"`: a robot that
 //! starts every run from its dock), or at [`SlamBackend::set_initial_pose`],
 //! and matched against the saved
-//! map around it (the loop-closure search window, branch and bound); then:
+//! map around it (the loop-closure search window, branch and bound, kept
+//! until a scan matches; an operator's pose given mid-run,
+//! [`SlamBackend::relocalize`], starts that search again around it, ± 3σ of
+//! what they said); then:
 //! - **mapping**: that scan becomes a new node tied to the saved node nearest
 //!   it (the last one carrying on, the first from the dock) by a robust edge
 //!   (a loose one if the match failed), and mapping goes on as
@@ -38,7 +41,7 @@
 //!   threshold leaves the pose to the motion (counted).
 
 use super::{GraphParams, GraphSlam, Node};
-use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
+use crate::backend::{RelocalizeError, SlamBackend, SlamUpdate, StampedPose};
 use crate::degeneracy::ScanConstraint;
 use crate::graph::g2o;
 use crate::graph::pose_graph::{Edge, PoseGraph};
@@ -412,6 +415,8 @@ pub struct LocalizationStats {
     /// Unmatched scans since the last matched one: a long run of them is a
     /// robot lost on the map (or started at the wrong end, `resume_at`).
     pub unmatched_streak: u64,
+    /// Poses an operator gave ([`SlamBackend::relocalize`]).
+    pub relocalized: u64,
 }
 
 /// Scans in a row that matched nothing on the saved map before a localising
@@ -433,7 +438,18 @@ pub struct ResumedGraph {
     loc: LocalizationStats,
     /// Map-frame endpoints of the saved nodes near the scan (reused).
     local: Vec<Vec<(f32, f32)>>,
+    /// The window (m, rad) scans are matched in while no scan has matched
+    /// since the start or an operator's pose: a robot that is not yet
+    /// found keeps searching wide, not only its first scan.
+    searching: Option<(f64, f64)>,
+    /// An operator's pose for the next scan ([`SlamBackend::relocalize`]).
+    given: Option<Pose2>,
 }
+
+/// The widest search around an operator's pose (3σ of what they said,
+/// at least the closure window): a branch-and-bound match over ± 3 m and
+/// ± 60° of the saved nodes near it stays within a scan period.
+pub const MAX_RELOCALIZE_WINDOW: (f64, f64) = (3.0, std::f64::consts::FRAC_PI_3);
 
 impl ResumedGraph {
     /// Starts at the saved run's last or first pose, as its settings'
@@ -443,6 +459,7 @@ impl ResumedGraph {
             ResumeAt::Last => run.last_pose,
             ResumeAt::First => run.first_pose,
         };
+        let wide = (run.slam.p.closure_window_m, run.slam.p.closure_window_rad);
         Self {
             inner: run.slam,
             localization,
@@ -454,6 +471,8 @@ impl ResumedGraph {
             trajectory: Vec::new(),
             loc: LocalizationStats::default(),
             local: Vec::new(),
+            searching: Some(wide),
+            given: None,
         }
     }
 
@@ -487,7 +506,8 @@ impl ResumedGraph {
             .iter()
             .enumerate()
             .map(|(i, x)| (i, (x.x - guess.x).hypot(x.y - guess.y)))
-            .filter(|&(_, d)| d <= g.p.closure_search_m)
+            // An operator's wide window reaches nodes past the closure radius.
+            .filter(|&(_, d)| d <= g.p.closure_search_m.max(window.0 + 2.0))
             .collect();
         near.sort_by(|a, b| a.1.total_cmp(&b.1));
         near.truncate(60);
@@ -527,10 +547,11 @@ impl ResumedGraph {
 
     /// Mapping on: the first scan becomes a node tied to the last saved node.
     fn first_mapping_scan(&mut self, scan: &RangeScan, odom: &Pose2) -> SlamUpdate {
-        let window = (
-            self.inner.p.closure_window_m,
-            self.inner.p.closure_window_rad,
-        );
+        let p = &self.inner.p;
+        let window = self
+            .searching
+            .take()
+            .unwrap_or((p.closure_window_m, p.closure_window_rad));
         self.inner.prepared.prepare(scan, &self.inner.mp);
         let start = self.start;
         let matched = self.match_saved(&start, window);
@@ -585,9 +606,11 @@ impl ResumedGraph {
     fn localize(&mut self, stamp_ns: u64, scan: Option<&RangeScan>, odom: &Pose2) -> SlamUpdate {
         self.inner.shared = None;
         let processed = scan.is_some();
-        let guess = match (self.pose, self.last_odom) {
-            (Some(p), Some(o)) if odom.is_finite() => p.compose(&o.between(odom)),
-            (Some(p), _) => p,
+        let guess = match (self.given.take(), self.pose, self.last_odom) {
+            // Where the operator says the robot is now, not where it was.
+            (Some(given), _, _) => given,
+            (None, Some(p), Some(o)) if odom.is_finite() => p.compose(&o.between(odom)),
+            (None, Some(p), _) => p,
             _ => self.start,
         };
         if odom.is_finite() {
@@ -597,16 +620,16 @@ impl ResumedGraph {
             self.loc.scans += 1;
             self.inner.prepared.prepare(scan, &self.inner.mp);
             let p = &self.inner.p;
-            // The first scan may be far from where the run ended: the wide window.
-            let window = if self.pose.is_none() {
-                (p.closure_window_m, p.closure_window_rad)
-            } else {
-                (p.tracker_window_m, p.tracker_window_rad)
-            };
+            // Until a scan matches, the robot may be far from where the run
+            // ended or the operator put it: the wide window.
+            let window = self
+                .searching
+                .unwrap_or((p.tracker_window_m, p.tracker_window_rad));
             match self.match_saved(&guess, window) {
                 Some((m, _)) => {
                     self.loc.matched += 1;
                     self.loc.unmatched_streak = 0;
+                    self.searching = None;
                     m
                 }
                 None => {
@@ -679,6 +702,28 @@ impl SlamBackend for ResumedGraph {
         }
     }
 
+    fn relocalize(&mut self, pose: Pose2, sigma: (f64, f64)) -> Result<(), RelocalizeError> {
+        if !(pose.is_finite() && sigma.0.is_finite() && sigma.1.is_finite()) {
+            return Err(RelocalizeError::NotFinite);
+        }
+        if !self.localization && self.started {
+            return Err(RelocalizeError::Mapping("graph"));
+        }
+        let p = &self.inner.p;
+        let (max_m, max_rad) = MAX_RELOCALIZE_WINDOW;
+        self.searching = Some((
+            (3.0 * sigma.0.abs()).clamp(p.closure_window_m, max_m),
+            (3.0 * sigma.1.abs()).clamp(p.closure_window_rad, max_rad),
+        ));
+        if self.localization && self.pose.is_some() {
+            self.given = Some(pose);
+        } else {
+            self.start = pose;
+        }
+        self.loc.relocalized += 1;
+        Ok(())
+    }
+
     fn pose(&self) -> Option<Pose2> {
         if self.localization {
             self.pose
@@ -710,13 +755,14 @@ impl SlamBackend for ResumedGraph {
         if self.localization {
             emit("localization_matched", self.loc.matched as f64);
             emit("localization_unmatched", self.loc.unmatched as f64);
+            emit("localization_poses_given", self.loc.relocalized as f64);
         }
     }
 
     fn health_condition(&self) -> Option<String> {
         (self.localization && self.loc.unmatched_streak >= LOST_AFTER_SCANS).then(|| {
             format!(
-                "localization: over {LOST_AFTER_SCANS} scans in a row matched nothing on the saved map (robot lost, or not where [slam] resume_at puts it)"
+                "localization: over {LOST_AFTER_SCANS} scans in a row matched nothing on the saved map (robot lost, or not where [slam] resume_at puts it: give its pose with `smokenav initial-pose` or RViz's 2D Pose Estimate)"
             )
         })
     }
@@ -931,6 +977,68 @@ mod tests {
             .map(d)
             .fold(f64::INFINITY, f64::min);
         assert!(d(&g.graph.poses()[tie.from]) <= nearest + 0.05, "{tie:?}");
+    }
+
+    /// A localising robot put on the wrong side of the block is lost (and
+    /// says so) until an operator gives its pose, half a metre and 11° off:
+    /// from there it is tracked on the saved map again.
+    #[test]
+    fn a_lost_localization_is_found_again_from_an_operators_pose() {
+        let dir = tempfile::tempdir().unwrap();
+        let (path, r, half) = first_half_saved(dir.path());
+        let saved = load(&SlamSection::default(), GraphParams::default(), &path).unwrap();
+        let mut loc = ResumedGraph::new(saved, true, true);
+        // The far side of the block, facing the other way.
+        loc.set_initial_pose(Pose2::new(0.0, 4.4, std::f64::consts::PI));
+        let lost_for = LOST_AFTER_SCANS as usize + 5;
+        run(&mut loc, &r[half..half + lost_for]);
+        let s = loc.localization_stats();
+        assert_eq!(s.matched, 0, "{s:?}");
+        assert!(loc.health_condition().is_some(), "{s:?}");
+
+        let from = half + lost_for;
+        let truth = START.between(&r[from].0);
+        let said = truth.compose(&Pose2::new(0.4, -0.3, 0.2));
+        loc.relocalize(said, (0.5, 0.25)).unwrap();
+        let est = run(&mut loc, &r[from..]);
+        let s = loc.localization_stats();
+        let worst = worst_error(&est, &r[from..]);
+        eprintln!("found again from the operator's pose: worst {worst:.3} m; {s:?}");
+        assert!(worst < 0.1, "{worst} m off the truth");
+        assert_eq!(s.relocalized, 1);
+        assert!(s.matched as usize > (r.len() - from) * 9 / 10, "{s:?}");
+        assert_eq!(loc.health_condition(), None);
+        assert_eq!(
+            loc.relocalize(Pose2::new(f64::NAN, 0.0, 0.0), (0.5, 0.2)),
+            Err(RelocalizeError::NotFinite)
+        );
+    }
+
+    /// Mapping takes an operator's pose before its first scan only: later it
+    /// would tear the map built so far.
+    #[test]
+    fn a_mapping_run_takes_an_operators_pose_only_before_its_first_scan() {
+        let dir = tempfile::tempdir().unwrap();
+        let (path, r, half) = first_half_saved(dir.path());
+        let saved = load(&SlamSection::default(), GraphParams::default(), &path).unwrap();
+        let mut mapping = ResumedGraph::new(saved, false, true);
+        let at = START.between(&r[half].0);
+        assert_eq!(mapping.relocalize(at, (0.2, 0.1)), Ok(()));
+        run(&mut mapping, &r[half..half + 1]);
+        let p = mapping.pose().unwrap();
+        assert!((p.x - at.x).hypot(p.y - at.y) < 0.1, "{p:?} vs {at:?}");
+        assert_eq!(
+            mapping.relocalize(at, (0.2, 0.1)),
+            Err(RelocalizeError::Mapping("graph"))
+        );
+        let mut fresh = GraphSlam::new(&SlamSection::default(), GraphParams::default());
+        assert_eq!(
+            fresh.relocalize(Pose2::new(1.0, 2.0, 0.5), (0.0, 0.0)),
+            Ok(())
+        );
+        let first = fresh.process(&r[0].1, &r[0].2).pose;
+        assert_eq!(first, Pose2::new(1.0, 2.0, 0.5));
+        assert!(fresh.relocalize(first, (0.0, 0.0)).is_err());
     }
 
     #[test]
