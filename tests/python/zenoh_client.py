@@ -7,15 +7,19 @@ subscribes to `/laser/scan` on rmw_zenoh's key — built here from the
 `rosbags` type store's own RIHS01 hash of sensor_msgs/msg/LaserScan, not
 from anything the bridge says — and decodes each payload with `rosbags`'
 CDR deserialiser. Optionally publishes geometry_msgs/Twist on `cmd_vel`
-first, with an rmw_zenoh attachment (one stale sample, then fresh ones).
+first, with an rmw_zenoh attachment (one stale sample, then fresh ones),
+and geometry_msgs/PoseWithCovarianceStamped on `initialpose` (RViz's 2D
+Pose Estimate), once in each frame given.
 Prints one JSON object per line:
 
   {"op": "tokens", "keys": [...]}
   {"op": "scan", "key": ..., "stamp_ns": ..., "angle_min": ..., "ranges": [...],
    "attachment": {"seq": ..., "unix_ns": ..., "gid_len": ...}}
   {"op": "sent_cmd", "count": N}
+  {"op": "sent_pose", "frames": [...]}
 
   zenoh_client.py ENDPOINT --scans N [--namespace /robot1] [--cmd-vel LIN,ANG,SECONDS]
+                  [--initial-pose X,Y,YAW,FRAME[,FRAME...]]
 """
 
 import argparse
@@ -56,6 +60,7 @@ def main():
     ap.add_argument("--namespace", default="")
     ap.add_argument("--domain", type=int, default=0)
     ap.add_argument("--cmd-vel", default=None)
+    ap.add_argument("--initial-pose", default=None)
     ap.add_argument("--timeout", type=float, default=60.0)
     a = ap.parse_args()
 
@@ -98,6 +103,33 @@ def main():
             time.sleep(0.1)
         pub.undeclare()
         out({"op": "sent_cmd", "count": n})
+
+    if a.initial_pose:
+        import numpy as np
+        x, y, yaw, *frames = a.initial_pose.split(",")
+        x, y, yaw = float(x), float(y), float(yaw)
+        t = STORE.types
+        name = "geometry_msgs/msg/PoseWithCovarianceStamped"
+        k = key(a.domain, a.namespace, "/initialpose", name)
+        pub = session.declare_publisher(k)
+        time.sleep(0.3)
+        cov = np.zeros(36)
+        cov[0], cov[7], cov[35] = 0.25, 0.25, 0.0685  # RViz's defaults
+        for n, frame in enumerate(frames):
+            msg = t[name](
+                header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=frame),
+                pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=t["geometry_msgs/msg/Pose"](
+                        position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                        orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
+                    ),
+                    covariance=cov,
+                ),
+            )
+            pub.put(bytes(STORE.serialize_cdr(msg, name)), attachment=attachment(n + 1, time.time_ns()))
+            time.sleep(0.3)
+        pub.undeclare()
+        out({"op": "sent_pose", "frames": frames})
 
     k = key(a.domain, a.namespace, "/laser/scan", "sensor_msgs/msg/LaserScan")
     sub = session.declare_subscriber(k)

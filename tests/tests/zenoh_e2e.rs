@@ -8,7 +8,9 @@
 //!   dds_::LaserScan_/RIHS01_…` with the ranges published on the bus and
 //!   rmw_zenoh's attachment; the node and publisher liveliness tokens are
 //!   there; `cmd_vel` from Python reaches `base/cmd_vel` (a stale sample
-//!   never does, and nothing is forwarded once Python stops); every
+//!   never does, and nothing is forwarded once Python stops); RViz's
+//!   `initialpose` in `map` reaches `slam/initial_pose` (one in `odom` is
+//!   refused and counted); every
 //!   socket of the bridge is bound to loopback.
 //! - a remote controller killed: the Pioneer emulator, the real driver and
 //!   the bridge; the base is commanded to stop by the driver's own command
@@ -53,6 +55,7 @@ fn zenoh_profile(
             connect: vec![],
             namespace: ns.into(),
             cmd_vel,
+            initial_pose: cmd_vel,
             ..ZenohSection::default()
         };
     });
@@ -174,10 +177,15 @@ fn laser_scan_reaches_a_python_zenoh_session_on_the_rmw_zenoh_key() {
     // Commands from outside land on base/cmd_vel.
     let bus = open_bus(&instance);
     let cmds = bus.subscriber(topics::BASE_CMD_VEL).unwrap();
+    let given = bus
+        .subscriber::<PoseEstimate>(topics::SLAM_INITIAL_POSE)
+        .unwrap();
     let out = Command::new(&py)
         .arg(workspace_root().join("tests/python/zenoh_client.py"))
         .arg(format!("tcp/127.0.0.1:{port}"))
         .args(["--scans", "5", "--cmd-vel", "0.25,-0.1,1.0"])
+        // RViz's 2D Pose Estimate: in `odom` (refused), then in `map`.
+        .args(["--initial-pose", "4.2,-1.0,2.5,odom,map"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .output()
@@ -289,6 +297,34 @@ fn laser_scan_reaches_a_python_zenoh_session_on_the_rmw_zenoh_key() {
         stale_seen.is_ok(),
         "the stale command is not counted: {stale_seen:?}"
     );
+
+    // initialpose: the one in `map` is on slam/initial_pose, the `odom` one refused.
+    let mut poses: Vec<PoseEstimate> = Vec::new();
+    while let Some(p) = given.receive().unwrap() {
+        poses.push(*p);
+    }
+    assert_eq!(poses.len(), 1, "{poses:?}\n{}", b.output());
+    let p = &poses[0];
+    assert_eq!(p.header.frame_id.as_str(), "map");
+    assert!(
+        (p.x - 4.2).abs() < 1e-9 && (p.y + 1.0).abs() < 1e-9 && (p.theta - 2.5).abs() < 1e-9,
+        "{p:?}"
+    );
+    assert_eq!(
+        (p.covariance[0], p.covariance[4], p.covariance[8]),
+        (0.25, 0.25, 0.0685)
+    );
+    let refused = smokenav_tests::wait_for(
+        &bus,
+        topics::health("zenoh"),
+        Duration::from_secs(10),
+        |h: &Health| h.metric("initial_poses_refused") == Some(1.0),
+    );
+    assert!(
+        refused.is_ok(),
+        "the `odom` pose is not counted: {refused:?}"
+    );
+    assert!(b.output().contains("frame `odom`"), "{}", b.output());
 
     // Every socket of the bridge is on loopback, and it has some (the listener).
     assert!(!sockets.is_empty(), "no socket found for the bridge");
@@ -460,11 +496,11 @@ fn two_robots_over_zenoh_one_bridge_killed_shows_unreachable_within_2s() {
 fn every_type_hash_is_the_one_rosbags_computes() {
     use smokenav_nodes_zenoh::rihs;
     use smokenav_platform_recording::schema;
-    // The catalog's types, and the Twist `cmd_vel` takes.
+    // The catalog's types, the Twist `cmd_vel` takes and RViz's `initialpose`.
     let all: Vec<&schema::MsgDef> = schema::ALL
         .iter()
         .copied()
-        .chain([&schema::TWIST])
+        .chain([&schema::TWIST, &schema::POSE_WITH_COVARIANCE_STAMPED])
         .collect();
     let defs: Vec<Value> = all
         .iter()

@@ -3,7 +3,10 @@
 //! its liveliness tokens and attachments), so `ros2 topic echo` on a machine
 //! running rmw_zenoh sees them, and `smokenav status --zenoh` shows several
 //! robots at once. With `[zenoh] cmd_vel = true` it also takes
-//! `<namespace>/cmd_vel` (geometry_msgs/Twist) onto `base/cmd_vel`.
+//! `<namespace>/cmd_vel` (geometry_msgs/Twist) onto `base/cmd_vel`, and with
+//! `[zenoh] initial_pose = true` `<namespace>/initialpose`
+//! (geometry_msgs/PoseWithCovarianceStamped, RViz's 2D Pose Estimate) onto
+//! `slam/initial_pose`.
 //! Health on `health/zenoh`.
 //!
 //! ```text
@@ -13,7 +16,7 @@
 use anyhow::Context;
 use clap::Parser;
 use smokenav_nodes_zenoh::bridge::{self, unix_now_ns};
-use smokenav_nodes_zenoh::{Bridge, command, keys, rihs};
+use smokenav_nodes_zenoh::{Bridge, command, initial_pose, keys, rihs};
 use smokenav_platform_bus::tap::{self, Tap};
 use smokenav_platform_bus::{Attachment, Bus, BusOptions, WaitOutcome, Waiter, topics};
 use smokenav_platform_config::RobotConfig;
@@ -21,13 +24,13 @@ use smokenav_platform_recording::RobotGeometry;
 use smokenav_platform_recording::schema;
 use smokenav_platform_runtime::{CommonArgs, Process, Shutdown};
 use smokenav_shared_types::clock::monotonic_now_ns;
-use smokenav_shared_types::{Header, VelocityCommand};
+use smokenav_shared_types::{Header, PoseEstimate, VelocityCommand};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 use zenoh::Wait;
-use zenoh::handlers::RingChannel;
+use zenoh::handlers::{RingChannel, RingChannelHandler};
 
 /// Its role: node name and health topic.
 const ROLE: &str = "zenoh";
@@ -45,6 +48,12 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     smokenav_platform_runtime::main(ROLE, &args.common, run)
+}
+
+#[derive(Default)]
+struct PoseCounters {
+    forwarded: AtomicU64,
+    refused: AtomicU64,
 }
 
 #[derive(Default)]
@@ -83,6 +92,17 @@ fn run(p: &mut Process) -> anyhow::Result<()> {
     } else {
         None
     };
+    let poses = Arc::new(PoseCounters::default());
+    let _poses = if zc.initial_pose {
+        Some(spawn_initial_poses(
+            &p.config,
+            &bridge,
+            p.shutdown(),
+            poses.clone(),
+        )?)
+    } else {
+        None
+    };
 
     let waiter = Waiter::new()?;
     let _attached: Vec<Attachment> = taps
@@ -97,7 +117,12 @@ fn run(p: &mut Process) -> anyhow::Result<()> {
         zc.domain_id,
         zc.namespace,
         taps.len(),
-        if zc.cmd_vel { ", cmd_vel in" } else { "" }
+        match (zc.cmd_vel, zc.initial_pose) {
+            (true, true) => ", cmd_vel and initialpose in",
+            (true, false) => ", cmd_vel in",
+            (false, true) => ", initialpose in",
+            (false, false) => "",
+        }
     ));
     while !p.shutdown_requested() {
         if waiter.wait(Some(Duration::from_millis(200)))? == WaitOutcome::Shutdown {
@@ -129,6 +154,14 @@ fn run(p: &mut Process) -> anyhow::Result<()> {
             "cmd_invalid",
             counters.invalid.load(Ordering::Relaxed) as f64,
         );
+        h.set_metric(
+            "initial_poses_forwarded",
+            poses.forwarded.load(Ordering::Relaxed) as f64,
+        );
+        h.set_metric(
+            "initial_poses_refused",
+            poses.refused.load(Ordering::Relaxed) as f64,
+        );
         p.tick()?;
     }
     Ok(())
@@ -137,16 +170,26 @@ fn run(p: &mut Process) -> anyhow::Result<()> {
 /// The `cmd_vel` subscriber: its own thread and bus publisher (bus ports
 /// stay on the thread that made them), woken by Zenoh, keeping only the
 /// newest sample (a backlog of old commands is never replayed).
-fn spawn_commands(
+/// A subscription to ROS topic `ros_topic` (under the namespace) of type
+/// `def` from outside, keeping only the newest sample, announced as
+/// rmw_zenoh announces a subscriber (entity `entity`); with its key.
+type Inbound = (
+    zenoh::pubsub::Subscriber<RingChannelHandler<zenoh::sample::Sample>>,
+    zenoh::liveliness::LivelinessToken,
+    String,
+);
+
+fn subscribe_inbound(
     cfg: &RobotConfig,
     bridge: &Bridge,
-    stop: Shutdown,
-    counters: Arc<CmdCounters>,
-) -> anyhow::Result<std::thread::JoinHandle<()>> {
+    ros_topic: &str,
+    def: &schema::MsgDef,
+    entity: u32,
+) -> anyhow::Result<Inbound> {
     let zc = &cfg.zenoh;
-    let topic = keys::qualified(&zc.namespace, "/cmd_vel");
-    let dds = rihs::dds_type_name(schema::TWIST.name);
-    let hash = rihs::type_hash(&schema::TWIST)?;
+    let topic = keys::qualified(&zc.namespace, ros_topic);
+    let dds = rihs::dds_type_name(def.name);
+    let hash = rihs::type_hash(def)?;
     let key = keys::topic_key(zc.domain_id, &topic, &dds, &hash);
     let session = bridge.session().clone();
     let sub = session
@@ -159,7 +202,7 @@ fn spawn_commands(
         &keys::entity_token(
             zc.domain_id,
             bridge.zid(),
-            0x7fff_0000,
+            entity,
             keys::EntityKind::Subscription,
             &zc.namespace,
             &topic,
@@ -171,6 +214,17 @@ fn spawn_commands(
             },
         ),
     )?;
+    Ok((sub, token, key))
+}
+
+fn spawn_commands(
+    cfg: &RobotConfig,
+    bridge: &Bridge,
+    stop: Shutdown,
+    counters: Arc<CmdCounters>,
+) -> anyhow::Result<std::thread::JoinHandle<()>> {
+    let (sub, token, key) =
+        subscribe_inbound(cfg, bridge, "/cmd_vel", &schema::TWIST, 0x7fff_0000)?;
     let opts =
         BusOptions::new(&cfg.robot.instance, "zenoh-cmd").with_root_path(cfg.bus.root_path.clone());
     let timeout_ns = (cfg.base.cmd_timeout_s * 1e9) as i64;
@@ -221,6 +275,101 @@ fn spawn_commands(
                 Err(e) => {
                     tracing::debug!("cmd_vel dropped: {e}");
                     counters.invalid.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }))
+}
+
+/// A pose older than this (its rmw_zenoh source time) was held by the
+/// network while the robot moved on: dropped.
+const POSE_MAX_AGE_NS: i64 = 5_000_000_000;
+
+/// The `initialpose` subscriber (RViz's 2D Pose Estimate): like the
+/// commands', its own thread and bus publisher; each fresh, valid pose is
+/// published once on `slam/initial_pose`.
+fn spawn_initial_poses(
+    cfg: &RobotConfig,
+    bridge: &Bridge,
+    stop: Shutdown,
+    counters: Arc<PoseCounters>,
+) -> anyhow::Result<std::thread::JoinHandle<()>> {
+    let (sub, token, key) = subscribe_inbound(
+        cfg,
+        bridge,
+        "/initialpose",
+        &schema::POSE_WITH_COVARIANCE_STAMPED,
+        0x7fff_0001,
+    )?;
+    let opts = BusOptions::new(&cfg.robot.instance, "zenoh-pose")
+        .with_root_path(cfg.bus.root_path.clone());
+    tracing::info!(%key, "taking initialpose from Zenoh onto slam/initial_pose");
+    let bus = Bus::open(&opts).context("cannot join the bus for initialpose")?;
+    drop(bus); // checked here; the thread opens its own
+    Ok(std::thread::spawn(move || {
+        let _token = token;
+        let bus = match Bus::open(&opts) {
+            Ok(b) => b,
+            Err(e) => return tracing::error!("initialpose: cannot join the bus: {e}"),
+        };
+        let mut publisher = match bus.publisher(topics::SLAM_INITIAL_POSE) {
+            Ok(p) => p,
+            Err(e) => {
+                return tracing::error!("initialpose: cannot publish slam/initial_pose: {e}");
+            }
+        };
+        while !stop.requested() {
+            let sample = match sub.recv_timeout(Duration::from_millis(200)) {
+                Ok(Some(s)) => s,
+                Ok(None) => continue,
+                Err(e) => return tracing::error!("initialpose subscriber closed: {e}"),
+            };
+            let payload = sample.payload().to_bytes();
+            let attachment = sample.attachment().map(|a| a.to_bytes());
+            let fresh = command::check_age(attachment.as_deref(), unix_now_ns(), POSE_MAX_AGE_NS);
+            let checked = fresh
+                .map_err(|e| e.to_string())
+                .and_then(|()| initial_pose::decode(&payload).map_err(|e| e.to_string()));
+            match checked {
+                Ok(pose) => {
+                    let given = PoseEstimate {
+                        header: Header::new(monotonic_now_ns(), 0, "map"),
+                        x: pose.x,
+                        y: pose.y,
+                        theta: pose.yaw,
+                        covariance: [
+                            pose.var_x,
+                            0.0,
+                            0.0,
+                            0.0,
+                            pose.var_y,
+                            0.0,
+                            0.0,
+                            0.0,
+                            pose.var_yaw,
+                        ],
+                        ..PoseEstimate::default()
+                    };
+                    match publisher.publish(&given) {
+                        Ok(_) => {
+                            tracing::info!(
+                                "initialpose from Zenoh: x {:.2} m, y {:.2} m, heading {:.1}°",
+                                pose.x,
+                                pose.y,
+                                pose.yaw.to_degrees()
+                            );
+                            counters.forwarded.fetch_add(1, Ordering::Relaxed);
+                        }
+                        Err(e) => {
+                            tracing::warn!("initialpose: {e}");
+                            counters.refused.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                }
+                Err(e) => {
+                    // An operator's click: worth a warning, unlike a stream of commands.
+                    tracing::warn!("initialpose refused: {e}");
+                    counters.refused.fetch_add(1, Ordering::Relaxed);
                 }
             }
         }

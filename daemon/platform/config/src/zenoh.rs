@@ -5,7 +5,8 @@
 //! enabled by default; multicast scouting is off (a robot must not announce
 //! itself on every interface); the default endpoints are loopback only, as
 //! rmw_zenoh's own session (listen on `tcp/127.0.0.1:0`, connect to a router
-//! on `tcp/127.0.0.1:7447`). Commands from outside (`cmd_vel`) are opt-in.
+//! on `tcp/127.0.0.1:7447`). Input from outside (`cmd_vel`, `initialpose`)
+//! is opt-in.
 
 use crate::validate::{Validate, Validator};
 use serde::{Deserialize, Serialize};
@@ -62,6 +63,12 @@ pub struct ZenohSection {
     /// timeout stops the robot when it goes quiet.
     #[serde(default)]
     pub cmd_vel: bool,
+    /// Subscribe to `<namespace>/initialpose`
+    /// (geometry_msgs/PoseWithCovarianceStamped: RViz's "2D Pose Estimate")
+    /// and publish it on `slam/initial_pose`, where a localising SLAM
+    /// searches around it. Off: nobody off the robot moves its estimate.
+    #[serde(default)]
+    pub initial_pose: bool,
 }
 
 fn default_listen() -> Vec<String> {
@@ -83,6 +90,7 @@ impl Default for ZenohSection {
             namespace: String::new(),
             topics: Vec::new(),
             cmd_vel: false,
+            initial_pose: false,
         }
     }
 }

@@ -97,6 +97,13 @@ pub static POSE_WITH_COVARIANCE: MsgDef = MsgDef {
     deps: &[&POSE],
 };
 
+/// RViz's "2D Pose Estimate" (`/initialpose`), taken by `smokenav-zenoh`.
+pub static POSE_WITH_COVARIANCE_STAMPED: MsgDef = MsgDef {
+    name: "geometry_msgs/msg/PoseWithCovarianceStamped",
+    text: "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n",
+    deps: &[&HEADER, &POSE_WITH_COVARIANCE],
+};
+
 pub static TWIST: MsgDef = MsgDef {
     name: "geometry_msgs/msg/Twist",
     text: "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n",
