@@ -547,7 +547,8 @@ fn publish_members(
     }
 }
 
-/// Degraded, naming the reasons, while a vote member is out or the heading
+/// Degraded, naming the reasons, while the back-end names a condition (a
+/// vote member out, a localisation lost) or the heading
 /// has been odometry's alone for more than `max_blind_m`; back to Ok when
 /// none holds. Returns whether it is flagged now.
 fn flag_conditions(
@@ -556,17 +557,9 @@ fn flag_conditions(
     max_blind_m: f64,
     flagged: bool,
 ) -> bool {
-    let vote = pipeline.backend().as_any().downcast_ref::<VoteSlam>();
-    let out: Vec<String> = vote.map_or_else(Vec::new, |v| {
-        v.status()
-            .members
-            .iter()
-            .filter(|m| m.health.is_out())
-            .map(|m| format!("{} {}", m.name, m.health))
-            .collect()
-    });
-    let mut reasons = conditions(&out, &pipeline.stats(), max_blind_m);
-    reasons.extend(pipeline.backend().health_condition());
+    // The back-end's own first (vote members out, localisation lost).
+    let mut reasons: Vec<String> = pipeline.backend().health_condition().into_iter().collect();
+    reasons.extend(conditions(&pipeline.stats(), max_blind_m));
     if !reasons.is_empty() {
         p.health.error(&reasons.join("; "));
         if p.health.state() == HealthState::Ok {
@@ -584,13 +577,10 @@ fn flag_conditions(
     }
 }
 
-/// Why the SLAM process is degraded: the vote members that are out (as
-/// `name state`) and a blind stretch longer than `max_blind_m` (0: never).
-fn conditions(members_out: &[String], stats: &PipelineStats, max_blind_m: f64) -> Vec<String> {
+/// Why the pipeline makes the SLAM process degraded: a blind stretch
+/// longer than `max_blind_m` (0: never).
+fn conditions(stats: &PipelineStats, max_blind_m: f64) -> Vec<String> {
     let mut reasons = Vec::new();
-    if !members_out.is_empty() {
-        reasons.push(format!("vote: member {}", members_out.join("; member ")));
-    }
     if max_blind_m > 0.0 && stats.blind_m > max_blind_m {
         // The limit, not the running figure: the text stays the same while
         // the stretch lasts (a new text is logged again); heading_blind_m has the figure.
@@ -658,28 +648,21 @@ mod tests {
     }
 
     #[test]
-    fn a_long_blind_stretch_and_members_out_are_named_in_health() {
+    fn a_long_blind_stretch_is_named_in_health() {
         let blind = |m: f64| PipelineStats {
             blind_m: m,
             ..PipelineStats::default()
         };
-        assert!(conditions(&[], &blind(4.9), 5.0).is_empty());
-        let r = conditions(&[], &blind(6.2), 5.0);
+        assert!(conditions(&blind(4.9), 5.0).is_empty());
+        let r = conditions(&blind(6.2), 5.0);
         assert_eq!(r.len(), 1);
         assert!(
             r[0].starts_with("heading from odometry alone for over 5.0 m"),
             "{r:?}"
         );
         // The same text while the stretch lasts (the log repeats a new text).
-        assert_eq!(conditions(&[], &blind(9.0), 5.0), r);
-        assert!(
-            conditions(&[], &blind(60.0), 0.0).is_empty(),
-            "0 never flags"
-        );
-        let out = ["rbpf stalled".to_string()];
-        let r = conditions(&out, &blind(6.2), 5.0);
-        assert_eq!(r.len(), 2);
-        assert_eq!(r[0], "vote: member rbpf stalled");
+        assert_eq!(conditions(&blind(9.0), 5.0), r);
+        assert!(conditions(&blind(60.0), 0.0).is_empty(), "0 never flags");
     }
 
     /// A health report holds `MAX_METRICS`; one past it is lost. Every

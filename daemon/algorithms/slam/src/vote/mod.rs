@@ -1088,6 +1088,19 @@ impl SlamBackend for VoteSlam {
         }
     }
 
+    /// The members that are out (panicked, stalled, misaligned), as
+    /// `vote: member rbpf stalled …; member graph …`.
+    fn health_condition(&self) -> Option<String> {
+        let st = self.status();
+        let out: Vec<String> = st
+            .members
+            .iter()
+            .filter(|m| m.health.is_out())
+            .map(|m| format!("member {} {}", m.name, m.health))
+            .collect();
+        (!out.is_empty()).then(|| format!("vote: {}", out.join("; ")))
+    }
+
     fn as_any(&self) -> &dyn std::any::Any {
         self
     }

@@ -123,6 +123,12 @@ fn a_panicking_member_is_out_and_the_vote_goes_on() {
     v.metrics(&mut |n, x| out.push((n, x)));
     assert!(out.contains(&("vote_out_fuzzy", 1.0)), "{out:?}");
     assert!(out.contains(&("vote_out_rbpf", 0.0)), "{out:?}");
+    // Health names the member (through the trait, as the process reads it).
+    let said = v.health_condition().unwrap_or_default();
+    assert!(
+        said.starts_with("vote: member fuzzy out (panicked"),
+        "{said}"
+    );
 }
 
 #[test]
