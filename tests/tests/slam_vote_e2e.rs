@@ -3,7 +3,8 @@
 //! `slam/vote/{rbpf,graph,fuzzy}` and the vote on `slam/map`; with a member
 //! made to panic or hang (the test-only `SMOKENAV_TEST_VOTE_FAULT`), the vote
 //! keeps updating on the others, `health/slam` names the member that is out,
-//! and the two left do not vote the union of their maps.
+//! and the two left do not vote the union of their maps. SIGUSR1 saves the
+//! graph member's pose graph beside the map, as the graph back-end does.
 
 use smokenav_platform_bus::{Bus, Publisher, Topic, Waiter, topics};
 use smokenav_platform_config::{MountPose, SlamBackendKind, SlamInput};
@@ -19,6 +20,8 @@ use std::time::{Duration, Instant};
 struct Run {
     slam: Child,
     bus: Bus,
+    /// Where SIGUSR1 saves (`--map-dir`).
+    maps: std::path::PathBuf,
     _dir: tempfile::TempDir,
 }
 
@@ -53,9 +56,15 @@ fn start(name: &str, fault: Option<&str>) -> Run {
     let env: Vec<(&str, &str)> = fault
         .map(|f| vec![("SMOKENAV_TEST_VOTE_FAULT", f)])
         .unwrap_or_default();
+    let maps = dir.path().join("maps");
     let slam = Child::spawn_env(
         &bin("smokenav-slam"),
-        &["--config", cfg.to_str().unwrap()],
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--map-dir",
+            maps.to_str().unwrap(),
+        ],
         &instance,
         &env,
     )
@@ -66,6 +75,7 @@ fn start(name: &str, fault: Option<&str>) -> Run {
     Run {
         slam,
         bus,
+        maps,
         _dir: dir,
     }
 }
@@ -164,6 +174,22 @@ fn vote_publishes_every_members_map_and_the_fused_one() {
         "{}",
         h.last_error.as_str()
     );
+    // SIGUSR1: the fused map, and the graph member's pose graph beside it,
+    // which a graph back-end reads back (to continue or localise on).
+    r.slam.signal(nix::sys::signal::Signal::SIGUSR1);
+    r.slam
+        .wait_for_line("map saved", Duration::from_secs(30))
+        .unwrap_or_else(|e| panic!("{e}\n{}", r.slam.output()));
+    assert!(r.maps.join("map.pgm").exists());
+    let graph = r.maps.join("graph.g2o");
+    let run = smokenav_algorithms_slam::graph::saved::load(
+        &smokenav_platform_config::SlamSection::default(),
+        smokenav_algorithms_slam::graph::GraphParams::default(),
+        &graph,
+    )
+    .unwrap_or_else(|e| panic!("{e}\n{}", r.slam.output()));
+    let nodes = run.slam.graph().len();
+    assert!(nodes >= 10, "{nodes} nodes");
 }
 
 /// Replays until `member` is out with `why` in health, then replays more and

@@ -14,6 +14,7 @@
 
 use crate::frontend::Tracked;
 use crate::fuzzy::FuzzySlam;
+use crate::graph::saved::SavedGraphError;
 use crate::graph::{GraphParams, GraphSlam};
 use crate::projected::{ProjectedMap, SensorRig};
 use crate::rbpf::{Rbpf, RbpfParams};
@@ -23,6 +24,7 @@ use nalgebra::Matrix3;
 use smokenav_platform_config::{SlamBackendKind, SlamSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
+use std::path::Path;
 use std::sync::Arc;
 
 /// A scan the fusion withheld more than this share of beams from the laser
@@ -157,6 +159,13 @@ pub trait SlamBackend: Send {
     /// (and be degraded for), e.g. a localisation that matches nothing;
     /// `None` while all is well. The same text while the condition lasts.
     fn health_condition(&self) -> Option<String> {
+        None
+    }
+    /// Writes the back-end's pose graph to `path` (2D g2o) and its nodes'
+    /// scans beside it (`path.scans`), what `--load-graph` continues or
+    /// localises on; `None` for a back-end that keeps no pose graph.
+    fn save_graph(&self, path: &Path) -> Option<Result<(), SavedGraphError>> {
+        let _ = path;
         None
     }
     /// For tools that know the concrete back-end (benches, summaries).

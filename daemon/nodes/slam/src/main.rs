@@ -14,7 +14,8 @@
 //! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
 //! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
 //! map.png (`smokenav map save DIR` saves the published map from anywhere)
-//! and, with the graph back-end, the pose graph as graph.g2o + graph.g2o.scans
+//! and, with the graph back-end (or the vote's graph member), the pose graph
+//! as graph.g2o + graph.g2o.scans
 //! (what `--load-graph` continues or localises on, and `smokenav graph
 //! optimize` reads);
 //! the folder defaults to `$SMOKENAV_MAP_DIR`, else systemd's
@@ -33,7 +34,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam, ResumedGraph, saved};
+use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
 use smokenav_algorithms_slam::pipeline::PipelineStats;
 use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::rbpf::Rbpf;
@@ -196,16 +197,17 @@ fn save_map(grid: &OccupancyGrid, fuzzy: Option<&OccupancyGrid>, dir: &Path) -> 
     Ok(())
 }
 
-/// With the graph back-end (mapping, continued or localising): the pose
-/// graph and its nodes' scans as `dir/graph.g2o` + `.scans`, so the run can
-/// be continued or localised on (`--load-graph`). Written beside, then
-/// renamed over the last save: a reader never sees half a graph.
+/// With a pose graph (the graph back-end, mapping, continued or localising,
+/// or the vote's graph member): the graph and its nodes' scans as
+/// `dir/graph.g2o` + `.scans`, so the run can be continued or localised on
+/// (`--load-graph`). Written beside, then renamed over the last save: a
+/// reader never sees half a graph.
 fn save_graph(pipeline: &SlamPipeline, dir: &Path) -> anyhow::Result<()> {
-    let Some(g) = pipeline.backend().as_any().downcast_ref::<GraphSlam>() else {
-        return Ok(());
-    };
     let (tmp, path) = (dir.join("graph.g2o.tmp"), dir.join("graph.g2o"));
-    saved::save(g, &tmp)?;
+    match pipeline.backend().save_graph(&tmp) {
+        None => return Ok(()),
+        Some(saved) => saved?,
+    }
     let scans = saved::scans_path(&path);
     std::fs::rename(saved::scans_path(&tmp), &scans)
         .with_context(|| format!("cannot write {}", scans.display()))?;

@@ -87,7 +87,8 @@ pub struct SlamArgs {
     #[arg(long)]
     max_scans: Option<usize>,
     /// Write the pose graph (2D g2o) here at the end, and the nodes' scans
-    /// beside it as FILE.g2o.scans (graph back-end only; `--load-graph` reads both).
+    /// beside it as FILE.g2o.scans (the graph back-end's, or the vote's graph
+    /// member's; `--load-graph` reads both).
     #[arg(long, value_name = "FILE.g2o")]
     save_graph: Option<PathBuf>,
     /// Go on from a run saved with `--save-graph` (G and G.scans): keep
@@ -487,9 +488,12 @@ fn run_bag(
 
 pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args)?;
+    let has_graph = cfg.backend == SlamBackendKind::Graph
+        || (cfg.backend == SlamBackendKind::Vote
+            && cfg.vote.members.contains(&SlamBackendKind::Graph));
     anyhow::ensure!(
-        args.save_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
-        "--save-graph needs --backend graph (the particle filter keeps no pose graph)"
+        args.save_graph.is_none() || has_graph,
+        "--save-graph needs --backend graph, or the vote with a graph member (only they keep a pose graph)"
     );
     anyhow::ensure!(
         cfg.load_graph.is_none() || cfg.backend == SlamBackendKind::Graph,
@@ -750,15 +754,6 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             "wide search        {} nodes uncertain and unclosed searched wider: {} matches held for a second, {} confirmed by one",
             s.closures_wide, s.closures_wide_held, s.closures_wide_confirmed
         );
-        if let Some(path) = &args.save_graph {
-            saved::save(g, path)?;
-            let _ = writeln!(
-                report,
-                "pose graph         {} (nodes' scans: {})",
-                path.display(),
-                saved::scans_path(path).display()
-            );
-        }
         if cfg.mode == SlamMode::Localization {
             let mut m = (0.0, 0.0);
             slam.backend().metrics(&mut |k, v| match k {
@@ -777,6 +772,17 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
                 m.1
             );
         }
+    }
+    if let Some(path) = &args.save_graph
+        && let Some(written) = slam.backend().save_graph(path)
+    {
+        written?;
+        let _ = writeln!(
+            report,
+            "pose graph         {} (nodes' scans: {})",
+            path.display(),
+            saved::scans_path(path).display()
+        );
     }
     if let Some(reference) = &reference {
         for (name, est) in [("trajectory", &trajectory), ("online", &online)] {

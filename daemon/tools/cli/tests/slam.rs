@@ -47,6 +47,33 @@ fn max_step(trajectory: &str) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// `smokenav slam ARGS`: success, stdout, stderr.
+fn slam(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
+        .arg("slam")
+        .args(args)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.status.success(), stdout, stderr)
+}
+
+/// The scans a localising run matched to the saved map, and the report's line.
+fn matched_scans(report: &str) -> (f64, &str) {
+    let line = report
+        .lines()
+        .find(|l| l.starts_with("localization"))
+        .unwrap_or_else(|| panic!("no localization line in\n{report}"));
+    let matched = line
+        .split(": ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    (matched, line)
+}
+
 #[test]
 fn one_corrupt_odometry_record_is_reported_by_line_and_never_taken_as_motion() {
     let dir = tempfile::tempdir().unwrap();
@@ -93,16 +120,6 @@ fn localization_on_a_saved_graph_tracks_the_second_half_and_leaves_the_map_uncha
     let (first, second) = (dir.path().join("first.clf"), dir.path().join("second.clf"));
     std::fs::write(&first, &halves.0).unwrap();
     std::fs::write(&second, &halves.1).unwrap();
-    let slam = |args: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
-            .arg("slam")
-            .args(args)
-            .output()
-            .unwrap();
-        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-        (out.status.success(), stdout, stderr)
-    };
     let d = |p: &str| dir.path().join(p).to_string_lossy().into_owned();
     let (ok, _, err) = slam(&[
         "--carmen",
@@ -128,16 +145,7 @@ fn localization_on_a_saved_graph_tracks_the_second_half_and_leaves_the_map_uncha
         &d("b"),
     ]);
     assert!(ok, "{err}");
-    let line = report
-        .lines()
-        .find(|l| l.starts_with("localization"))
-        .unwrap_or_else(|| panic!("no localization line in\n{report}"));
-    let matched: f64 = line
-        .split(": ")
-        .nth(1)
-        .and_then(|r| r.split_whitespace().next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{line}"));
+    let (matched, line) = matched_scans(&report);
     // The second half drives on beyond the part the first half mapped (48 of
     // 100 scans matched here): where it overlaps, the saved map is found.
     assert!(matched >= 25.0, "{line}");
@@ -373,4 +381,54 @@ fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
         "--out",
         "relative",
     ]);
+}
+
+/// The vote keeps a pose graph in its graph member: `--save-graph` writes
+/// it, and a graph back-end localises on it; a back-end without a graph
+/// (the particle filter) is refused with the reason.
+#[test]
+fn the_votes_graph_member_is_saved_and_localised_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |p: &str| dir.path().join(p).to_string_lossy().into_owned();
+    let log = data().join("csail-prefix-200.clf");
+    let log = log.to_str().unwrap();
+    let (ok, report, err) = slam(&[
+        "--carmen",
+        log,
+        "--backend",
+        "vote",
+        "--particles",
+        "5",
+        "--save-graph",
+        &d("vote.g2o"),
+        "--out",
+        &d("vote"),
+    ]);
+    assert!(ok, "{err}");
+    assert!(report.contains("pose graph"), "{report}");
+    let (ok, report, err) = slam(&[
+        "--carmen",
+        log,
+        "--load-graph",
+        &d("vote.g2o"),
+        "--localization",
+        "--resume-at",
+        "first",
+        "--out",
+        &d("loc"),
+    ]);
+    assert!(ok, "{err}");
+    let (matched, line) = matched_scans(&report);
+    assert!(matched >= 150.0, "{line}");
+    let (ok, _, err) = slam(&[
+        "--carmen",
+        log,
+        "--backend",
+        "rbpf",
+        "--save-graph",
+        &d("rbpf.g2o"),
+        "--out",
+        &d("rbpf"),
+    ]);
+    assert!(!ok && err.contains("keep a pose graph"), "{err}");
 }

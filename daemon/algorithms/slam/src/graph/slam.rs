@@ -1243,6 +1243,10 @@ impl SlamBackend for GraphSlam {
         }
     }
 
+    fn save_graph(&self, path: &std::path::Path) -> Option<Result<(), saved::SavedGraphError>> {
+        Some(saved::save(self, path))
+    }
+
     fn as_any(&self) -> &dyn std::any::Any {
         self
     }

@@ -6,11 +6,13 @@
 
 use crate::backend::{SlamBackend, SlamUpdate, StampedPose};
 use crate::frontend::Tracked;
+use crate::graph::saved::SavedGraphError;
 use crate::scan::RangeScan;
 use smokenav_platform_config::SlamBackendKind;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
 use std::panic::AssertUnwindSafe;
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -77,6 +79,8 @@ pub(crate) enum Job {
     Export,
     Trajectory(SyncSender<Vec<StampedPose>>),
     InitialPose(Pose2),
+    /// Save the member's pose graph there ([`SlamBackend::save_graph`]).
+    SaveGraph(PathBuf, SyncSender<Option<Result<(), SavedGraphError>>>),
 }
 
 /// What the member's thread shares with the vote.
@@ -333,6 +337,10 @@ fn worker(
                 }
                 Some(Job::InitialPose(p)) => {
                     backend.set_initial_pose(p);
+                    None
+                }
+                Some(Job::SaveGraph(path, reply)) => {
+                    let _ = reply.try_send(backend.save_graph(&path));
                     None
                 }
                 Some(Job::Export) | None => None,

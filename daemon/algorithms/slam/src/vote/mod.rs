@@ -46,6 +46,7 @@ pub mod rule;
 
 use crate::backend::{BackendOptions, SlamBackend, SlamUpdate, StampedPose, from_config};
 use crate::frontend::Tracked;
+use crate::graph::saved::SavedGraphError;
 use crate::scan::{BeamKind, RangeScan};
 use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
@@ -55,6 +56,7 @@ use smokenav_platform_config::{SlamSection, VoteRule, VoteSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
 use std::collections::HashMap;
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -1085,6 +1087,29 @@ impl SlamBackend for VoteSlam {
                 _ => continue,
             };
             emit(name, f64::from(u8::from(m.health.is_out())));
+        }
+    }
+
+    /// The graph member's pose graph, in its own frame (every member starts
+    /// at the same pose on the same odometry: the reference's frame but for
+    /// the alignment the status reports). Waits up to the stall timeout for
+    /// the member's thread; a member that is out cannot save.
+    fn save_graph(&self, path: &Path) -> Option<Result<(), SavedGraphError>> {
+        let i = self.members.iter().position(|m| m.name == "graph")?;
+        let (rtx, rrx) = std::sync::mpsc::sync_channel(1);
+        let out = |why: &str| {
+            Some(Err(SavedGraphError::Io {
+                file: path.to_owned(),
+                message: format!("the vote's graph member {why}"),
+            }))
+        };
+        if !self.members[i].send_within(Job::SaveGraph(path.to_owned(), rtx), self.stall_timeout())
+        {
+            return out("is out or its queue stayed full");
+        }
+        match rrx.recv_timeout(self.stall_timeout()) {
+            Ok(saved) => saved,
+            Err(_) => out("did not answer within the stall timeout"),
         }
     }
 

@@ -767,6 +767,10 @@ impl SlamBackend for ResumedGraph {
         })
     }
 
+    fn save_graph(&self, path: &Path) -> Option<Result<(), SavedGraphError>> {
+        Some(save(&self.inner, path))
+    }
+
     /// The graph back-end itself ([`GraphSlam`]), so tools that read its
     /// graph and counters work on a resumed run too; this wrapper is
     /// reached through [`ResumedGraph::graph_slam`]'s owner.
