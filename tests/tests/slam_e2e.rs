@@ -623,10 +623,11 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
         .map(|(f, m)| (f.x - m.x).hypot(f.y - m.y))
         .collect();
     let near = off.iter().filter(|&&d| d < 0.15).count();
+    // The first is the operator's pose: its match waits for the next scan's.
     eprintln!(
-        "slam_e2e: found again from the operator's pose: {near} of {} poses within 0.15 m of the mapping run's, worst {:.3} m",
+        "slam_e2e: found again from the operator's pose: {near} of {} poses within 0.15 m of the mapping run's, worst {:.3} m after the first",
         off.len(),
-        off.iter().copied().fold(0.0, f64::max)
+        off[1..].iter().copied().fold(0.0, f64::max)
     );
     assert!(near * 10 >= off.len() * 9, "{off:?}");
     wait_for::<Health>(

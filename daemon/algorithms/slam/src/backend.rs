@@ -117,8 +117,8 @@ pub trait SlamBackend: Send {
     /// An operator says where the robot is now (map frame), give or take
     /// `sigma` (m, rad; zero: not said): RViz's "2D Pose Estimate" on
     /// `/initialpose`, or `smokenav initial-pose`. A back-end localising on
-    /// a saved map searches around it from its next scan until a scan
-    /// matches; before the first scan any back-end starts there
+    /// a saved map searches around it over its next scans until one matches
+    /// (and the next confirms it); before the first scan any back-end starts there
     /// ([`SlamBackend::set_initial_pose`], the default). A back-end that is
     /// mapping refuses it after its first scan: moving the robot in a map
     /// half built from where it thought it was would tear that map.

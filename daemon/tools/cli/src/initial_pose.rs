@@ -1,9 +1,9 @@
 //! `smokenav initial-pose X Y HEADING`: tell SLAM where the robot is, as
 //! RViz's "2D Pose Estimate" does on `/initialpose`. Publishes one pose on
 //! `slam/initial_pose` (map frame, the σ given as its covariance); a SLAM
-//! process localising on a saved map searches around it from its next scan
-//! until a scan matches, and any SLAM process starts there before its first
-//! scan. Then it reads `health/slam` to say whether the pose was taken.
+//! process localising on a saved map searches around it over its next 10
+//! scans until one matches (and the next confirms it), and any SLAM process
+//! starts there before its first scan. Then it reads `health/slam` to say whether the pose was taken.
 
 use crate::topic::BusArgs;
 use anyhow::Context;
