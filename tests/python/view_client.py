@@ -13,7 +13,11 @@ object per line:
 
 `--stall` stops reading for D seconds after S seconds (a slow client);
 `--rcvbuf` shrinks the socket's receive buffer so the stall backs up into
-the server instead of this machine's kernel.
+the server instead of this machine's kernel. `--publish-pose X,Y,YAW`
+publishes Foxglove's "2D Pose Estimate" instead (client advertise of
+`/initialpose`, geometry_msgs/msg/PoseWithCovarianceStamped serialised by
+`rosbags`, one client message) and prints
+  {"op": "published_pose", "capabilities": [...], "encodings": [...]}
 """
 
 import argparse
@@ -99,6 +103,7 @@ def main():
     ap.add_argument("--stall-after", type=float, default=None)
     ap.add_argument("--stall", type=float, default=0.0)
     ap.add_argument("--rcvbuf", type=int, default=None)
+    ap.add_argument("--publish-pose", default=None)
     args = ap.parse_args()
     wanted = set(t for t in args.topics.split(",") if t)
 
@@ -121,6 +126,9 @@ def main():
         adv = json.loads(ws.recv(timeout=10))
         assert adv["op"] == "advertise", adv
         channels = {c["id"]: c for c in adv["channels"]}
+        if args.publish_pose:
+            publish_pose(ws, info, args.publish_pose, out)
+            return 0
         out.write(
             json.dumps(
                 {
@@ -176,6 +184,33 @@ def main():
             out.write(json.dumps(rec) + "\n")
     out.flush()
     return 0
+
+
+def publish_pose(ws, info, spec, out):
+    import numpy as np
+    from rosbags.typesys import Stores, get_typestore
+
+    x, y, yaw = (float(v) for v in spec.split(","))
+    store = get_typestore(Stores.ROS2_JAZZY)
+    t = store.types
+    name = "geometry_msgs/msg/PoseWithCovarianceStamped"
+    cov = np.zeros(36)
+    cov[0], cov[7], cov[35] = 0.25, 0.25, 0.0685
+    msg = t[name](
+        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="map"),
+        pose=t["geometry_msgs/msg/PoseWithCovariance"](
+            pose=t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)),
+            ),
+            covariance=cov,
+        ),
+    )
+    ws.send(json.dumps({"op": "advertise", "channels": [{"id": 1, "topic": "/initialpose", "encoding": "cdr", "schemaName": name}]}))
+    ws.send(struct.pack("<BI", 1, 1) + bytes(store.serialize_cdr(msg, name)))
+    time.sleep(0.5)
+    out.write(json.dumps({"op": "published_pose", "capabilities": info.get("capabilities", []), "encodings": info.get("supportedEncodings", [])}) + "\n")
+    out.flush()
 
 
 if __name__ == "__main__":

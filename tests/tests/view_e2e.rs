@@ -550,3 +550,77 @@ fn crc32(bytes: &[u8]) -> u32 {
     }
     !crc
 }
+
+/// Foxglove's "2D Pose Estimate" through the real `smokenav-view
+/// --initial-pose`: a Python client (`websockets`, the pose serialised by
+/// `rosbags`) advertises `/initialpose` and publishes one pose; it arrives
+/// on the bus as `slam/initial_pose`, counted in `health/view`.
+#[test]
+fn a_foxglove_pose_estimate_reaches_slam_initial_pose() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let instance = unique_instance("view_pose");
+    let cfg = smokenav_tests::profile(dir.path(), "nomad-scout.toml", |_| {});
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let listen = format!("127.0.0.1:{port}");
+    let view = Child::spawn(
+        &bin("smokenav-view"),
+        &[
+            "--config",
+            cfg.to_str().unwrap(),
+            "--listen",
+            &listen,
+            "--initial-pose",
+        ],
+        &instance,
+    )
+    .unwrap();
+    view.wait_for_line("/initialpose in", Duration::from_secs(60))
+        .unwrap();
+    let bus = open_bus(&instance);
+    let given = bus
+        .subscriber::<smokenav_shared_types::PoseEstimate>(topics::SLAM_INITIAL_POSE)
+        .unwrap();
+    let out = Command::new(&python)
+        .arg(workspace_root().join("tests/python/view_client.py"))
+        .arg(format!("ws://{listen}"))
+        .args(["--publish-pose", "1.5,-2.0,0.7"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        view.output()
+    );
+    let said: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(said["capabilities"], serde_json::json!(["clientPublish"]));
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let pose = loop {
+        if let Some(p) = given.receive().unwrap() {
+            break *p;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no slam/initial_pose\n{}",
+            view.output()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(pose.header.frame_id.as_str(), "map");
+    assert!(
+        (pose.x - 1.5).abs() < 1e-9
+            && (pose.y + 2.0).abs() < 1e-9
+            && (pose.theta - 0.7).abs() < 1e-9,
+        "{pose:?}"
+    );
+    assert_eq!(pose.covariance[0], 0.25);
+    wait_for::<Health>(&bus, topics::health("view"), Duration::from_secs(10), |h| {
+        h.metric("initial_poses_taken") == Some(1.0)
+    })
+    .unwrap();
+}

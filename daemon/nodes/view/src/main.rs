@@ -6,9 +6,13 @@
 //! (map → odom → base_link), `/tf_static` (base_link → laser) and the sonar
 //! ring's points. Bound to 127.0.0.1:8765 unless `--listen` opens it.
 //! Health on `health/view`: clients, and what each was sent and lost.
+//! With `--initial-pose` a client may publish a "2D Pose Estimate"
+//! (`/initialpose`, geometry_msgs/PoseWithCovarianceStamped in CDR: Foxglove's
+//! 3D panel publish tool) and it goes onto `slam/initial_pose`; nothing
+//! else is ever taken from a client.
 //!
 //! ```text
-//! smokenav-view --config robot.toml [--listen 0.0.0.0:8765]
+//! smokenav-view --config robot.toml [--listen 0.0.0.0:8765] [--initial-pose]
 //! ```
 
 use anyhow::Context;
@@ -19,6 +23,7 @@ use smokenav_platform_bus::{Attachment, WaitOutcome, Waiter};
 use smokenav_platform_recording::RobotGeometry;
 use smokenav_platform_runtime::{CommonArgs, Process};
 use smokenav_shared_types::clock::monotonic_now_ns;
+use smokenav_shared_types::{Header, PoseEstimate};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -42,6 +47,11 @@ struct Args {
     /// Kernel send buffer per client, bytes (0: the kernel's default).
     #[arg(long, default_value_t = 64 * 1024)]
     send_buffer: usize,
+    /// Let clients publish a "2D Pose Estimate" on /initialpose, handed to
+    /// SLAM on slam/initial_pose (a localising SLAM searches there). Off:
+    /// clients only watch.
+    #[arg(long)]
+    initial_pose: bool,
 }
 
 fn main() -> ExitCode {
@@ -61,12 +71,26 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         send_buffer: (args.send_buffer > 0).then_some(args.send_buffer),
         ..Limits::default()
     };
-    let server = ViewServer::start(
-        &args.listen,
-        &format!("smokenav {}", p.config.robot.name),
-        channel_table(&topics, true),
-        limits,
-    )?;
+    let name = format!("smokenav {}", p.config.robot.name);
+    // A few poses between two bus turns (an operator clicks, not a stream).
+    let (pose_tx, poses) = std::sync::mpsc::sync_channel(4);
+    let mut given = None;
+    let server = if args.initial_pose {
+        given = Some(
+            p.bus
+                .publisher(smokenav_platform_bus::topics::SLAM_INITIAL_POSE)?,
+        );
+        ViewServer::start_taking_poses(
+            &args.listen,
+            &name,
+            channel_table(&topics, true),
+            limits,
+            pose_tx,
+        )?
+    } else {
+        drop(pose_tx);
+        ViewServer::start(&args.listen, &name, channel_table(&topics, true), limits)?
+    };
     let taps: Vec<Box<dyn Tap>> = topics
         .iter()
         .map(|t| tap::open(&p.bus, t))
@@ -82,9 +106,14 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         .context("cannot wait on the bus")?;
     let rate = p.health.add_rate("messages_hz", None);
     p.ready(&format!(
-        "serving {} channels on ws://{}",
+        "serving {} channels on ws://{}{}",
         server.channels().len(),
-        server.local_addr()
+        server.local_addr(),
+        if args.initial_pose {
+            ", /initialpose in"
+        } else {
+            ""
+        }
     ));
     let mut shown = String::new();
     while !p.shutdown_requested() {
@@ -97,6 +126,39 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                 p.health.mark(rate);
                 Ok(())
             })?;
+        }
+        if let Some(publisher) = &mut given {
+            while let Ok(pose) = poses.try_recv() {
+                let msg = PoseEstimate {
+                    header: Header::new(monotonic_now_ns(), 0, "map"),
+                    x: pose.x,
+                    y: pose.y,
+                    theta: pose.yaw,
+                    covariance: [
+                        pose.var_x,
+                        0.0,
+                        0.0,
+                        0.0,
+                        pose.var_y,
+                        0.0,
+                        0.0,
+                        0.0,
+                        pose.var_yaw,
+                    ],
+                    ..PoseEstimate::default()
+                };
+                match publisher.publish(&msg) {
+                    Ok(_) => tracing::info!(
+                        "initial pose from a client: x {:.2} m, y {:.2} m, heading {:.1}°",
+                        pose.x,
+                        pose.y,
+                        pose.yaw.to_degrees()
+                    ),
+                    Err(e) => p
+                        .health
+                        .error(&format!("cannot publish slam/initial_pose: {e}")),
+                }
+            }
         }
         let status = report(p, &server, &taps, pump.unadvertised);
         if status != shown {
@@ -126,6 +188,9 @@ fn report(
     h.set_metric("superseded_total", totals.superseded as f64);
     h.set_metric("bus_lost", bus_lost as f64);
     h.set_metric("unadvertised", unadvertised as f64);
+    let poses = server.pose_stats();
+    h.set_metric("initial_poses_taken", poses.taken as f64);
+    h.set_metric("initial_poses_refused", poses.refused as f64);
     for (i, c) in clients.iter().take(CLIENTS_IN_HEALTH).enumerate() {
         h.set_metric(&format!("client{i}_id"), c.id as f64);
         h.set_metric(&format!("client{i}_dropped"), c.dropped as f64);

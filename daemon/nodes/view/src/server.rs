@@ -14,12 +14,16 @@
 use crate::channels::{ChannelDef, Lane};
 use foxglove::websocket::ws_protocol::client::ClientMessage;
 use foxglove::websocket::ws_protocol::schema::Schema;
+use foxglove::websocket::ws_protocol::server::server_info::Capability;
 use foxglove::websocket::ws_protocol::server::{Advertise, Channel, MessageData, ServerInfo};
 use foxglove::websocket::ws_protocol::{BinaryMessage, JsonMessage};
+use smokenav_platform_recording::initial_pose::{self, PlanarPose};
+use std::collections::HashMap;
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -185,8 +189,27 @@ impl Client {
     }
 }
 
+/// The topic and type a Foxglove or RViz "2D Pose Estimate" publishes.
+pub const INITIAL_POSE_TOPIC: &str = "/initialpose";
+pub const INITIAL_POSE_SCHEMA: &str = "geometry_msgs/msg/PoseWithCovarianceStamped";
+/// Channels one client may advertise at once.
+const MAX_CLIENT_CHANNELS: usize = 16;
+
+/// What became of the poses clients published.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PoseStats {
+    /// Handed on (`slam/initial_pose`).
+    pub taken: u64,
+    /// Refused: another topic or type, undecodable, not in `map`, or the hand-over full.
+    pub refused: u64,
+}
+
 struct Shared {
     channels: Vec<ChannelDef>,
+    /// Where a client's `/initialpose` goes; `None`: clients only subscribe.
+    poses: Option<SyncSender<PlanarPose>>,
+    poses_taken: AtomicU64,
+    poses_refused: AtomicU64,
     server_info: String,
     advertise: String,
     limits: Limits,
@@ -223,6 +246,29 @@ impl ViewServer {
         channels: Vec<ChannelDef>,
         limits: Limits,
     ) -> Result<Self, ServerError> {
+        Self::start_inner(addr, name, channels, limits, None)
+    }
+
+    /// [`ViewServer::start`], and clients may publish a "2D Pose Estimate"
+    /// ([`INITIAL_POSE_TOPIC`], CDR): each valid one is handed to `poses`
+    /// (the server advertises `clientPublish`; any other topic is refused).
+    pub fn start_taking_poses(
+        addr: &str,
+        name: &str,
+        channels: Vec<ChannelDef>,
+        limits: Limits,
+        poses: SyncSender<PlanarPose>,
+    ) -> Result<Self, ServerError> {
+        Self::start_inner(addr, name, channels, limits, Some(poses))
+    }
+
+    fn start_inner(
+        addr: &str,
+        name: &str,
+        channels: Vec<ChannelDef>,
+        limits: Limits,
+        poses: Option<SyncSender<PlanarPose>>,
+    ) -> Result<Self, ServerError> {
         let listener = TcpListener::bind(addr).map_err(|source| ServerError::Bind {
             addr: addr.to_owned(),
             source,
@@ -247,9 +293,19 @@ impl ViewServer {
                     })
             })
             .collect::<Result<_, _>>()?;
+        // Clients only subscribe, unless poses are taken: then they may
+        // publish (one topic, in CDR); never services or parameters.
+        let info = match &poses {
+            Some(_) => ServerInfo::new(name)
+                .with_capabilities([Capability::ClientPublish])
+                .with_supported_encodings(["cdr"]),
+            None => ServerInfo::new(name),
+        };
         let shared = Arc::new(Shared {
-            // No capabilities: clients only subscribe (no publishing, no services).
-            server_info: ServerInfo::new(name).to_string(),
+            server_info: info.to_string(),
+            poses,
+            poses_taken: AtomicU64::new(0),
+            poses_refused: AtomicU64::new(0),
             advertise: Advertise::new(advertised).to_string(),
             last: Mutex::new(vec![None; channels.len()]),
             watched: channels.iter().map(|_| AtomicU64::new(0)).collect(),
@@ -277,6 +333,14 @@ impl ViewServer {
     /// The address it listens on.
     pub fn local_addr(&self) -> SocketAddr {
         self.addr
+    }
+
+    /// What became of the poses clients published.
+    pub fn pose_stats(&self) -> PoseStats {
+        PoseStats {
+            taken: self.shared.poses_taken.load(Ordering::Relaxed),
+            refused: self.shared.poses_refused.load(Ordering::Relaxed),
+        }
     }
 
     /// The advertised channels.
@@ -543,8 +607,12 @@ fn write_loop(
     }
 }
 
+/// A channel a client advertised for publishing: topic, schema, encoding.
+type ClientChannel = (String, String, String);
+
 fn read_loop(stream: TcpStream, client: &Client, shared: &Shared) {
     let mut ws = WebSocket::from_raw_socket(ReadSide(stream), Role::Server, None);
+    let mut published: HashMap<u32, ClientChannel> = HashMap::new();
     loop {
         let msg = match ws.read() {
             Ok(m) => m,
@@ -555,10 +623,52 @@ fn read_loop(stream: TcpStream, client: &Client, shared: &Shared) {
         };
         let text = match &msg {
             Message::Text(t) => t.as_str(),
+            Message::Binary(b) => {
+                match ClientMessage::parse_binary(b) {
+                    Ok(ClientMessage::MessageData(m)) => {
+                        take_pose(client, shared, published.get(&m.channel_id), &m.data);
+                    }
+                    Ok(other) => tracing::debug!("client {}: ignored {other:?}", client.id),
+                    Err(e) => tracing::info!("client {}: unreadable message: {e}", client.id),
+                }
+                continue;
+            }
             Message::Close(_) => break,
             _ => continue,
         };
         match ClientMessage::parse_json(text) {
+            Ok(ClientMessage::Advertise(a)) if shared.poses.is_some() => {
+                for c in a.channels {
+                    if published.len() >= MAX_CLIENT_CHANNELS && !published.contains_key(&c.id) {
+                        tracing::info!(
+                            "client {}: over {MAX_CLIENT_CHANNELS} channels advertised, `{}` ignored",
+                            client.id,
+                            c.topic
+                        );
+                        continue;
+                    }
+                    tracing::info!(
+                        "client {} publishes `{}` ({}, {})",
+                        client.id,
+                        c.topic,
+                        c.schema_name,
+                        c.encoding
+                    );
+                    published.insert(
+                        c.id,
+                        (
+                            c.topic.into_owned(),
+                            c.schema_name.into_owned(),
+                            c.encoding.into_owned(),
+                        ),
+                    );
+                }
+            }
+            Ok(ClientMessage::Unadvertise(u)) => {
+                for id in u.channel_ids {
+                    published.remove(&id);
+                }
+            }
             Ok(ClientMessage::Subscribe(s)) => {
                 for sub in s.subscriptions {
                     subscribe(client, shared, sub.id, sub.channel_id);
@@ -579,6 +689,40 @@ fn read_loop(stream: TcpStream, client: &Client, shared: &Shared) {
         }
     }
     client.close();
+}
+
+/// A message a client published on `channel`: a "2D Pose Estimate" on
+/// [`INITIAL_POSE_TOPIC`] in CDR is decoded and handed on; anything else
+/// is refused (counted, and logged with the reason).
+fn take_pose(client: &Client, shared: &Shared, channel: Option<&ClientChannel>, data: &[u8]) {
+    let refuse = |why: &str| {
+        shared.poses_refused.fetch_add(1, Ordering::Relaxed);
+        tracing::warn!("client {}: published message refused: {why}", client.id);
+    };
+    let Some(poses) = &shared.poses else {
+        return refuse("this view takes no messages (smokenav-view --initial-pose)");
+    };
+    let Some((topic, schema, encoding)) = channel else {
+        return refuse("on a channel it did not advertise");
+    };
+    if topic.trim_start_matches('/') != INITIAL_POSE_TOPIC.trim_start_matches('/')
+        || schema != INITIAL_POSE_SCHEMA
+        || encoding != "cdr"
+    {
+        return refuse(&format!(
+            "`{topic}` ({schema}, {encoding}): only {INITIAL_POSE_TOPIC} ({INITIAL_POSE_SCHEMA}, cdr) is taken"
+        ));
+    }
+    match initial_pose::decode(data) {
+        Ok(pose) => match poses.try_send(pose) {
+            Ok(()) => {
+                shared.poses_taken.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(TrySendError::Full(_)) => refuse("poses arrive faster than they are handed on"),
+            Err(TrySendError::Disconnected(_)) => refuse("the view is shutting down"),
+        },
+        Err(e) => refuse(&e.to_string()),
+    }
 }
 
 fn subscribe(client: &Client, shared: &Shared, sub: u32, channel: u64) {
@@ -754,6 +898,118 @@ mod tests {
         assert!(got.contains(&(40, 9, b"scan".to_vec())), "{got:?}");
         assert_eq!(server.client_stats().len(), 1);
         assert_eq!(server.client_stats()[0].dropped, 0);
+    }
+
+    fn connect(server: &ViewServer) -> WebSocket<TcpStream> {
+        let mut req = tungstenite::client::IntoClientRequest::into_client_request(format!(
+            "ws://{}",
+            server.local_addr()
+        ))
+        .unwrap();
+        req.headers_mut().insert(
+            "Sec-WebSocket-Protocol",
+            HeaderValue::from_static("foxglove.websocket.v1"),
+        );
+        let tcp = TcpStream::connect(server.local_addr()).unwrap();
+        tungstenite::client(req, tcp).unwrap().0
+    }
+
+    /// A client message: opcode 1, channel id, payload.
+    fn published(channel: u32, payload: &[u8]) -> Message {
+        let mut b = vec![1u8];
+        b.extend_from_slice(&channel.to_le_bytes());
+        b.extend_from_slice(payload);
+        Message::binary(b)
+    }
+
+    /// Foxglove's "2D Pose Estimate": a view taking poses says it accepts
+    /// client publishing in CDR, hands a valid `/initialpose` on, and
+    /// refuses (counting) another topic, a pose in `odom` and a channel
+    /// never advertised; a view that takes none says nothing of it and
+    /// refuses everything.
+    #[test]
+    fn a_client_pose_estimate_is_handed_on_and_nothing_else_is() {
+        use smokenav_platform_recording::initial_pose::{PlanarPose, encode};
+        let (tx, rx) = std::sync::mpsc::sync_channel(4);
+        let server = ViewServer::start_taking_poses(
+            "127.0.0.1:0",
+            "test",
+            Vec::new(),
+            Limits::default(),
+            tx,
+        )
+        .unwrap();
+        let mut ws = connect(&server);
+        let info = read_json(&mut ws);
+        assert_eq!(
+            info["capabilities"],
+            serde_json::json!(["clientPublish"]),
+            "{info}"
+        );
+        assert_eq!(
+            info["supportedEncodings"],
+            serde_json::json!(["cdr"]),
+            "{info}"
+        );
+        ws.send(Message::text(
+            r#"{"op":"advertise","channels":[{"id":7,"topic":"/initialpose","encoding":"cdr","schemaName":"geometry_msgs/msg/PoseWithCovarianceStamped"},{"id":8,"topic":"/cmd_vel","encoding":"cdr","schemaName":"geometry_msgs/msg/Twist"}]}"#,
+        ))
+        .unwrap();
+        let pose = PlanarPose {
+            x: 1.5,
+            y: -2.0,
+            yaw: 0.7,
+            var_x: 0.25,
+            var_y: 0.25,
+            var_yaw: 0.07,
+        };
+        ws.send(published(8, &[0, 1, 0, 0])).unwrap();
+        ws.send(published(9, &encode("map", &pose))).unwrap();
+        ws.send(published(7, &encode("odom", &pose))).unwrap();
+        ws.send(published(7, &encode("map", &pose))).unwrap();
+        let got = rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        assert!(
+            (got.x - 1.5).abs() < 1e-12 && (got.yaw - 0.7).abs() < 1e-12,
+            "{got:?}"
+        );
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        while server.pose_stats().refused < 3 && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert_eq!(
+            server.pose_stats(),
+            PoseStats {
+                taken: 1,
+                refused: 3
+            }
+        );
+        assert!(rx.try_recv().is_err());
+
+        let watch_only =
+            ViewServer::start("127.0.0.1:0", "test", Vec::new(), Limits::default()).unwrap();
+        let mut ws = connect(&watch_only);
+        let info = read_json(&mut ws);
+        assert!(
+            info.get("capabilities")
+                .is_none_or(|c| c == &serde_json::json!([])),
+            "{info}"
+        );
+        ws.send(Message::text(
+            r#"{"op":"advertise","channels":[{"id":7,"topic":"/initialpose","encoding":"cdr","schemaName":"geometry_msgs/msg/PoseWithCovarianceStamped"}]}"#,
+        ))
+        .unwrap();
+        ws.send(published(7, &encode("map", &pose))).unwrap();
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        while watch_only.pose_stats().refused < 1 && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert_eq!(
+            watch_only.pose_stats(),
+            PoseStats {
+                taken: 0,
+                refused: 1
+            }
+        );
     }
 
     #[test]

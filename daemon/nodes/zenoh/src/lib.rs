@@ -6,13 +6,11 @@
 //! - [`rihs`]: ROS 2 type hashes of the recordings' message definitions.
 //! - [`bridge`]: bus messages in, Zenoh samples out.
 //! - [`command`]: `cmd_vel` from outside, decoded and checked.
-//! - [`initial_pose`]: `initialpose` from outside (RViz's 2D Pose Estimate), decoded and checked.
 //! - [`fleet`]: the operator's view of every robot on the network.
 
 pub mod bridge;
 pub mod command;
 pub mod fleet;
-pub mod initial_pose;
 pub mod keys;
 pub mod rihs;
 

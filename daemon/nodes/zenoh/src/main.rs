@@ -16,12 +16,12 @@
 use anyhow::Context;
 use clap::Parser;
 use smokenav_nodes_zenoh::bridge::{self, unix_now_ns};
-use smokenav_nodes_zenoh::{Bridge, command, initial_pose, keys, rihs};
+use smokenav_nodes_zenoh::{Bridge, command, keys, rihs};
 use smokenav_platform_bus::tap::{self, Tap};
 use smokenav_platform_bus::{Attachment, Bus, BusOptions, WaitOutcome, Waiter, topics};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_recording::RobotGeometry;
-use smokenav_platform_recording::schema;
+use smokenav_platform_recording::{initial_pose, schema};
 use smokenav_platform_runtime::{CommonArgs, Process, Shutdown};
 use smokenav_shared_types::clock::monotonic_now_ns;
 use smokenav_shared_types::{Header, PoseEstimate, VelocityCommand};

@@ -69,6 +69,7 @@ pub mod cdr;
 pub mod codec;
 pub mod encoder;
 pub mod info;
+pub mod initial_pose;
 pub mod reader;
 pub mod ros2;
 pub mod schema;

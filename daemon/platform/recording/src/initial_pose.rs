@@ -1,6 +1,7 @@
-//! `initialpose` from outside: RViz's "2D Pose Estimate", a
+//! `initialpose` from outside: RViz's or Foxglove's "2D Pose Estimate", a
 //! `geometry_msgs/msg/PoseWithCovarianceStamped`, decoded and checked
-//! before it becomes a bus `slam/initial_pose`.
+//! before it becomes a bus `slam/initial_pose` (by `smokenav-zenoh` from
+//! rmw_zenoh, by `smokenav-view` from a Foxglove client's publish).
 //!
 //! The pose must be in the `map` frame (RViz's fixed frame when it shows
 //! the robot's map) and planar: its position and the heading about z are
@@ -8,7 +9,7 @@
 //! rotation out of the plane, a non-finite number or a malformed payload is
 //! refused with the reason; nothing is guessed.
 
-use smokenav_platform_recording::cdr::{CdrError, CdrReader, CdrWriter};
+use crate::cdr::{CdrError, CdrReader, CdrWriter};
 use thiserror::Error;
 
 /// Longest `frame_id` read (RViz sends `map`).
