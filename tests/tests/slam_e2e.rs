@@ -518,6 +518,23 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     mapping.wait_for_line("graph on laser/scan", Duration::from_secs(30))?;
     let bus = open_bus(&instance);
     let mapped = replay_in_lock_step(&bus, usize::MAX)?;
+    // An operator's pose is refused while mapping (it would tear the map):
+    // the command says it was not taken, the process's log says why.
+    let out = std::process::Command::new(bin("smokenav"))
+        .args([
+            "initial-pose",
+            "--instance",
+            &instance,
+            "--wait",
+            "3",
+            "1",
+            "2",
+            "90",
+        ])
+        .output()?;
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && said.contains("mapping"), "{said}");
+    mapping.wait_for_line("initial pose refused", Duration::from_secs(10))?;
     mapping.signal(nix::sys::signal::Signal::SIGUSR1);
     mapping.wait_for_line("map saved", Duration::from_secs(10))?;
     mapping.terminate(Duration::from_secs(10))?;
