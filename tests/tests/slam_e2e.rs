@@ -419,6 +419,20 @@ fn fuzzy_slam_process_publishes_its_confidence_map_and_map_save_writes_it() -> a
     Ok(())
 }
 
+/// Waits up to 10 s for a `health/slam` report of `slam`'s process that `done` accepts.
+fn slam_health_until(
+    bus: &smokenav_platform_bus::Bus,
+    slam: &Child,
+    done: impl Fn(&Health) -> bool,
+) -> anyhow::Result<()> {
+    let pid = slam.pid();
+    wait_for::<Health>(bus, topics::health("slam"), Duration::from_secs(10), |h| {
+        h.pid == pid && done(h)
+    })
+    .map(|_| ())
+    .map_err(|e| anyhow::anyhow!("{e}\n{}", slam.output()))
+}
+
 /// A Pioneer profile in `dir` for the CSAIL replay (laser scans, the laser
 /// at the robot's centre) with the graph back-end in `mode`, loading `graph`
 /// if given (`[slam] load_graph`).
@@ -567,11 +581,9 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     let estimate = replay_in_lock_step(&bus, usize::MAX)?;
     // Tracked on the map, not only carried by the odometry: health counts
     // the scans matched to the saved map (placed at the run's end, none were).
-    let pid = slam.pid();
-    wait_for::<Health>(&bus, topics::health("slam"), Duration::from_secs(10), |h| {
-        h.pid == pid && h.metric("localization_matched").is_some_and(|m| m >= 150.0)
-    })
-    .map_err(|e| anyhow::anyhow!("{e}\n{}", slam.output()))?;
+    slam_health_until(&bus, &slam, |h| {
+        h.metric("localization_matched").is_some_and(|m| m >= 150.0)
+    })?;
     slam.terminate(Duration::from_secs(10))?;
 
     // The same replay with the robot placed where the saved run ended (the
@@ -593,20 +605,12 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     let bus_lost = open_bus(&instance);
     const FOUND_AT: usize = 80;
     replay_records(&bus_lost, 0..FOUND_AT)?;
-    let pid = lost.pid();
-    wait_for::<Health>(
-        &bus_lost,
-        topics::health("slam"),
-        Duration::from_secs(10),
-        |h| {
-            h.pid == pid
-                && h.state() == HealthState::Degraded
-                && h.last_error
-                    .as_str()
-                    .contains("localization: over 30 scans")
-        },
-    )
-    .map_err(|e| anyhow::anyhow!("{e}\n{}", lost.output()))?;
+    slam_health_until(&bus_lost, &lost, |h| {
+        h.state() == HealthState::Degraded
+            && h.last_error
+                .as_str()
+                .contains("localization: over 30 scans")
+    })?;
     // The operator says where the robot is (as RViz's 2D Pose Estimate
     // would), 0.3 m and 6° off where the mapping run had it: from there
     // it is tracked on the saved map again, in the map's own frame.
@@ -647,17 +651,9 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
         off[1..].iter().copied().fold(0.0, f64::max)
     );
     assert!(near * 10 >= off.len() * 9, "{off:?}");
-    wait_for::<Health>(
-        &bus_lost,
-        topics::health("slam"),
-        Duration::from_secs(10),
-        |h| {
-            h.pid == pid
-                && h.state() == HealthState::Ok
-                && h.metric("localization_poses_given") == Some(1.0)
-        },
-    )
-    .map_err(|e| anyhow::anyhow!("{e}\n{}", lost.output()))?;
+    slam_health_until(&bus_lost, &lost, |h| {
+        h.state() == HealthState::Ok && h.metric("localization_poses_given") == Some(1.0)
+    })?;
     assert!(
         lost.output().contains("initial pose taken"),
         "{}",

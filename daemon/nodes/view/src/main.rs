@@ -23,7 +23,6 @@ use smokenav_platform_bus::{Attachment, WaitOutcome, Waiter};
 use smokenav_platform_recording::RobotGeometry;
 use smokenav_platform_runtime::{CommonArgs, Process};
 use smokenav_shared_types::clock::monotonic_now_ns;
-use smokenav_shared_types::{Header, PoseEstimate};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -129,25 +128,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         }
         if let Some(publisher) = &mut given {
             while let Ok(pose) = poses.try_recv() {
-                let msg = PoseEstimate {
-                    header: Header::new(monotonic_now_ns(), 0, "map"),
-                    x: pose.x,
-                    y: pose.y,
-                    theta: pose.yaw,
-                    covariance: [
-                        pose.var_x,
-                        0.0,
-                        0.0,
-                        0.0,
-                        pose.var_y,
-                        0.0,
-                        0.0,
-                        0.0,
-                        pose.var_yaw,
-                    ],
-                    ..PoseEstimate::default()
-                };
-                match publisher.publish(&msg) {
+                match publisher.publish(&pose.to_estimate(monotonic_now_ns())) {
                     Ok(_) => tracing::info!(
                         "initial pose from a client: x {:.2} m, y {:.2} m, heading {:.1}°",
                         pose.x,

@@ -844,17 +844,7 @@ mod tests {
         // Latched: a late subscriber gets it.
         server.publish(map, 5, b"old map");
         server.publish(map, 6, b"map");
-        let mut req = tungstenite::client::IntoClientRequest::into_client_request(format!(
-            "ws://{}",
-            server.local_addr()
-        ))
-        .unwrap();
-        req.headers_mut().insert(
-            "Sec-WebSocket-Protocol",
-            HeaderValue::from_static("foxglove.websocket.v1"),
-        );
-        let tcp = TcpStream::connect(server.local_addr()).unwrap();
-        let (mut ws, resp) = tungstenite::client(req, tcp).unwrap();
+        let (mut ws, resp) = connect(&server, "foxglove.websocket.v1").unwrap();
         assert_eq!(
             resp.headers().get("Sec-WebSocket-Protocol").unwrap(),
             "foxglove.websocket.v1"
@@ -900,7 +890,17 @@ mod tests {
         assert_eq!(server.client_stats()[0].dropped, 0);
     }
 
-    fn connect(server: &ViewServer) -> WebSocket<TcpStream> {
+    /// A client asking for `subprotocol`, and the server's answer.
+    fn connect(
+        server: &ViewServer,
+        subprotocol: &'static str,
+    ) -> Result<
+        (
+            WebSocket<TcpStream>,
+            tungstenite::handshake::client::Response,
+        ),
+        String,
+    > {
         let mut req = tungstenite::client::IntoClientRequest::into_client_request(format!(
             "ws://{}",
             server.local_addr()
@@ -908,10 +908,10 @@ mod tests {
         .unwrap();
         req.headers_mut().insert(
             "Sec-WebSocket-Protocol",
-            HeaderValue::from_static("foxglove.websocket.v1"),
+            HeaderValue::from_static(subprotocol),
         );
         let tcp = TcpStream::connect(server.local_addr()).unwrap();
-        tungstenite::client(req, tcp).unwrap().0
+        tungstenite::client(req, tcp).map_err(|e| e.to_string())
     }
 
     /// A client message: opcode 1, channel id, payload.
@@ -939,7 +939,7 @@ mod tests {
             tx,
         )
         .unwrap();
-        let mut ws = connect(&server);
+        let mut ws = connect(&server, "foxglove.websocket.v1").unwrap().0;
         let info = read_json(&mut ws);
         assert_eq!(
             info["capabilities"],
@@ -987,7 +987,7 @@ mod tests {
 
         let watch_only =
             ViewServer::start("127.0.0.1:0", "test", Vec::new(), Limits::default()).unwrap();
-        let mut ws = connect(&watch_only);
+        let mut ws = connect(&watch_only, "foxglove.websocket.v1").unwrap().0;
         let info = read_json(&mut ws);
         assert!(
             info.get("capabilities")
@@ -1031,22 +1031,12 @@ mod tests {
             ..Limits::default()
         };
         let server = ViewServer::start("127.0.0.1:0", "test", Vec::new(), limits).unwrap();
-        let connect = || {
-            let mut req = tungstenite::client::IntoClientRequest::into_client_request(format!(
-                "ws://{}",
-                server.local_addr()
-            ))
-            .unwrap();
-            req.headers_mut().insert(
-                "Sec-WebSocket-Protocol",
-                HeaderValue::from_static("foxglove.sdk.v1"),
-            );
-            let tcp = TcpStream::connect(server.local_addr()).unwrap();
-            tungstenite::client(req, tcp).map_err(|e| e.to_string())
-        };
-        let (mut first, _) = connect().unwrap();
+        let (mut first, _) = connect(&server, "foxglove.sdk.v1").unwrap();
         assert_eq!(read_json(&mut first)["op"], "serverInfo");
-        assert!(connect().is_err(), "a second client was served");
+        assert!(
+            connect(&server, "foxglove.sdk.v1").is_err(),
+            "a second client was served"
+        );
         assert_eq!(server.client_stats().len(), 1);
     }
 }

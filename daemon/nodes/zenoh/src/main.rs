@@ -18,13 +18,15 @@ use clap::Parser;
 use smokenav_nodes_zenoh::bridge::{self, unix_now_ns};
 use smokenav_nodes_zenoh::{Bridge, command, keys, rihs};
 use smokenav_platform_bus::tap::{self, Tap};
-use smokenav_platform_bus::{Attachment, Bus, BusOptions, WaitOutcome, Waiter, topics};
+use smokenav_platform_bus::{
+    Attachment, Bus, BusOptions, Message, Publisher, Topic, WaitOutcome, Waiter, topics,
+};
 use smokenav_platform_config::RobotConfig;
 use smokenav_platform_recording::RobotGeometry;
 use smokenav_platform_recording::{initial_pose, schema};
 use smokenav_platform_runtime::{CommonArgs, Process, Shutdown};
 use smokenav_shared_types::clock::monotonic_now_ns;
-use smokenav_shared_types::{Header, PoseEstimate, VelocityCommand};
+use smokenav_shared_types::{Header, VelocityCommand};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -167,17 +169,14 @@ fn run(p: &mut Process) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The `cmd_vel` subscriber: its own thread and bus publisher (bus ports
-/// stay on the thread that made them), woken by Zenoh, keeping only the
-/// newest sample (a backlog of old commands is never replayed).
 /// A subscription to ROS topic `ros_topic` (under the namespace) of type
 /// `def` from outside, keeping only the newest sample, announced as
 /// rmw_zenoh announces a subscriber (entity `entity`); with its key.
-type Inbound = (
-    zenoh::pubsub::Subscriber<RingChannelHandler<zenoh::sample::Sample>>,
-    zenoh::liveliness::LivelinessToken,
-    String,
-);
+struct Inbound {
+    sub: zenoh::pubsub::Subscriber<RingChannelHandler<zenoh::sample::Sample>>,
+    token: zenoh::liveliness::LivelinessToken,
+    key: String,
+}
 
 fn subscribe_inbound(
     cfg: &RobotConfig,
@@ -214,43 +213,71 @@ fn subscribe_inbound(
             },
         ),
     )?;
-    Ok((sub, token, key))
+    Ok(Inbound { sub, token, key })
 }
 
+/// Forwards `inbound`'s samples onto bus topic `topic` on a thread of its
+/// own (bus ports stay on the thread that made them), woken by Zenoh and
+/// keeping only the newest sample (a backlog is never replayed):
+/// `forward(payload, attachment, publisher)` decides what is published.
+fn spawn_inbound<T: Message + 'static>(
+    cfg: &RobotConfig,
+    inbound: Inbound,
+    node: &str,
+    topic: Topic<T>,
+    stop: Shutdown,
+    mut forward: impl FnMut(&[u8], Option<&[u8]>, &mut Publisher<T>) + Send + 'static,
+) -> anyhow::Result<std::thread::JoinHandle<()>> {
+    let opts = BusOptions::new(&cfg.robot.instance, node).with_root_path(cfg.bus.root_path.clone());
+    tracing::info!(key = %inbound.key, "taking it from Zenoh onto {}", topic.name());
+    let bus =
+        Bus::open(&opts).with_context(|| format!("cannot join the bus for {}", topic.name()))?;
+    drop(bus); // checked here; the thread opens its own
+    Ok(std::thread::spawn(move || {
+        let Inbound {
+            sub,
+            token: _token,
+            key,
+        } = inbound;
+        let bus = match Bus::open(&opts) {
+            Ok(b) => b,
+            Err(e) => return tracing::error!("{key}: cannot join the bus: {e}"),
+        };
+        let mut publisher = match bus.publisher(topic.clone()) {
+            Ok(p) => p,
+            Err(e) => return tracing::error!("{key}: cannot publish {}: {e}", topic.name()),
+        };
+        while !stop.requested() {
+            let sample = match sub.recv_timeout(Duration::from_millis(200)) {
+                Ok(Some(s)) => s,
+                Ok(None) => continue,
+                Err(e) => return tracing::error!("{key}: subscriber closed: {e}"),
+            };
+            let payload = sample.payload().to_bytes();
+            let attachment = sample.attachment().map(|a| a.to_bytes());
+            forward(&payload, attachment.as_deref(), &mut publisher);
+        }
+    }))
+}
+
+/// `cmd_vel` onto `base/cmd_vel`: each fresh, valid command once.
 fn spawn_commands(
     cfg: &RobotConfig,
     bridge: &Bridge,
     stop: Shutdown,
     counters: Arc<CmdCounters>,
 ) -> anyhow::Result<std::thread::JoinHandle<()>> {
-    let (sub, token, key) =
-        subscribe_inbound(cfg, bridge, "/cmd_vel", &schema::TWIST, 0x7fff_0000)?;
-    let opts =
-        BusOptions::new(&cfg.robot.instance, "zenoh-cmd").with_root_path(cfg.bus.root_path.clone());
+    let inbound = subscribe_inbound(cfg, bridge, "/cmd_vel", &schema::TWIST, 0x7fff_0000)?;
     let timeout_ns = (cfg.base.cmd_timeout_s * 1e9) as i64;
-    tracing::info!(%key, "taking cmd_vel from Zenoh onto base/cmd_vel");
-    let bus = Bus::open(&opts).context("cannot join the bus for cmd_vel")?;
-    drop(bus); // checked here; the thread opens its own
-    Ok(std::thread::spawn(move || {
-        let _token = token;
-        let bus = match Bus::open(&opts) {
-            Ok(b) => b,
-            Err(e) => return tracing::error!("cmd_vel: cannot join the bus: {e}"),
-        };
-        let mut publisher = match bus.publisher(topics::BASE_CMD_VEL) {
-            Ok(p) => p,
-            Err(e) => return tracing::error!("cmd_vel: cannot publish base/cmd_vel: {e}"),
-        };
-        while !stop.requested() {
-            let sample = match sub.recv_timeout(Duration::from_millis(200)) {
-                Ok(Some(s)) => s,
-                Ok(None) => continue,
-                Err(e) => return tracing::error!("cmd_vel subscriber closed: {e}"),
-            };
-            let payload = sample.payload().to_bytes();
-            let attachment = sample.attachment().map(|a| a.to_bytes());
-            let checked = command::decode_twist(&payload).and_then(|t| {
-                command::check_age(attachment.as_deref(), unix_now_ns(), timeout_ns)?;
+    spawn_inbound(
+        cfg,
+        inbound,
+        "zenoh-cmd",
+        topics::BASE_CMD_VEL,
+        stop,
+        move |payload, attachment, publisher| {
+            let checked = command::decode_twist(payload).and_then(|t| {
+                command::check_age(attachment, unix_now_ns(), timeout_ns)?;
                 Ok(t)
             });
             match checked {
@@ -277,101 +304,61 @@ fn spawn_commands(
                     counters.invalid.fetch_add(1, Ordering::Relaxed);
                 }
             }
-        }
-    }))
+        },
+    )
 }
 
 /// A pose older than this (its rmw_zenoh source time) was held by the
 /// network while the robot moved on: dropped.
 const POSE_MAX_AGE_NS: i64 = 5_000_000_000;
 
-/// The `initialpose` subscriber (RViz's 2D Pose Estimate): like the
-/// commands', its own thread and bus publisher; each fresh, valid pose is
-/// published once on `slam/initial_pose`.
+/// `initialpose` (RViz's 2D Pose Estimate) onto `slam/initial_pose`: each
+/// fresh, valid pose once; a refused one is warned of (an operator's click,
+/// not a stream of commands).
 fn spawn_initial_poses(
     cfg: &RobotConfig,
     bridge: &Bridge,
     stop: Shutdown,
     counters: Arc<PoseCounters>,
 ) -> anyhow::Result<std::thread::JoinHandle<()>> {
-    let (sub, token, key) = subscribe_inbound(
+    let inbound = subscribe_inbound(
         cfg,
         bridge,
         "/initialpose",
         &schema::POSE_WITH_COVARIANCE_STAMPED,
         0x7fff_0001,
     )?;
-    let opts = BusOptions::new(&cfg.robot.instance, "zenoh-pose")
-        .with_root_path(cfg.bus.root_path.clone());
-    tracing::info!(%key, "taking initialpose from Zenoh onto slam/initial_pose");
-    let bus = Bus::open(&opts).context("cannot join the bus for initialpose")?;
-    drop(bus); // checked here; the thread opens its own
-    Ok(std::thread::spawn(move || {
-        let _token = token;
-        let bus = match Bus::open(&opts) {
-            Ok(b) => b,
-            Err(e) => return tracing::error!("initialpose: cannot join the bus: {e}"),
-        };
-        let mut publisher = match bus.publisher(topics::SLAM_INITIAL_POSE) {
-            Ok(p) => p,
-            Err(e) => {
-                return tracing::error!("initialpose: cannot publish slam/initial_pose: {e}");
-            }
-        };
-        while !stop.requested() {
-            let sample = match sub.recv_timeout(Duration::from_millis(200)) {
-                Ok(Some(s)) => s,
-                Ok(None) => continue,
-                Err(e) => return tracing::error!("initialpose subscriber closed: {e}"),
-            };
-            let payload = sample.payload().to_bytes();
-            let attachment = sample.attachment().map(|a| a.to_bytes());
-            let fresh = command::check_age(attachment.as_deref(), unix_now_ns(), POSE_MAX_AGE_NS);
-            let checked = fresh
+    spawn_inbound(
+        cfg,
+        inbound,
+        "zenoh-pose",
+        topics::SLAM_INITIAL_POSE,
+        stop,
+        move |payload, attachment, publisher| {
+            let checked = command::check_age(attachment, unix_now_ns(), POSE_MAX_AGE_NS)
                 .map_err(|e| e.to_string())
-                .and_then(|()| initial_pose::decode(&payload).map_err(|e| e.to_string()));
-            match checked {
+                .and_then(|()| initial_pose::decode(payload).map_err(|e| e.to_string()));
+            let published = checked.and_then(|pose| {
+                publisher
+                    .publish(&pose.to_estimate(monotonic_now_ns()))
+                    .map_err(|e| e.to_string())?;
+                Ok(pose)
+            });
+            match published {
                 Ok(pose) => {
-                    let given = PoseEstimate {
-                        header: Header::new(monotonic_now_ns(), 0, "map"),
-                        x: pose.x,
-                        y: pose.y,
-                        theta: pose.yaw,
-                        covariance: [
-                            pose.var_x,
-                            0.0,
-                            0.0,
-                            0.0,
-                            pose.var_y,
-                            0.0,
-                            0.0,
-                            0.0,
-                            pose.var_yaw,
-                        ],
-                        ..PoseEstimate::default()
-                    };
-                    match publisher.publish(&given) {
-                        Ok(_) => {
-                            tracing::info!(
-                                "initialpose from Zenoh: x {:.2} m, y {:.2} m, heading {:.1}°",
-                                pose.x,
-                                pose.y,
-                                pose.yaw.to_degrees()
-                            );
-                            counters.forwarded.fetch_add(1, Ordering::Relaxed);
-                        }
-                        Err(e) => {
-                            tracing::warn!("initialpose: {e}");
-                            counters.refused.fetch_add(1, Ordering::Relaxed);
-                        }
-                    }
+                    tracing::info!(
+                        "initialpose from Zenoh: x {:.2} m, y {:.2} m, heading {:.1}°",
+                        pose.x,
+                        pose.y,
+                        pose.yaw.to_degrees()
+                    );
+                    counters.forwarded.fetch_add(1, Ordering::Relaxed);
                 }
                 Err(e) => {
-                    // An operator's click: worth a warning, unlike a stream of commands.
                     tracing::warn!("initialpose refused: {e}");
                     counters.refused.fetch_add(1, Ordering::Relaxed);
                 }
             }
-        }
-    }))
+        },
+    )
 }

@@ -10,6 +10,7 @@
 //! refused with the reason; nothing is guessed.
 
 use crate::cdr::{CdrError, CdrReader, CdrWriter};
+use smokenav_shared_types::{Header, PoseEstimate};
 use thiserror::Error;
 
 /// Longest `frame_id` read (RViz sends `map`).
@@ -41,6 +42,31 @@ pub struct PlanarPose {
     pub var_x: f64,
     pub var_y: f64,
     pub var_yaw: f64,
+}
+
+impl PlanarPose {
+    /// The bus message `slam/initial_pose` carries: map frame, stamped
+    /// `stamp_ns`, the variances on the (x, y, θ) covariance's diagonal.
+    pub fn to_estimate(&self, stamp_ns: u64) -> PoseEstimate {
+        PoseEstimate {
+            header: Header::new(stamp_ns, 0, "map"),
+            x: self.x,
+            y: self.y,
+            theta: self.yaw,
+            covariance: [
+                self.var_x,
+                0.0,
+                0.0,
+                0.0,
+                self.var_y,
+                0.0,
+                0.0,
+                0.0,
+                self.var_yaw,
+            ],
+            ..PoseEstimate::default()
+        }
+    }
 }
 
 /// Decodes a CDR PoseWithCovarianceStamped: header (stamp, frame_id), pose

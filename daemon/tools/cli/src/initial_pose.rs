@@ -9,8 +9,9 @@ use crate::topic::BusArgs;
 use anyhow::Context;
 use clap::Args;
 use smokenav_platform_bus::topics;
+use smokenav_platform_recording::initial_pose::PlanarPose;
 use smokenav_shared_types::clock::monotonic_now_ns;
-use smokenav_shared_types::{Header, Health, PoseEstimate};
+use smokenav_shared_types::{Health, PoseEstimate};
 use std::time::{Duration, Instant};
 
 #[derive(Debug, Args)]
@@ -66,15 +67,16 @@ pub fn pose_message(a: &InitialPoseArgs, stamp_ns: u64) -> anyhow::Result<PoseEs
         "--sigma-deg must be 0–180°, got {}",
         a.sigma_deg
     );
-    let (vp, vh) = (a.sigma_m * a.sigma_m, a.sigma_deg.to_radians().powi(2));
-    Ok(PoseEstimate {
-        header: Header::new(stamp_ns, 0, "map"),
+    let var = a.sigma_m * a.sigma_m;
+    Ok(PlanarPose {
         x: a.x,
         y: a.y,
-        theta: heading,
-        covariance: [vp, 0.0, 0.0, 0.0, vp, 0.0, 0.0, 0.0, vh],
-        ..PoseEstimate::default()
-    })
+        yaw: heading,
+        var_x: var,
+        var_y: var,
+        var_yaw: a.sigma_deg.to_radians().powi(2),
+    }
+    .to_estimate(stamp_ns))
 }
 
 pub fn run(a: InitialPoseArgs) -> anyhow::Result<()> {
