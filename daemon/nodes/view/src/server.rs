@@ -973,16 +973,15 @@ mod tests {
             "{got:?}"
         );
         let deadline = std::time::Instant::now() + Duration::from_secs(10);
-        while server.pose_stats().refused < 3 && std::time::Instant::now() < deadline {
+        // The counters follow the hand-over on the client's reader thread.
+        let want = PoseStats {
+            taken: 1,
+            refused: 3,
+        };
+        while server.pose_stats() != want && std::time::Instant::now() < deadline {
             std::thread::sleep(Duration::from_millis(20));
         }
-        assert_eq!(
-            server.pose_stats(),
-            PoseStats {
-                taken: 1,
-                refused: 3
-            }
-        );
+        assert_eq!(server.pose_stats(), want);
         assert!(rx.try_recv().is_err());
 
         let watch_only =
