@@ -4,7 +4,8 @@
 //! (`tests/systemd/inside-checks`): every unit `active` through `READY=1`;
 //! `smokenav status` as an operator (group smokenav, through the installed
 //! sudo rule) and as root shows every process up, the operator can echo a
-//! topic but not drive, a stranger is told which group to join; `kill -9`
+//! topic but not drive nor publish (`topic pub`, `initial-pose`), a stranger
+//! is told which group to join; `kill -9`
 //! of fusion is restarted and fused scans flow again within 2 s; a SIGSTOPped
 //! SLAM is killed by the watchdog and restarted; the laser driver stops when
 //! its device goes and comes back with it; the journal holds each process's
@@ -61,6 +62,7 @@ fn units_under_a_booted_systemd_start_restart_watchdog_follow_devices_and_admit_
         "root_status_all_up",
         "operator_topic_echo",
         "operator_cannot_drive",
+        "operator_cannot_publish",
         "stranger_told_the_group",
         "fusion_restarted_data_within_2s",
         "watchdog_restarts_stopped_process",

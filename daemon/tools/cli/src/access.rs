@@ -71,7 +71,7 @@ pub fn ensure_bus_access(root: &Path, command: &str) -> anyhow::Result<()> {
         bail!(
             "permission denied on {}: `smokenav {command}` on this robot needs group \
              {DRIVE_GROUP} (sudo usermod -aG {DRIVE_GROUP} $USER, then log in again); group \
-             {group_name} may run `smokenav status` and `smokenav topic` (through sudo as \
+             {group_name} may run `smokenav status` and `smokenav topic list|echo|hz|info|bw` (through sudo as \
              {owner_name}: systemd/install sets that up in /etc/sudoers.d/smokenav)",
             root.display()
         );
