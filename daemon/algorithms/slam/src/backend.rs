@@ -123,7 +123,9 @@ pub trait SlamBackend: Send {
     /// mapping refuses it after its first scan: moving the robot in a map
     /// half built from where it thought it was would tear that map.
     fn relocalize(&mut self, pose: Pose2, sigma: (f64, f64)) -> Result<(), RelocalizeError> {
-        let _ = sigma;
+        if !(pose.is_finite() && sigma.0.is_finite() && sigma.1.is_finite()) {
+            return Err(RelocalizeError::NotFinite);
+        }
         if self.pose().is_some() {
             return Err(RelocalizeError::Mapping(self.name()));
         }

@@ -387,9 +387,6 @@ impl SlamPipeline {
     /// a localising back-end searches around it, any back-end starts there
     /// before its first scan, a mapping one refuses it later.
     pub fn relocalize(&mut self, pose: Pose2, sigma: (f64, f64)) -> Result<(), RelocalizeError> {
-        if !(pose.is_finite() && sigma.0.is_finite() && sigma.1.is_finite()) {
-            return Err(RelocalizeError::NotFinite);
-        }
         self.backend.relocalize(pose, sigma)
     }
 

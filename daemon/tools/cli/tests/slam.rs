@@ -49,14 +49,34 @@ fn max_step(trajectory: &str) -> f64 {
 
 /// `smokenav slam ARGS`: success, stdout, stderr.
 fn slam(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
-        .arg("slam")
-        .args(args)
-        .output()
-        .unwrap();
+    slam_in(None, args)
+}
+
+/// [`slam`] run in folder `cwd` (relative paths are the user's).
+fn slam_in(cwd: Option<&std::path::Path>, args: &[&str]) -> (bool, String, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_smokenav"));
+    if let Some(dir) = cwd {
+        cmd.current_dir(dir);
+    }
+    let out = cmd.arg("slam").args(args).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     (out.status.success(), stdout, stderr)
+}
+
+/// The report's `ATE trajectory` line and its RMS, m.
+fn ate_rms(report: &str) -> (f64, &str) {
+    let line = report
+        .lines()
+        .find(|l| l.starts_with("ATE trajectory"))
+        .unwrap_or_else(|| panic!("no ATE line:\n{report}"));
+    let rms = line
+        .split("RMS ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no RMS in {line}"));
+    (rms, line)
 }
 
 /// The scans a localising run matched to the saved map, and the report's line.
@@ -237,20 +257,11 @@ fn a_reference_on_its_own_clock_is_interpolated_not_refused() {
     let path = dir.path().join("reference.txt");
     std::fs::write(&path, reference).unwrap();
     let report = run("second", &["--reference", path.to_str().unwrap()]);
-    let line = report
-        .lines()
-        .find(|l| l.starts_with("ATE trajectory"))
-        .unwrap_or_else(|| panic!("no ATE line:\n{report}"));
+    let (rms, line) = ate_rms(&report);
     assert!(
         line.contains("paired with the reference interpolated"),
         "{line}"
     );
-    let rms: f64 = line
-        .split("RMS ")
-        .nth(1)
-        .and_then(|t| t.split(' ').next())
-        .and_then(|t| t.parse().ok())
-        .unwrap_or_else(|| panic!("no RMS in {line}"));
     assert!(rms < 0.02, "{line}");
     // Without a ground-truth map the scans drawn at the reference are the truth.
     let map = report
@@ -273,18 +284,11 @@ fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
     let d = |p: &str| dir.path().join(p).to_string_lossy().into_owned();
     // `smokenav slam` on the log, run in the test's folder.
     let slam = |args: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_smokenav"))
-            .current_dir(dir.path())
-            .args(["slam", "--carmen", log.to_str().unwrap()])
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        String::from_utf8_lossy(&out.stdout).into_owned()
+        let mut all = vec!["--carmen", log.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let (ok, report, err) = slam_in(Some(dir.path()), &all);
+        assert!(ok, "{err}");
+        report
     };
     slam(&[
         "--backend",
@@ -308,34 +312,18 @@ fn localization_from_the_dock_starts_at_the_saved_runs_first_node() {
         ];
         args.extend_from_slice(at);
         let report = slam(&args);
-        let loc = report
-            .lines()
-            .find(|l| l.starts_with("localization"))
-            .unwrap_or_else(|| panic!("no localization line in\n{report}"))
-            .to_owned();
-        let matched: u64 = loc
-            .split(": ")
-            .nth(1)
-            .and_then(|r| r.split_whitespace().next())
-            .and_then(|n| n.parse().ok())
-            .unwrap_or_else(|| panic!("{loc}"));
-        let ate = report
-            .lines()
-            .find(|l| l.starts_with("ATE trajectory"))
-            .and_then(|l| l.split("RMS ").nth(1))
-            .and_then(|t| t.split(' ').next())
-            .and_then(|t| t.parse::<f64>().ok())
-            .unwrap_or_else(|| panic!("no ATE in\n{report}"));
-        (matched, ate, loc)
+        let (matched, loc) = matched_scans(&report);
+        let (ate, _) = ate_rms(&report);
+        (matched, ate, loc.to_owned())
     };
     let (matched, ate, loc) = localise("dock", &["--resume-at", "first"]);
-    assert!(matched >= 190, "{loc}");
+    assert!(matched >= 190.0, "{loc}");
     assert!(ate < 0.03, "{ate} m from the mapping run: {loc}");
     // From the end nothing is found, and nothing false either: the pose
     // keeps the odometry's shape (a wide search on every lost scan matched
     // places metres off and ended 0.47 m ATE from the mapping run).
     let (matched_last, ate_last, loc_last) = localise("end", &[]);
-    assert!(matched_last < 20, "{loc_last}");
+    assert!(matched_last < 20.0, "{loc_last}");
     assert!(
         ate_last < 0.1,
         "{ate_last} m from the mapping run: {loc_last}"
