@@ -16,6 +16,8 @@ pub enum SectionSource {
     /// The sonar reading replaced the laser in this section.
     Sonar = 1,
     /// Sonar superimposed on the laser (both kept, nearer wins per beam).
+    /// As a beam's source: a laser range in a section given to the sonar,
+    /// which the sonar did not contradict (v2); SLAM maps it, unmatched.
     Both = 2,
     /// Neither is trusted: beams are marked beyond-max so SLAM treats them as no return.
     Neither = 3,

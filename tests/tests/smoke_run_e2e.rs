@@ -273,10 +273,14 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
     let specks = fusion_health
         .metric("speck_beams")
         .expect("health/fusion reports speck_beams");
+    // So does keeping the laser beams the sonar vouches for.
+    let vouched = fusion_health
+        .metric("vouched_beams")
+        .expect("health/fusion reports vouched_beams");
     eprintln!(
         "fusion: {complete} complete fused scans; raw phantom sections {}: true distance kept {} \
          ({} by the sonar), dropped {}, coarse sonar arc {}, phantom through {}; before the \
-         smoke sensor read smoke: {unsensed:?}; sonar usage {:.1} %; {specks} speck beams dropped",
+         smoke sensor read smoke: {unsensed:?}; sonar usage {:.1} %; {specks} speck beams dropped, {vouched} vouched for by the sonar",
         tally.sections,
         tally.kept_true_distance,
         tally.kept_by_sonar,

@@ -50,6 +50,9 @@ pub struct StepReport {
     pub smoke_silent: bool,
     /// Laser beams v2 dropped as specks of patchy smoke (`v2.speck_max_beams`).
     pub speck_beams: usize,
+    /// Laser beams v2 kept in sections it gave to the sonar, which the
+    /// sonar did not contradict (`v2.keep_uncontradicted_laser`).
+    pub vouched_beams: usize,
 }
 
 /// The layout of the last laser scan, used to shape sonar-only output.
@@ -267,6 +270,7 @@ impl FusionEngine {
             bad_layout: false,
             smoke_silent,
             speck_beams: 0,
+            vouched_beams: 0,
         };
         let Some(shape) = ScanShape::of(l) else {
             report.bad_layout = true;
@@ -304,7 +308,13 @@ impl FusionEngine {
             }
         }
         out.section_count = n_sections as u32;
-        self.apply_sections(l, &shape, out);
+        // v2's witness also vouches: in a section given to its sonar, a laser
+        // beam the sonar does not contradict reached the sonar's nearest
+        // surface or passed it, so smoke did not catch it there.
+        let keep_margin = (self.method != FusionMethod::V1
+            && self.fuzzy.params().keep_uncontradicted_laser)
+            .then(|| self.fuzzy.params().contradiction_margin_m as f32);
+        report.vouched_beams = self.apply_sections(l, &shape, keep_margin, out);
         // Patchy smoke also catches lone beams the sonar cannot judge (thin
         // smoke below the witness's threshold, beams between cones). Only
         // where smoke is measured: a silent sensor (warming up) is not
@@ -546,7 +556,18 @@ impl FusionEngine {
     }
 
     /// Writes the beams of every non-laser section.
-    fn apply_sections(&mut self, l: &LaserScan, shape: &ScanShape, out: &mut FusedScan) {
+    /// Writes the sections' decisions into the output. With `keep_margin`,
+    /// a `Sonar` section keeps each laser beam that lies no nearer than the
+    /// sonar's arc by more than the margin (not contradicted), and paints
+    /// the arc only on the others. Returns how many beams it kept so.
+    fn apply_sections(
+        &mut self,
+        l: &LaserScan,
+        shape: &ScanShape,
+        keep_margin: Option<f32>,
+        out: &mut FusedScan,
+    ) -> usize {
+        let mut vouched = 0;
         let range_min = f64::from(l.range_min);
         for k in 0..self.sections.as_slice().len() {
             let d = self.decisions[k];
@@ -564,6 +585,16 @@ impl FusionEngine {
                     for i in s.first..s.end {
                         let p = self.paint[i];
                         let laser_range = l.beam(i).range().filter(|r| r.is_finite());
+                        if let (Some(m), SectionSource::Sonar, Some(lr)) =
+                            (keep_margin, d, laser_range)
+                            && p.is_finite()
+                            && lr >= p - m
+                        {
+                            // Both: the laser's range, in a section smoke made the sonar's.
+                            out.beam_source[i] = SectionSource::Both as u8;
+                            vouched += 1;
+                            continue;
+                        }
                         let take_sonar = match d {
                             SectionSource::Sonar => true,
                             // Both: the nearer of the two wins.
@@ -583,6 +614,7 @@ impl FusionEngine {
                 }
             }
         }
+        vouched
     }
 
     /// Algorithm 1 alone: the laser is silent.
@@ -656,6 +688,7 @@ impl FusionEngine {
             bad_layout: false,
             smoke_silent: false,
             speck_beams: 0,
+            vouched_beams: 0,
         }
     }
 }

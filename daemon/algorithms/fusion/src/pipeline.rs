@@ -28,6 +28,8 @@ pub struct PipelineStats {
     pub bad_layouts: u64,
     /// Laser beams v2 dropped as specks of patchy smoke.
     pub speck_beams: u64,
+    /// Laser beams v2 kept, uncontradicted, in sections it gave to the sonar.
+    pub vouched_beams: u64,
 }
 
 impl PipelineStats {
@@ -88,6 +90,7 @@ impl Parts<'_> {
                 self.stats.sonar_sections += report.sonar_sections as u64;
                 self.stats.bad_layouts += u64::from(report.bad_layout);
                 self.stats.speck_beams += report.speck_beams as u64;
+                self.stats.vouched_beams += report.vouched_beams as u64;
                 *self.last = Some(report);
                 emit(self.out, &report);
             }

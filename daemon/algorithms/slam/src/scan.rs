@@ -202,7 +202,10 @@ impl RangeScan {
         let mut withheld = 0usize;
         for (i, beam) in self.beams.iter_mut().enumerate() {
             match fused.beam_source(i) {
-                SectionSource::Sonar => {
+                // Both: a laser range the sonar did not contradict in a
+                // section smoke gave to the sonar. Mapped, but not matched:
+                // a part view through smoke slides the matcher.
+                SectionSource::Sonar | SectionSource::Both => {
                     beam.kind = BeamKind::Sonar;
                     withheld += 1;
                 }
@@ -210,7 +213,7 @@ impl RangeScan {
                     beam.range = None;
                     withheld += 1;
                 }
-                SectionSource::Laser | SectionSource::Both => {}
+                SectionSource::Laser => {}
             }
         }
         self.withheld_share = withheld as f64 / self.beams.len().max(1) as f64;
@@ -255,15 +258,19 @@ mod tests {
     }
 
     #[test]
-    fn fused_sonar_beams_are_marked_and_neither_beams_dropped() {
+    fn fused_sonar_and_both_beams_are_marked_and_neither_beams_dropped() {
         let mut f = FusedScan::default();
         f.scan.count = 3;
         f.scan.range_max = 5.6;
         for i in 0..3 {
             f.scan.set_beam(i, BeamReading::Range(2.0));
         }
+        f.scan.count = 4;
+        f.scan.set_beam(3, BeamReading::Range(2.0));
         f.beam_source[1] = SectionSource::Sonar as u8;
         f.beam_source[2] = SectionSource::Neither as u8;
+        // A laser range v2 kept in a section it gave to the sonar.
+        f.beam_source[3] = SectionSource::Both as u8;
         // Two sections: sonar 3 heard 1.2 m, sonar 4 gave no reading (0).
         f.section_count = 2;
         f.sections[0].sonar_index = 3;
@@ -278,9 +285,14 @@ mod tests {
         assert_eq!(r.beams[0].kind, BeamKind::Laser);
         assert_eq!(r.beams[1].kind, BeamKind::Sonar);
         assert_eq!(r.beams[2].range, None);
+        // Mapped with its range, but not matched as the laser.
+        assert_eq!(
+            (r.beams[3].kind, r.beams[3].range),
+            (BeamKind::Sonar, Some(2.0))
+        );
         assert_eq!(r.laser_noise_factor, 1.3);
         assert!(
-            (r.withheld_share - 2.0 / 3.0).abs() < 1e-12,
+            (r.withheld_share - 3.0 / 4.0).abs() < 1e-12,
             "{}",
             r.withheld_share
         );

@@ -7,6 +7,8 @@
 //! the sensors run at the same rate, as in the paper. Health on
 //! `health/fusion`: method, smoke state, sonar usage, sync drops,
 //! `speck_beams` (laser beams v2 dropped as specks of patchy smoke, total),
+//! `vouched_beams` (laser beams v2 kept in sections it gave to the sonar,
+//! which the sonar did not contradict, total),
 //! `smoke_silent` (v2 fused the last set assuming smoke because the smoke
 //! sensor sent nothing or flagged itself not ready; health degraded), and the
 //! latency from the input that completed a set to its fused scan being
@@ -194,6 +196,7 @@ fn report(p: &mut Process, pipeline: &FusionPipeline, out: &Output, bus_lost: u6
     h.set_metric("skipped_sets", stats.skipped as f64);
     h.set_metric("bad_laser_layouts", stats.bad_layouts as f64);
     h.set_metric("speck_beams", stats.speck_beams as f64);
+    h.set_metric("vouched_beams", stats.vouched_beams as f64);
     h.set_metric("bus_lost", bus_lost as f64);
     h.set_metric("publish_errors", out.publish_errors as f64);
 

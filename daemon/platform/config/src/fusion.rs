@@ -33,6 +33,7 @@
 //! | `v2.dense`                  | μ Dense over the laser's spread σ, m                                      | 0, 0, 0.6, 1.0       | Π shape                     |
 //! | `v2.contradicted`           | μ Contradicted over the share of laser ranges nearer than the sonar's arc | 0.1, 0.3, inf, inf   | Π shape                     |
 //! | `v2.contradiction_margin_m` | how much nearer a laser range must be to contradict, m                    | 0.3                  | [0, 5]                      |
+//! | `v2.keep_uncontradicted_laser` | in a section given to its sonar, laser beams the sonar does not contradict stay | true          | bool                        |
 //! | `v2.speck_max_beams`        | in measured smoke, laser runs this long nearer than both sides drop (0: off) | 2                    | 0–16                        |
 //! | `v2.output_bell`            | the consequent bell: `width` at μ = 0.5, `slope`                          | 0.2, 2.0             | [0.01, 1], [0.1, 20]        |
 //! | `v2.defuzz_samples`         | points of [0, 1] the centroid is taken over                               | 101                  | 11–10001                    |
@@ -233,6 +234,13 @@ pub struct V2Params {
     pub contradicted: PiShape,
     /// How much nearer than the sonar's arc a laser range must be to count as contradicting it, m.
     pub contradiction_margin_m: f64,
+    /// Beyond the paper: in a section given to its sonar, laser beams the
+    /// sonar does not contradict (no nearer than its echo's arc by more than
+    /// `contradiction_margin_m`) stay the laser's; only the others get the
+    /// arc. Smoke catches a beam short, in front of the surface; a beam that
+    /// reached the sonar's nearest surface, or passed it, was not caught.
+    /// Off, the whole section is the sonar's arc, as in the paper.
+    pub keep_uncontradicted_laser: bool,
     /// Beyond the paper: where the smoke sensor measures smoke (μ
     /// Alcoholized > 0), a run of at most this many laser beams that lies
     /// nearer than the beams on both sides by more than
@@ -257,6 +265,7 @@ impl Default for V2Params {
             dense: PiShape::new(0.0, 0.0, 0.6, 1.0),
             contradicted: PiShape::new(0.1, 0.3, f64::INFINITY, f64::INFINITY),
             contradiction_margin_m: 0.3,
+            keep_uncontradicted_laser: true,
             speck_max_beams: 2,
             output_bell: BellShape {
                 width: 0.2,

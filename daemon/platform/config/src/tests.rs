@@ -480,6 +480,32 @@ fn zenoh_keys_are_strict_and_name_the_problem() {
 }
 
 #[test]
+fn keep_uncontradicted_laser_is_on_by_default_and_can_be_turned_off() {
+    assert!(
+        parse(&pioneer_text())
+            .unwrap()
+            .fusion
+            .v2
+            .keep_uncontradicted_laser
+    );
+    let cfg = parse(&format!(
+        "{}\n[fusion.v2]\nkeep_uncontradicted_laser = false\n",
+        pioneer_text()
+    ))
+    .unwrap();
+    assert!(!cfg.fusion.v2.keep_uncontradicted_laser);
+    let err = parse(&format!(
+        "{}\n[fusion.v2]\nkeep_uncontradicted_laser = 1\n",
+        pioneer_text()
+    ))
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("keep_uncontradicted_laser"),
+        "{err}"
+    );
+}
+
+#[test]
 fn speck_max_beams_is_read_and_bounded() {
     let cfg = parse(&format!(
         "{}\n[fusion.v2]\nspeck_max_beams = 0\n",

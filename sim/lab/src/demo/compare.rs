@@ -254,7 +254,7 @@ pub fn fuzzy_walls(
                 continue;
             };
             let bit = match f.beam_source(i) {
-                SectionSource::Laser => 1,
+                SectionSource::Laser | SectionSource::Both => 1,
                 SectionSource::Sonar => 2,
                 _ => continue,
             };

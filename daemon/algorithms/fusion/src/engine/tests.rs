@@ -416,6 +416,66 @@ fn v2_gives_a_section_the_sonar_contradicts_in_smoky_air_to_the_sonar() {
 }
 
 #[test]
+fn v2_keeps_the_laser_beams_the_sonar_does_not_contradict_in_a_section_it_gives_the_sonar() {
+    // Smoke 60 and a smoke front 0.7 m ahead on every other beam of sonar
+    // 3's section (half its beams contradicted: the section goes to the
+    // sonar); the other beams reach the room's walls, at or beyond the
+    // sonar's nearest echo.
+    let run = |keep: bool| {
+        let (mut e, sonar, mut out) = v2_small_room_with(60.0, SmokeTrend::Rising, |v2| {
+            v2.keep_uncontradicted_laser = keep;
+        });
+        let (smoky, s3) = phantom_in_section(&e, 3, 0.7);
+        let laser = urg(0, |i, a| {
+            if (s3.first..s3.end).contains(&i) && i % 2 == 1 {
+                room(0.0, 0.0, a) as f32
+            } else {
+                smoky.beam(i).range().unwrap()
+            }
+        });
+        let report = e
+            .step(
+                Some(&laser),
+                Some(&sonar),
+                Some(&smoke(0, 60.0, SmokeTrend::Rising)),
+                &mut out,
+            )
+            .unwrap();
+        let d3 = *out.sections().iter().find(|d| d.sonar_index == 3).unwrap();
+        assert_eq!(d3.source(), SectionSource::Sonar, "keep {keep}: {d3:?}");
+        // Where each beam meets the sonar's arc (infinite where it misses it).
+        let arc = e.paint.clone();
+        (laser, s3, out, arc, report.vouched_beams)
+    };
+    let (laser, s3, out, arc, vouched) = run(true);
+    let mut kept = 0;
+    for i in s3.first..s3.end {
+        if i % 2 == 1 && arc[i].is_finite() {
+            // Reached the wall: the laser's range, marked both.
+            assert_eq!(out.beam_source(i), SectionSource::Both, "beam {i}");
+            assert_eq!(out.scan.beam(i), laser.beam(i), "beam {i}");
+            kept += 1;
+        } else if i % 2 == 1 {
+            // Outside the sonar's arc: nothing, as before.
+            assert_eq!(out.beam_source(i), SectionSource::Sonar, "beam {i}");
+            assert_eq!(out.scan.beam(i), BeamReading::BeyondMax, "beam {i}");
+        } else {
+            // Caught by the smoke: the sonar's arc (or nothing), never 0.7 m.
+            assert_eq!(out.beam_source(i), SectionSource::Sonar, "beam {i}");
+            assert_ne!(out.scan.beam(i), BeamReading::Range(0.7), "beam {i}");
+        }
+    }
+    assert!(kept >= 5, "{kept} beams kept");
+    assert_eq!(vouched, kept, "the report counts the beams kept");
+    // Off: the whole section is the sonar's arc, as in the paper.
+    let (_, s3, out, _, vouched) = run(false);
+    assert_eq!(vouched, 0);
+    for i in s3.first..s3.end {
+        assert_eq!(out.beam_source(i), SectionSource::Sonar, "beam {i}");
+    }
+}
+
+#[test]
 fn v2_ignores_a_contradicting_sonar_in_clean_air() {
     // The same phantom-looking section without smoke: sonars miss walls by
     // specular reflection far more often than the laser invents one, so the
