@@ -397,6 +397,7 @@ fn map_vote_aligns_saved_maps_and_votes_out_what_one_member_alone_drew() {
         "vote (weighted)",
         "vote (consensus)",
         "vote (majority-reference)",
+        "vote (corroborated)",
     ] {
         assert!(error(rule).is_finite());
     }

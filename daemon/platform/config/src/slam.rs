@@ -605,6 +605,10 @@ mod tests {
             crate::slam_vote::VoteRule::Majority,
             "majority is the default rule"
         );
+        assert_eq!(
+            section("[vote]\nrule = \"corroborated\"\n").vote.rule,
+            crate::slam_vote::VoteRule::Corroborated
+        );
         let err = parse_toml::<SlamSection>("[vote]\nmax_residual = 0.2\n", Path::new("slam.toml"))
             .unwrap_err()
             .to_string();

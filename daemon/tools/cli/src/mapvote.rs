@@ -104,7 +104,12 @@ pub fn run(a: VoteArgs) -> anyhow::Result<()> {
         };
         println!("  member {}: {al}{}", name(p), score(m).unwrap_or_default());
     }
-    if v.voters() == 2 && matches!(rule, VoteRule::Majority | VoteRule::MajorityReference) {
+    if v.voters() == 2
+        && matches!(
+            rule,
+            VoteRule::Majority | VoteRule::MajorityReference | VoteRule::Corroborated
+        )
+    {
         println!(
             "  note: two maps vote; where they differ neither is a majority and the first one voting decides, so the vote is that map: give three or more"
         );

@@ -363,6 +363,46 @@ fn majority_reference_takes_the_references_cell_where_the_members_split() {
 }
 
 #[test]
+fn corroborated_draws_a_split_cell_only_where_another_member_has_a_wall_beside_it() {
+    use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
+    // Three-way splits (reference free, member 1 a wall, member 2 nothing):
+    // at `lone` member 1's wall stands alone (a phantom); at `beside`
+    // member 2 has a wall one cell east (the same wall drawn a cell off).
+    let (w, lone, beside) = (80, 20 * 80 + 20, 30 * 80 + 20);
+    let mut members: Vec<OccupancyGrid> = vec![room(); 3];
+    for at in [lone, beside] {
+        members[1].cells[at] = OCCUPIED;
+        members[2].cells[at] = UNKNOWN;
+    }
+    members[2].cells[beside + 1] = OCCUPIED;
+    let members_free = members.clone();
+    let inputs = inputs_of(members, |_| false);
+    let fuse = |rule: VoteRule| {
+        let section = VoteSection {
+            rule,
+            ..VoteSection::default()
+        };
+        fused_once(section, &inputs).out.map.clone().unwrap()
+    };
+    let paper = fuse(VoteRule::Majority);
+    assert_eq!(
+        [paper.cells[lone], paper.cells[beside]],
+        [OCCUPIED; 2],
+        "the paper: every doubt is a wall"
+    );
+    let c = fuse(VoteRule::Corroborated);
+    assert_eq!(c.cells[lone], FREE, "a lone wall is not drawn");
+    assert_eq!(
+        c.cells[beside], OCCUPIED,
+        "a wall another member has beside it is"
+    );
+    // Where a majority exists the rules agree.
+    let room_wall = (60 - 1) * w + 10;
+    assert_eq!(members_free[0].cells[room_wall], OCCUPIED);
+    assert_eq!(c.cells[room_wall], OCCUPIED);
+}
+
+#[test]
 fn with_a_member_out_two_maps_do_not_vote_their_union() {
     use smokenav_platform_map::{FREE, OCCUPIED};
     // Member 1 draws the partition (x = 40) one cell east: the kind of
@@ -376,7 +416,11 @@ fn with_a_member_out_two_maps_do_not_vote_their_union() {
         members[1].cells[y * w + 41] = OCCUPIED;
     }
     let inputs = inputs_of(members, |k| k == 2);
-    for rule in [VoteRule::Majority, VoteRule::MajorityReference] {
+    for rule in [
+        VoteRule::Majority,
+        VoteRule::MajorityReference,
+        VoteRule::Corroborated,
+    ] {
         let section = VoteSection {
             rule,
             ..VoteSection::default()
