@@ -311,7 +311,7 @@ impl FusionEngine {
         // v2's witness also vouches: in a section given to its sonar, a laser
         // beam the sonar does not contradict reached the sonar's nearest
         // surface or passed it, so smoke did not catch it there.
-        let keep_margin = (self.method != FusionMethod::V1
+        let keep_margin = (self.method == FusionMethod::V2
             && self.fuzzy.params().keep_uncontradicted_laser)
             .then(|| self.fuzzy.params().contradiction_margin_m as f32);
         report.vouched_beams = self.apply_sections(l, &shape, keep_margin, out);
@@ -555,8 +555,7 @@ impl FusionEngine {
         };
     }
 
-    /// Writes the beams of every non-laser section.
-    /// Writes the sections' decisions into the output. With `keep_margin`,
+    /// Writes the beams of every non-laser section. With `keep_margin`,
     /// a `Sonar` section keeps each laser beam that lies no nearer than the
     /// sonar's arc by more than the margin (not contradicted), and paints
     /// the arc only on the others. Returns how many beams it kept so.

@@ -410,10 +410,9 @@ impl Rbpf {
         self.output(stamp_ns, true, false)
     }
 
-    /// Moves every particle by the odometry since the previous scan (through
-    /// the motion model); `None` before the first scan.
-    /// Moves every particle by the odometry since the last call, through the
-    /// motion model, or exactly by it without `noise`.
+    /// Moves every particle by the odometry since the previous scan, through
+    /// the motion model, or exactly by it without `noise`; `None` before the
+    /// first scan.
     fn move_particles(&mut self, odom: &Pose2, noise: bool) -> Option<()> {
         let odom = if odom.is_finite() {
             *odom

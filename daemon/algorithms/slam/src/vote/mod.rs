@@ -51,7 +51,9 @@ use crate::scan::{BeamKind, RangeScan};
 use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
 use nalgebra::Matrix3;
-use rule::{CellState, Consensus, WeightedVote, corroborated_doubt, majority_or, weighted};
+use rule::{
+    CellState, Consensus, WeightedVote, corroborated_doubt, majority_or, strict_majority, weighted,
+};
 use smokenav_platform_config::{SlamSection, VoteRule, VoteSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
@@ -415,17 +417,11 @@ impl Fuser {
                 for i in 0..n {
                     self.votes.clear();
                     self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
-                    // Two voting: the first decides, as under the majority.
-                    let doubt = || {
-                        if k_n == 2 {
-                            self.states[i]
-                        } else {
-                            corroborated_doubt(&self.states, k_n, w, h, i)
-                        }
-                    };
-                    self.fused_states[i] = match rule::strict_majority(&self.votes) {
+                    self.fused_states[i] = match strict_majority(&self.votes) {
                         Some(s) => s,
-                        None => doubt(),
+                        // Two voting: the first decides, as under the majority.
+                        None if k_n == 2 => self.states[i],
+                        None => corroborated_doubt(&self.states, k_n, w, h, i),
                     };
                 }
             }
