@@ -260,13 +260,11 @@ mod tests {
     #[test]
     fn fused_sonar_and_both_beams_are_marked_and_neither_beams_dropped() {
         let mut f = FusedScan::default();
-        f.scan.count = 3;
+        f.scan.count = 4;
         f.scan.range_max = 5.6;
-        for i in 0..3 {
+        for i in 0..4 {
             f.scan.set_beam(i, BeamReading::Range(2.0));
         }
-        f.scan.count = 4;
-        f.scan.set_beam(3, BeamReading::Range(2.0));
         f.beam_source[1] = SectionSource::Sonar as u8;
         f.beam_source[2] = SectionSource::Neither as u8;
         // A laser range v2 kept in a section it gave to the sonar.
