@@ -200,7 +200,41 @@ pub struct BackendOptions {
     /// The sensors in 3D (the robot profile's mounts at `[mapping]`'s
     /// heights), for the projected map; without them it maps the laser only.
     pub sensors: Option<Arc<SensorRig>>,
+    /// Radius (m) of the robot's footprint to mark free along the
+    /// trajectory in every exported map ([`export_map`]); 0 leaves maps as drawn.
+    pub footprint_m: f64,
 }
+
+/// The back-end's map with the cells within `footprint_m` of its
+/// trajectory marked free ([`OccupancyGrid::clear_footprint`]), and how many
+/// of them read occupied before.
+pub fn export_map(backend: &dyn SlamBackend, footprint_m: f64) -> Option<(OccupancyGrid, usize)> {
+    let mut map = backend.map()?;
+    let cleared = if footprint_m > 0.0 {
+        map.clear_footprint(
+            backend.trajectory().iter().map(|p| (p.pose.x, p.pose.y)),
+            footprint_m,
+            OCCUPIED_AT,
+        )
+    } else {
+        0
+    };
+    Some((map, cleared))
+}
+
+/// The footprint radius to clear in exported maps ([`BackendOptions::footprint_m`]) for a
+/// robot of `robot_radius_m` under `cfg` (`[slam] clear_footprint`): the radius less half a
+/// cell, so a cell the robot's edge only brushed keeps a wall it may hold; 0 when off.
+pub fn footprint_radius(cfg: &SlamSection, robot_radius_m: f64) -> f64 {
+    if cfg.clear_footprint && robot_radius_m.is_finite() {
+        (robot_radius_m - 0.5 * cfg.resolution_m).max(0.0)
+    } else {
+        0.0
+    }
+}
+
+/// The occupancy (0..100) a map's reader takes for a wall (map_server's 0.65).
+const OCCUPIED_AT: i8 = 65;
 
 /// The back-end `[slam] backend` names, with its parameters from the section.
 pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Box<dyn SlamBackend> {

@@ -140,6 +140,8 @@ pub struct SlamPipeline {
     blind_odom: Option<Pose2>,
     stats: PipelineStats,
     last_update: Option<SlamUpdate>,
+    /// [`Self::with_footprint`].
+    footprint_m: f64,
 }
 
 impl SlamPipeline {
@@ -180,12 +182,14 @@ impl SlamPipeline {
             blind_odom: None,
             stats: PipelineStats::default(),
             last_update: None,
+            footprint_m: 0.0,
         }
     }
 
     /// A pipeline around the back-end `[slam] backend` names.
     pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Self {
         Self::new(cfg, backend::from_config(cfg, opts))
+            .with_footprint(vote_aware_footprint(cfg, opts.footprint_m))
     }
 
     /// Where the laser sits on the robot (bus scans carry no mount).
@@ -419,7 +423,21 @@ impl SlamPipeline {
     }
 
     pub fn map(&self) -> Option<OccupancyGrid> {
-        self.backend.map()
+        self.map_and_footprint().map(|(m, _)| m)
+    }
+
+    /// The map, and how many of its wall cells the footprint ([`Self::with_footprint`]) cleared.
+    pub fn map_and_footprint(&self) -> Option<(OccupancyGrid, usize)> {
+        backend::export_map(self.backend.as_ref(), self.footprint_m)
+    }
+
+    /// Marks free, in every map exported, the cells within `radius_m` of the
+    /// trajectory (the robot's body; `[slam] clear_footprint`); 0 turns it off.
+    /// For the vote give it to the members instead ([`BackendOptions::footprint_m`],
+    /// see [`vote_aware_footprint`]).
+    pub fn with_footprint(mut self, radius_m: f64) -> Self {
+        self.footprint_m = radius_m.max(0.0);
+        self
     }
 
     /// [`SlamBackend::confidence_map`]: the combined fuzzy map, fuzzy back-end only.
@@ -429,6 +447,18 @@ impl SlamPipeline {
 
     pub fn trajectory(&self) -> Vec<StampedPose> {
         self.backend.trajectory()
+    }
+}
+
+/// The footprint the pipeline itself clears around `cfg`'s back-end: none
+/// for the vote, whose members clear their own maps before they vote (given
+/// [`BackendOptions::footprint_m`]) and whose trajectory is a round trip to a
+/// member's thread, which an export on the scan path must not wait for.
+pub fn vote_aware_footprint(cfg: &SlamSection, footprint_m: f64) -> f64 {
+    if cfg.backend == smokenav_platform_config::SlamBackendKind::Vote {
+        0.0
+    } else {
+        footprint_m
     }
 }
 

@@ -34,8 +34,9 @@
 
 use anyhow::Context;
 use clap::Parser;
+use smokenav_algorithms_slam::backend::footprint_radius;
 use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
-use smokenav_algorithms_slam::pipeline::PipelineStats;
+use smokenav_algorithms_slam::pipeline::{PipelineStats, vote_aware_footprint};
 use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::rbpf::Rbpf;
 use smokenav_algorithms_slam::vote::VoteSlam;
@@ -305,6 +306,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         ],
     };
 
+    let footprint_m = footprint_radius(&cfg, p.config.robot.radius_m);
     let mut pipeline = if cfg.backend == SlamBackendKind::Vote {
         // Online the members run free: a slow one drops scans, none waits for another.
         cfg.vote.lockstep = false;
@@ -320,6 +322,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         }
         let opts = BackendOptions {
             sensors: Some(Arc::new(SensorRig::from_config(&p.config))),
+            footprint_m,
             ..BackendOptions::default()
         };
         let vote =
@@ -343,11 +346,13 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             &BackendOptions {
                 online: true,
                 sensors: Some(Arc::new(SensorRig::from_config(&p.config))),
+                footprint_m,
                 ..BackendOptions::default()
             },
         )
     }
-    .with_sensor_pose(mount);
+    .with_sensor_pose(mount)
+    .with_footprint(vote_aware_footprint(&cfg, footprint_m));
     let mut member_maps = Vec::new();
     if cfg.backend == SlamBackendKind::Vote {
         for m in &cfg.vote.members {

@@ -33,7 +33,8 @@ pub struct RobotSection {
     /// two test runs) on one machine never collide.
     #[serde(default = "default_instance")]
     pub instance: String,
-    /// Robot footprint radius, m (used by the simulator and for sanity checks).
+    /// Robot footprint radius, m (used by the simulator, for sanity checks and
+    /// by SLAM's `[slam] clear_footprint`).
     #[serde(default = "default_radius")]
     pub radius_m: f64,
 }

@@ -310,6 +310,13 @@ slam_section! {
     /// sweeps it would bend the wrong way. The mapping process reads it too:
     /// it deskews the scans it maps by `base/odom`'s velocities.
     deskew: bool = (true, true),
+    /// Mark free, in every map SLAM exports, the cells the robot's body
+    /// covered along its trajectory (`[robot] radius_m` less half a cell):
+    /// nothing stands where the robot drove. Removes the phantom walls a
+    /// smoke cloud leaves in the robot's own path when the laser saw the
+    /// cloud before the robot drove through it. Needs the back-end's
+    /// trajectory (the graph keeps one; the particle filter only offline).
+    clear_footprint: bool = (true, true),
     /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
     fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),
     /// `[slam.graph]`: the graph back-end's node spacing and loop-closure search.

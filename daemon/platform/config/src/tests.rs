@@ -537,6 +537,22 @@ fn deskewing_is_on_by_default_and_can_be_turned_off() {
 }
 
 #[test]
+fn the_footprint_is_cleared_by_default_and_can_be_turned_off() {
+    let on = parse(&pioneer_text()).unwrap();
+    assert!(on.slam.clear_footprint);
+    assert!(on.robot.radius_m > 0.1, "{}", on.robot.radius_m);
+    let off = pioneer_text().replace("[slam]\n", "[slam]\nclear_footprint = false\n");
+    assert!(!parse(&off).unwrap().slam.clear_footprint);
+    let err = parse(&pioneer_text().replace("[slam]\n", "[slam]\nclear_footprint = \"yes\"\n"))
+        .unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("clear_footprint") && msg.contains("config/test-robot.toml"),
+        "{msg}"
+    );
+}
+
+#[test]
 fn particle_filter_threads_default_to_one_per_core_and_are_bounded() {
     assert_eq!(parse(&pioneer_text()).unwrap().slam.threads, 0);
     let two = pioneer_text().replace("[slam]\n", "[slam]\nthreads = 2\n");

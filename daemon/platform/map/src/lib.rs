@@ -28,6 +28,10 @@ pub const UNKNOWN: i8 = -1;
 pub const FREE: i8 = 0;
 pub const OCCUPIED: i8 = 100;
 
+/// Farthest apart two consecutive positions of a trajectory are taken as
+/// driven in a straight line by [`OccupancyGrid::clear_footprint`], m.
+pub const MAX_FOOTPRINT_SWEEP_M: f64 = 0.5;
+
 #[derive(Debug, thiserror::Error)]
 pub enum MapError {
     #[error("{path}: {error}")]
@@ -112,6 +116,86 @@ impl OccupancyGrid {
         let y = ((wy - self.origin[1]) / self.resolution).floor();
         (x >= 0.0 && y >= 0.0 && (x as usize) < self.width && (y as usize) < self.height)
             .then_some((x as usize, y as usize))
+    }
+
+    /// Marks free every cell whose centre lies within `radius` (m) of the
+    /// path through `positions` (map frame, in the order driven): the robot's
+    /// body swept it, so nothing stood there. Consecutive positions up to
+    /// [`MAX_FOOTPRINT_SWEEP_M`] apart are joined by the straight segment
+    /// between them; farther apart (a jump: a reset, a relocalisation) only
+    /// the positions themselves are cleared. Returns how many of the cleared
+    /// cells read `threshold` (0..100) or more before.
+    pub fn clear_footprint(
+        &mut self,
+        positions: impl IntoIterator<Item = (f64, f64)>,
+        radius: f64,
+        threshold: i8,
+    ) -> usize {
+        let usable = radius > 0.0 && radius.is_finite() && self.resolution > 0.0;
+        if !usable || self.cells.len() != self.width * self.height {
+            return 0;
+        }
+        let step = 0.5 * self.resolution;
+        let mut cleared = 0;
+        let mut last: Option<(f64, f64)> = None;
+        for (px, py) in positions {
+            if !(px.is_finite() && py.is_finite()) {
+                continue;
+            }
+            let Some((lx, ly)) = last else {
+                cleared += self.clear_disc(px, py, radius, threshold);
+                last = Some((px, py));
+                continue;
+            };
+            let d = (px - lx).hypot(py - ly);
+            if d < step {
+                // Standing still: nothing new under the robot.
+                continue;
+            }
+            let n = if d <= MAX_FOOTPRINT_SWEEP_M {
+                (d / step).ceil() as usize
+            } else {
+                1
+            };
+            for i in 1..=n {
+                let t = i as f64 / n as f64;
+                cleared +=
+                    self.clear_disc(lx + t * (px - lx), ly + t * (py - ly), radius, threshold);
+            }
+            last = Some((px, py));
+        }
+        cleared
+    }
+
+    /// [`Self::clear_footprint`] at one position.
+    fn clear_disc(&mut self, px: f64, py: f64, radius: f64, threshold: i8) -> usize {
+        let res = self.resolution;
+        let cx = ((px - self.origin[0]) / res).floor();
+        let cy = ((py - self.origin[1]) / res).floor();
+        let reach = (radius / res).ceil() + 1.0;
+        let (x0, x1) = (
+            (cx - reach).max(0.0),
+            (cx + reach).min(self.width as f64 - 1.0),
+        );
+        let (y0, y1) = (
+            (cy - reach).max(0.0),
+            (cy + reach).min(self.height as f64 - 1.0),
+        );
+        if x0 > x1 || y0 > y1 {
+            return 0;
+        }
+        let mut cleared = 0;
+        for y in y0 as usize..=y1 as usize {
+            for x in x0 as usize..=x1 as usize {
+                let (wx, wy) = self.cell_center(x, y);
+                if (wx - px).powi(2) + (wy - py).powi(2) <= radius * radius {
+                    let c = &mut self.cells[y * self.width + x];
+                    cleared += usize::from(*c >= threshold);
+                    *c = FREE;
+                }
+            }
+        }
+        cleared
     }
 
     /// Centres of the cells whose occupancy is at least `threshold` (0..100).
@@ -543,6 +627,73 @@ mod tests {
         let back = load_map_server(&yaml).unwrap();
         assert_eq!(back, g);
         assert_eq!(back.world_to_cell(-1.0 + 0.16, -0.5 + 0.01), Some((3, 0)));
+    }
+
+    /// A 4 m × 2 m grid at 5 cm, every cell a wall, origin (0, 0).
+    fn walls() -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(80, 40, 0.05, [0.0, 0.0, 0.0]);
+        g.cells.fill(OCCUPIED);
+        g
+    }
+
+    #[test]
+    fn the_footprint_clears_the_cells_the_robot_swept_and_nothing_else() {
+        let mut g = walls();
+        // Driven along y = 1 from x = 0.5 to 3.5 in 0.1 m steps, with a pause.
+        let mut path: Vec<(f64, f64)> = (5..=35).map(|i| (0.1 * f64::from(i), 1.0)).collect();
+        path.insert(10, path[9]);
+        let cleared = g.clear_footprint(path.iter().copied(), 0.2, 65);
+        for y in 0..g.height {
+            for x in 0..g.width {
+                let (wx, wy) = g.cell_center(x, y);
+                // Distance from the cell centre to the segment driven.
+                let d = (wy - 1.0).abs().hypot((0.5 - wx).max(wx - 3.5).max(0.0));
+                let v = g.get(x, y).unwrap();
+                if d <= 0.2 - 1e-9 {
+                    assert_eq!(v, FREE, "({wx}, {wy}) lies under the robot");
+                } else if d > 0.2 + 1e-9 {
+                    assert_eq!(v, OCCUPIED, "({wx}, {wy}) lies {d} m off the path");
+                }
+            }
+        }
+        let free = g.cells.iter().filter(|&&v| v == FREE).count();
+        assert_eq!(cleared, free, "every cleared cell was a wall");
+        // A second pass finds nothing left to clear.
+        assert_eq!(g.clear_footprint(path.iter().copied(), 0.2, 65), 0);
+    }
+
+    #[test]
+    fn the_footprint_does_not_sweep_across_a_jump() {
+        let mut g = walls();
+        // A relocalisation from (0.5, 0.5) to (3.5, 1.5): two discs, no corridor between.
+        g.clear_footprint([(0.5, 0.5), (3.5, 1.5)], 0.15, 65);
+        assert_eq!(g.get(40, 20), Some(OCCUPIED), "the middle was never driven");
+        assert_eq!(g.get(10, 10), Some(FREE));
+        assert_eq!(g.get(70, 30), Some(FREE));
+        // 0.4 m apart is a step: swept.
+        let mut g = walls();
+        g.clear_footprint([(1.0, 1.0), (1.4, 1.0)], 0.1, 65);
+        assert_eq!(g.get(24, 20), Some(FREE));
+    }
+
+    #[test]
+    fn the_footprint_ignores_bad_input() {
+        let mut g = walls();
+        let path = [
+            (f64::NAN, 1.0),
+            (1.0, f64::INFINITY),
+            (-50.0, -50.0),
+            (90.0, 1.0),
+        ];
+        assert_eq!(g.clear_footprint(path, 0.2, 65), 0);
+        assert_eq!(g.clear_footprint([(1.0, 1.0)], 0.0, 65), 0);
+        assert_eq!(g.clear_footprint([(1.0, 1.0)], f64::NAN, 65), 0);
+        assert!(g.cells.iter().all(|&v| v == OCCUPIED));
+        // Unknown and faint cells under the robot become free but are not counted as walls.
+        g.cells.fill(UNKNOWN);
+        g.set(20, 20, 40);
+        assert_eq!(g.clear_footprint([(1.0, 1.0)], 0.1, 65), 0);
+        assert_eq!(g.get(20, 20), Some(FREE));
     }
 
     /// A grid with every value: unknown, free, occupied and probabilities in between.

@@ -13,10 +13,12 @@ use smokenav_algorithms_eval::{
     evaluate_trajectories, format_trajectory_as, load_trajectory,
 };
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
+use smokenav_algorithms_slam::backend::footprint_radius;
 use smokenav_algorithms_slam::fuzzy::FuzzySlam;
 use smokenav_algorithms_slam::graph::{GraphParams, GraphSlam, ResumedGraph, saved};
 use smokenav_algorithms_slam::grid::{BeamEnd, LogOddsModel, TiledGrid};
 use smokenav_algorithms_slam::offline::LogScans;
+use smokenav_algorithms_slam::pipeline::vote_aware_footprint;
 use smokenav_algorithms_slam::projected::SensorRig;
 use smokenav_algorithms_slam::scan::{EndpointLimits, RangeScan};
 use smokenav_algorithms_slam::vote::VoteSlam;
@@ -531,6 +533,17 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let robot = match &args.profile {
+        Some(p) => Some(
+            RobotConfig::load(p)
+                .with_context(|| format!("invalid robot profile {}", p.display()))?,
+        ),
+        None => None,
+    };
+    // Without a profile the robot's size is unknown: nothing is cleared.
+    let footprint_m = robot
+        .as_ref()
+        .map_or(0.0, |r| footprint_radius(&cfg, r.robot.radius_m));
     let mut slam = match &cfg.load_graph {
         Some(g) => {
             let run = saved::load(&cfg, GraphParams::from_config(&cfg), g)
@@ -546,23 +559,19 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         }
         None => {
             // The projected map needs the sensors in 3D: the profile's, if given.
-            let sensors = match &args.profile {
-                Some(p) => Some(Arc::new(SensorRig::from_config(
-                    &RobotConfig::load(p)
-                        .with_context(|| format!("invalid robot profile {}", p.display()))?,
-                ))),
-                None => None,
-            };
+            let sensors = robot.as_ref().map(|r| Arc::new(SensorRig::from_config(r)));
             SlamPipeline::from_config(
                 &cfg,
                 &BackendOptions {
                     keep_trajectory: true,
                     sensors,
+                    footprint_m,
                     ..BackendOptions::default()
                 },
             )
         }
-    };
+    }
+    .with_footprint(vote_aware_footprint(&cfg, footprint_m));
     let truth_map = match &args.truth_map {
         Some(p) => Some(
             smokenav_platform_map::load_map_server(p)
@@ -638,8 +647,9 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         &args.out.join(format!("trajectory_online.{ext}")),
         &format_trajectory_as(&online, args.format.layout()),
     )?;
-    if let Some(map) = slam.map() {
-        smokenav_platform_map::save_map_server(&map, &args.out, "map")?;
+    let (map, footprint_cleared) = slam.map_and_footprint().unzip();
+    if let Some(map) = &map {
+        smokenav_platform_map::save_map_server(map, &args.out, "map")?;
         map.save_png(&args.out.join("map.png"))?;
     }
 
@@ -666,6 +676,18 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         kind => writeln!(report, "back-end           {}", kind.as_str()),
     }
     .ok();
+    if vote_aware_footprint(&cfg, footprint_m) > 0.0 {
+        let _ = writeln!(
+            report,
+            "footprint          {} wall cells cleared where the robot drove (radius {footprint_m:.3} m)",
+            footprint_cleared.unwrap_or(0)
+        );
+    } else if footprint_m > 0.0 {
+        let _ = writeln!(
+            report,
+            "footprint          each member's map cleared under its own path (radius {footprint_m:.3} m)"
+        );
+    }
     let _ = writeln!(
         report,
         "per-scan CPU ms    p50 {:.2}  p99 {:.2}  max {:.2}",
@@ -813,15 +835,9 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     }
     let truth = truth_map.or_else(|| reference_map.map(|r| r.grid()));
     if let Some(vote) = slam.backend().as_any().downcast_ref::<VoteSlam>() {
-        vote_report(
-            vote,
-            truth.as_ref(),
-            slam.map().as_ref(),
-            &args.out,
-            &mut report,
-        )?;
-    } else if let (Some(t), Some(m)) = (&truth, slam.map()) {
-        let _ = writeln!(report, "map error          {}", map_error(t, &m));
+        vote_report(vote, truth.as_ref(), map.as_ref(), &args.out, &mut report)?;
+    } else if let (Some(t), Some(m)) = (&truth, &map) {
+        let _ = writeln!(report, "map error          {}", map_error(t, m));
     }
     write(&args.out.join("stats.txt"), &report)?;
     print!("{report}");

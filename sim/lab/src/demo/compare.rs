@@ -6,6 +6,7 @@ use super::recording::{Kind, SensorLog};
 use smokenav_algorithms_eval::{MapOptions, MapReport, TrajectoryOptions, TrajectoryReport};
 use smokenav_algorithms_fusion::engine::StepReport;
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
+use smokenav_algorithms_slam::backend::footprint_radius;
 use smokenav_algorithms_slam::noise::LaserNoiseModel;
 use smokenav_algorithms_slam::offline::{Received, replay};
 use smokenav_algorithms_slam::projected::SensorRig;
@@ -456,6 +457,7 @@ pub(crate) fn replay_slam(
         &BackendOptions {
             keep_trajectory: true,
             sensors: Some(Arc::new(SensorRig::from_config(profile))),
+            footprint_m: footprint_radius(&profile.slam, profile.robot.radius_m),
             ..BackendOptions::default()
         },
     )

@@ -570,3 +570,77 @@ fn deskewing_can_be_turned_off() {
     };
     assert_eq!(turning_sweeps_with(true, &off), turning_sweeps(false));
 }
+
+/// The map's largest value within 0.1 m of `(x, y)` (map frame).
+fn max_near(map: &OccupancyGrid, x: f64, y: f64) -> i8 {
+    let mut max = -1;
+    for dy in -2..=2 {
+        for dx in -2..=2 {
+            let p = (x + 0.05 * f64::from(dx), y + 0.05 * f64::from(dy));
+            if let Some((cx, cy)) = map.world_to_cell(p.0, p.1) {
+                max = max.max(map.get(cx, cy).unwrap_or(-1));
+            }
+        }
+    }
+    max
+}
+
+/// A smoke cloud on the robot's path: the laser sees it as a short wall
+/// 1.5 m ahead (a phantom), is blind inside it, and clear past it, the
+/// phantom then behind the robot where no beam looks. Only the footprint
+/// can tell the map that the robot drove through that "wall".
+#[test]
+fn the_exported_map_is_free_where_the_robot_drove_through_a_phantom() {
+    use crate::testkit::{WALLS, scan_in};
+    use smokenav_platform_config::SlamBackendKind;
+    for backend in [SlamBackendKind::Graph, SlamBackendKind::Rbpf] {
+        let mut phantom_value = Vec::new();
+        for footprint in [0.0, 0.185] {
+            let c = SlamSection {
+                backend,
+                particles: 5,
+                ..SlamSection::default()
+            };
+            let mut slam = pipeline(&c, true).with_footprint(footprint);
+            let start = Pose2::new(-3.5, -1.5, 0.0);
+            let mut truth = start;
+            let mut with_phantom = WALLS.to_vec();
+            with_phantom.push((-2.0, -1.7, -2.0, -1.3));
+            for k in 0..32u64 {
+                let stamp = k * 100_000_000;
+                let scan = if truth.x < -2.65 {
+                    scan_in(&with_phantom, f64::INFINITY, &truth, stamp)
+                } else if truth.x < -1.55 {
+                    let mut s = scan_at(&truth, stamp);
+                    s.beams.iter_mut().for_each(|b| b.range = None);
+                    s
+                } else {
+                    scan_at(&truth, stamp)
+                };
+                slam.process(&scan, &truth);
+                truth = truth.compose(&Pose2::new(0.1, 0.0, 0.0));
+            }
+            let (map, cleared) = slam.map_and_footprint().unwrap();
+            // The map frame is the first scan's pose: the phantom lies 1.5 m ahead of it.
+            phantom_value.push((max_near(&map, 1.5, 0.0), cleared));
+            // The room's real walls stay: the inner wall's end 3.5 m right, 2.5 m up.
+            assert!(
+                max_near(&map, 3.5, 2.6) >= 65,
+                "{backend:?}: a real wall went"
+            );
+        }
+        let [(without, none), (with, cleared)] = phantom_value[..] else {
+            unreachable!()
+        };
+        assert!(
+            without >= 65,
+            "{backend:?}: the phantom is mapped ({without})"
+        );
+        assert_eq!(none, 0);
+        assert!(
+            with <= 19,
+            "{backend:?}: the robot drove through it ({with})"
+        );
+        assert!(cleared >= 3, "{backend:?}: {cleared} wall cells cleared");
+    }
+}

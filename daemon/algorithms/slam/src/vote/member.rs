@@ -147,6 +147,8 @@ pub(crate) struct WorkerConfig {
     pub queue: usize,
     pub export_period: Duration,
     pub fault: Option<MemberFault>,
+    /// [`BackendOptions::footprint_m`](crate::backend::BackendOptions::footprint_m).
+    pub footprint_m: f64,
 }
 
 impl Member {
@@ -349,8 +351,9 @@ fn worker(
             let exported = shared.lock().map.as_ref().map(|(_, r)| *r);
             let due = last_export.is_none_or(|t| t.elapsed() >= cfg.export_period);
             let map = (exported != Some(revision) && (due || force_export))
-                .then(|| backend.map())
-                .flatten();
+                .then(|| crate::backend::export_map(backend.as_ref(), cfg.footprint_m))
+                .flatten()
+                .map(|(m, _)| m);
             let below = map.as_ref().and_then(|_| backend.out_of_plane_map());
             (update, revision, map, below)
         }));

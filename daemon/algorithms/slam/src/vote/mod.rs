@@ -647,6 +647,7 @@ impl VoteSlam {
                         export_period
                     },
                     fault,
+                    footprint_m: opts.footprint_m,
                 },
             )?);
         }
