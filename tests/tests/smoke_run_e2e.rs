@@ -337,6 +337,11 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
     // The Hokuyo driver's time between beams reached the SLAM process, and
     // the base's odometry ran: the sweeps were deskewed.
     let deskewed = slam_health.metric("scans_deskewed").unwrap_or(0.0);
+    // Reported, though the online particle filter keeps no trajectory to clear along.
+    assert!(
+        slam_health.metric("footprint_cleared").is_some(),
+        "health/slam reports footprint_cleared"
+    );
     assert!(
         deskewed > 0.5 * processed,
         "{deskewed} of {processed} scans deskewed"

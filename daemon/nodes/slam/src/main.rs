@@ -142,6 +142,8 @@ struct Counters {
     publish_errors: u64,
     maps_published: u64,
     maps_saved: u64,
+    /// Wall cells the footprint cleared in the last map exported.
+    footprint_cleared: u64,
 }
 
 fn map_info(grid: &OccupancyGrid, stamp_ns: u64) -> MapInfo {
@@ -444,7 +446,10 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             // Exporting the map copies it: only when it changed since the last export.
             let revision = pipeline.map_revision();
             if last_map_revision != Some(revision) {
-                map = pipeline.map();
+                map = pipeline.map_and_footprint().map(|(m, cleared)| {
+                    counters.footprint_cleared = cleared as u64;
+                    m
+                });
                 if fuzzy_maps.is_some() {
                     fuzzy = pipeline.confidence_map();
                 }
@@ -631,6 +636,8 @@ fn metrics(
     emit("scans_deskewed", stats.deskewed as f64);
     emit("maps_published", c.maps_published as f64);
     emit("maps_saved", c.maps_saved as f64);
+    // Smoke phantoms in the robot's own path, gone from the map ([slam] clear_footprint).
+    emit("footprint_cleared", c.footprint_cleared as f64);
     emit("publish_errors", c.publish_errors as f64);
     // The back-end's own figures (the particle filter's resamples and N_eff).
     pipeline.backend().metrics(emit);
