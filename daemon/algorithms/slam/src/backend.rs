@@ -21,7 +21,7 @@ use crate::rbpf::{Rbpf, RbpfParams};
 use crate::scan::RangeScan;
 use crate::vote::VoteSlam;
 use nalgebra::Matrix3;
-use smokenav_platform_config::{SlamBackendKind, SlamSection};
+use smokenav_platform_config::{SlamBackendKind, SlamMode, SlamSection};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::Pose2;
 use std::path::Path;
@@ -224,9 +224,10 @@ pub fn export_map(backend: &dyn SlamBackend, footprint_m: f64) -> Option<(Occupa
 
 /// The footprint radius to clear in exported maps ([`BackendOptions::footprint_m`]) for a
 /// robot of `robot_radius_m` under `cfg` (`[slam] clear_footprint`): the radius less half a
-/// cell, so a cell the robot's edge only brushed keeps a wall it may hold; 0 when off.
+/// cell, so a cell the robot's edge only brushed keeps a wall it may hold; 0 when off, and
+/// in localisation, whose map stays as it was loaded.
 pub fn footprint_radius(cfg: &SlamSection, robot_radius_m: f64) -> f64 {
-    if cfg.clear_footprint && robot_radius_m.is_finite() {
+    if cfg.clear_footprint && cfg.mode == SlamMode::Mapping && robot_radius_m.is_finite() {
         (robot_radius_m - 0.5 * cfg.resolution_m).max(0.0)
     } else {
         0.0
@@ -257,5 +258,29 @@ pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Box<dyn SlamBack
         SlamBackendKind::Vote => Box::new(
             VoteSlam::new(cfg, opts, None).expect("cannot start the vote's member threads"),
         ),
+    }
+}
+
+#[cfg(test)]
+mod footprint_tests {
+    use super::*;
+
+    #[test]
+    fn the_footprint_is_the_robot_less_half_a_cell_and_only_while_mapping() {
+        let cfg = SlamSection::default();
+        let r = footprint_radius(&cfg, 0.21);
+        assert!((r - (0.21 - 0.5 * cfg.resolution_m)).abs() < 1e-12, "{r}");
+        let off = SlamSection {
+            clear_footprint: false,
+            ..SlamSection::default()
+        };
+        assert_eq!(footprint_radius(&off, 0.21), 0.0);
+        let localising = SlamSection {
+            mode: SlamMode::Localization,
+            ..SlamSection::default()
+        };
+        assert_eq!(footprint_radius(&localising, 0.21), 0.0);
+        assert_eq!(footprint_radius(&cfg, f64::NAN), 0.0);
+        assert_eq!(footprint_radius(&cfg, 0.01), 0.0);
     }
 }
