@@ -337,10 +337,13 @@ fn fused_scan_keeps_the_true_walls_through_smoke_and_slam_follows_the_truth() {
     // The Hokuyo driver's time between beams reached the SLAM process, and
     // the base's odometry ran: the sweeps were deskewed.
     let deskewed = slam_health.metric("scans_deskewed").unwrap_or(0.0);
-    // Reported, though the online particle filter keeps no trajectory to clear along.
+    // The laser maps the smoke front ahead as a wall, then the robot drives
+    // through it blind: the footprint takes that wall out of the map.
+    let footprint = slam_health.metric("footprint_cleared").unwrap_or(0.0);
+    eprintln!("slam: the footprint cleared {footprint} wall cells of the last map");
     assert!(
-        slam_health.metric("footprint_cleared").is_some(),
-        "health/slam reports footprint_cleared"
+        footprint > 0.0,
+        "no phantom wall cleared from the robot's path"
     );
     assert!(
         deskewed > 0.5 * processed,

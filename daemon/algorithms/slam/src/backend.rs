@@ -240,9 +240,11 @@ const OCCUPIED_AT: i8 = 65;
 /// The back-end `[slam] backend` names, with its parameters from the section.
 pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Box<dyn SlamBackend> {
     match cfg.backend {
+        // The footprint is cleared along the best particle's path: kept then
+        // online too (one shared node a scan, ~56 bytes).
         SlamBackendKind::Rbpf => Box::new(Rbpf::new(
             RbpfParams::from_config(cfg),
-            opts.keep_trajectory,
+            opts.keep_trajectory || opts.footprint_m > 0.0,
         )),
         SlamBackendKind::Graph => {
             let mut g = GraphSlam::new(cfg, GraphParams::from_config(cfg));

@@ -314,8 +314,9 @@ slam_section! {
     /// covered along its trajectory (`[robot] radius_m` less half a cell):
     /// nothing stands where the robot drove. Removes the phantom walls a
     /// smoke cloud leaves in the robot's own path when the laser saw the
-    /// cloud before the robot drove through it. Needs the back-end's
-    /// trajectory (the graph keeps one; the particle filter only offline).
+    /// cloud before the robot drove through it. Cleared along the back-end's
+    /// trajectory (the particle filter keeps its particles' paths for it).
+    /// Never in localisation: the loaded map stays as it was.
     clear_footprint: bool = (true, true),
     /// `[slam.fuzzy]`: the fuzzy confidence model and its registration back-end.
     fuzzy: FuzzySection = (FuzzySection::default(), FuzzySection::default()),
