@@ -223,15 +223,20 @@ pub fn export_map(backend: &dyn SlamBackend, footprint_m: f64) -> Option<(Occupa
 }
 
 /// The footprint radius to clear in exported maps ([`BackendOptions::footprint_m`]) for a
-/// robot of `robot_radius_m` under `cfg` (`[slam] clear_footprint`): the radius less half a
-/// cell, so a cell the robot's edge only brushed keeps a wall it may hold; 0 when off, and
-/// in localisation, whose map stays as it was loaded.
+/// robot of `robot_radius_m` under `cfg` (`[slam] clear_footprint`):
+/// `footprint_radius_m` when given, else the robot's radius less half a cell, so a cell the
+/// robot's edge only brushed keeps a wall it may hold; 0 when off, and in localisation,
+/// whose map stays as it was loaded.
 pub fn footprint_radius(cfg: &SlamSection, robot_radius_m: f64) -> f64 {
-    if cfg.clear_footprint && cfg.mode == SlamMode::Mapping && robot_radius_m.is_finite() {
-        (robot_radius_m - 0.5 * cfg.resolution_m).max(0.0)
-    } else {
-        0.0
+    if !(cfg.clear_footprint && cfg.mode == SlamMode::Mapping) {
+        return 0.0;
     }
+    let r = if cfg.footprint_radius_m > 0.0 {
+        cfg.footprint_radius_m
+    } else {
+        robot_radius_m - 0.5 * cfg.resolution_m
+    };
+    if r.is_finite() { r.max(0.0) } else { 0.0 }
 }
 
 /// The occupancy (0..100) a map's reader takes for a wall (map_server's 0.65).
@@ -284,5 +289,11 @@ mod footprint_tests {
         assert_eq!(footprint_radius(&localising, 0.21), 0.0);
         assert_eq!(footprint_radius(&cfg, f64::NAN), 0.0);
         assert_eq!(footprint_radius(&cfg, 0.01), 0.0);
+        // A robot longer than wide gives its inscribed radius.
+        let given = SlamSection {
+            footprint_radius_m: 0.185,
+            ..SlamSection::default()
+        };
+        assert_eq!(footprint_radius(&given, 0.26), 0.185);
     }
 }

@@ -550,6 +550,17 @@ fn the_footprint_is_cleared_by_default_and_can_be_turned_off() {
         msg.contains("clear_footprint") && msg.contains("config/test-robot.toml"),
         "{msg}"
     );
+    // The Pioneer is longer than wide: its profile gives the inscribed radius.
+    assert_eq!(on.slam.footprint_radius_m, 0.185);
+    assert_eq!(
+        SlamSection::default().footprint_radius_m,
+        0.0,
+        "0: the robot's radius"
+    );
+    let err =
+        parse(&pioneer_text().replace("footprint_radius_m = 0.185", "footprint_radius_m = 5.0"))
+            .unwrap_err();
+    assert_eq!(err.keys(), vec!["slam.footprint_radius_m"], "{err}");
 }
 
 #[test]
