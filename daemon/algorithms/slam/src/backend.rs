@@ -239,8 +239,8 @@ pub fn footprint_radius(cfg: &SlamSection, robot_radius_m: f64) -> f64 {
     if r.is_finite() { r.max(0.0) } else { 0.0 }
 }
 
-/// The occupancy (0..100) a map's reader takes for a wall (map_server's 0.65).
-const OCCUPIED_AT: i8 = 65;
+/// The occupancy (0..100) a map's reader takes for a wall (map_server's threshold).
+const OCCUPIED_AT: i8 = (smokenav_platform_map::OCCUPIED_THRESH * 100.0) as i8;
 
 /// The back-end `[slam] backend` names, with its parameters from the section.
 pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Box<dyn SlamBackend> {
@@ -271,6 +271,11 @@ pub fn from_config(cfg: &SlamSection, opts: &BackendOptions) -> Box<dyn SlamBack
 #[cfg(test)]
 mod footprint_tests {
     use super::*;
+
+    #[test]
+    fn a_wall_is_what_map_server_reads_as_occupied() {
+        assert_eq!(OCCUPIED_AT, 65);
+    }
 
     #[test]
     fn the_footprint_is_the_robot_less_half_a_cell_and_only_while_mapping() {

@@ -544,6 +544,8 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     let footprint_m = robot
         .as_ref()
         .map_or(0.0, |r| footprint_radius(&cfg, r.robot.radius_m));
+    // What the pipeline clears itself (the vote's members clear their own).
+    let own_footprint_m = vote_aware_footprint(&cfg, footprint_m);
     let mut slam = match &cfg.load_graph {
         Some(g) => {
             let run = saved::load(&cfg, GraphParams::from_config(&cfg), g)
@@ -571,7 +573,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             )
         }
     }
-    .with_footprint(vote_aware_footprint(&cfg, footprint_m));
+    .with_footprint(own_footprint_m);
     let truth_map = match &args.truth_map {
         Some(p) => Some(
             smokenav_platform_map::load_map_server(p)
@@ -600,9 +602,8 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             slam = slam.with_sensor_pose(mount.0);
             let fusion = match args.fuse {
                 Some(method) => {
-                    let cfg = match &args.profile {
-                        Some(p) => RobotConfig::load(p)
-                            .with_context(|| format!("invalid robot profile {}", p.display()))?,
+                    let cfg = match &robot {
+                        Some(r) => r.clone(),
                         None => RobotConfig::builtin("pioneer-3dx")
                             .context("the built-in profile is invalid")?,
                     };
@@ -676,7 +677,7 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         kind => writeln!(report, "back-end           {}", kind.as_str()),
     }
     .ok();
-    if vote_aware_footprint(&cfg, footprint_m) > 0.0 {
+    if own_footprint_m > 0.0 {
         let _ = writeln!(
             report,
             "footprint          {} wall cells cleared where the robot drove (radius {footprint_m:.3} m)",
