@@ -168,6 +168,10 @@ fn vote_publishes_every_members_map_and_the_fused_one() {
         "residual {:?}",
         h.metric("vote_residual_max_m")
     );
+    assert!(
+        h.metric("vote_local_blocks").is_some_and(|b| b >= 0.0),
+        "the blocks re-aligned locally are reported"
+    );
     // (The pose rate itself goes low once the replay ends: not the vote's flag.)
     assert!(
         !h.last_error.as_str().contains("vote"),

@@ -633,7 +633,9 @@ mod tests {
                 .unwrap_err()
                 .to_string();
         assert!(err.contains("karto"), "{err}");
-        let bad = section("[vote]\nmembers = [\"vote\", \"rbpf\", \"rbpf\"]\nqueue = 0\n");
+        let bad = section(
+            "[vote]\nmembers = [\"vote\", \"rbpf\", \"rbpf\"]\nqueue = 0\nlocal_block_m = 0.0\nlocal_shift_cells = 11\n",
+        );
         let mut v = Validator::default();
         bad.validate("slam", &mut v);
         let msgs: Vec<String> = v.issues.iter().map(|i| i.to_string()).collect();
@@ -650,6 +652,9 @@ mod tests {
             msgs.iter().any(|m| m.contains("slam.vote.queue")),
             "{msgs:?}"
         );
+        for key in ["slam.vote.local_block_m", "slam.vote.local_shift_cells"] {
+            assert!(msgs.iter().any(|m| m.contains(key)), "{key}: {msgs:?}");
+        }
         let one = section("[vote]\nmembers = [\"rbpf\"]\n");
         let mut v = Validator::default();
         one.validate("slam", &mut v);

@@ -12,6 +12,9 @@
 //! rule = "majority"                      # or "weighted", "consensus", "majority-reference", "corroborated"
 //! agree_radius_m = 0.1                   # consensus: walls this close are one wall
 //! max_residual_m = 0.15                  # alignment residual above it: flagged, left out
+//! local_residual_m = 0.018               # residual above it: re-aligned block by block too
+//! local_block_m = 2.0                    # those blocks' side
+//! local_shift_cells = 1                  # and their largest shift
 //! ```
 
 use crate::slam::SlamBackendKind;
@@ -118,6 +121,17 @@ pub struct VoteSection {
     pub align_truncation_m: f64,
     /// At most this many wall cells of a member are matched (evenly thinned).
     pub align_max_points: u32,
+    /// A member whose alignment residual is above this is re-aligned block by
+    /// block after the rigid alignment (`local_block_m` squares, each shifted
+    /// by up to `local_shift_cells` where that lays more of its walls on the
+    /// reference's): one rigid transform cannot undo two members' different
+    /// loop corrections or drift. 0 = every member, a value above
+    /// `max_residual_m` = never, m.
+    pub local_residual_m: f64,
+    /// Side of the blocks of the local re-alignment, m.
+    pub local_block_m: f64,
+    /// Largest shift of a block in the local re-alignment, cells of the member's map.
+    pub local_shift_cells: u32,
     /// Scans (and odometry updates) a member's queue holds; a full queue drops
     /// the newest and counts it.
     pub queue: u32,
@@ -145,6 +159,9 @@ impl Default for VoteSection {
             align_window_rad: 0.1,
             align_truncation_m: 0.5,
             align_max_points: 3000,
+            local_residual_m: 0.018,
+            local_block_m: 2.0,
+            local_shift_cells: 1,
             queue: 8,
             stall_timeout_s: 5.0,
             fuse_period_s: 0.5,
@@ -193,6 +210,14 @@ impl Validate for VoteSection {
             0.01,
             10.0,
         );
+        v.within(&k("local_residual_m"), self.local_residual_m, 0.0, 10.0);
+        v.within(&k("local_block_m"), self.local_block_m, 0.1, 100.0);
+        if self.local_shift_cells > 10 {
+            v.fail(
+                k("local_shift_cells"),
+                format!("must be 0–10, got {}", self.local_shift_cells),
+            );
+        }
         if !(10..=1_000_000).contains(&self.align_max_points) {
             v.fail(
                 k("align_max_points"),

@@ -1004,6 +1004,9 @@ fn vote_report(
                 .map(|g| format!("{:.1} %", 100.0 * g))
                 .unwrap_or_else(|| "-".into())
         );
+        if m.local_blocks > 0 {
+            let _ = write!(line, ", {} blocks re-aligned locally", m.local_blocks);
+        }
         if let Some((map, _)) = &m.map {
             let name = format!("map_{}", m.name);
             smokenav_platform_map::save_map_server(map, out, &name)?;

@@ -41,6 +41,7 @@
 //! reproducible.
 
 pub mod align;
+pub mod local;
 pub mod member;
 pub mod rule;
 
@@ -110,6 +111,8 @@ pub struct MemberStatus {
     pub map: Option<(Arc<OccupancyGrid>, u64)>,
     /// Share of its known cells whose state is the vote's, at the last vote.
     pub agreement: Option<f64>,
+    /// Blocks of its map re-aligned locally at the last vote (`local_residual_m`).
+    pub local_blocks: u32,
 }
 
 /// The vote's state, for health and the member map topics.
@@ -138,6 +141,8 @@ struct FusedOut {
     alignments: Vec<Option<Alignment>>,
     agreement: Vec<Option<f64>>,
     misaligned: Vec<bool>,
+    /// Per member: blocks re-aligned locally in the last update.
+    local_blocks: Vec<u32>,
     /// Members that voted in the laser plane in the last update.
     plane_voters: usize,
     pose_member: Option<usize>,
@@ -228,6 +233,7 @@ impl Fuser {
                 alignments: vec![None; members],
                 agreement: vec![None; members],
                 misaligned: vec![false; members],
+                local_blocks: vec![0; members],
                 ..FusedOut::default()
             },
             votes: Vec::with_capacity(members),
@@ -389,6 +395,22 @@ impl Fuser {
                     {
                         layer[y * w + x] = g.cells[my as usize * g.width + mx as usize];
                     }
+                }
+            }
+        }
+        // Members the rigid transform leaves apart: block by block onto the
+        // first voter's walls.
+        let block = (s.local_block_m / res).round().max(1.0) as usize;
+        let shift = i64::from(s.local_shift_cells);
+        self.out.local_blocks.iter_mut().for_each(|b| *b = 0);
+        if k_n > 1 {
+            let (first, rest) = self.values.split_at_mut(n);
+            for (k, layer) in rest.chunks_mut(n).enumerate() {
+                let (i, g, a, _) = maps[k + 1];
+                let residual = self.out.alignments[i].map_or(0.0, |al| al.residual_m);
+                if residual > s.local_residual_m {
+                    self.out.local_blocks[i] =
+                        local::realign_blocks(layer, first, (w, h), g, &a, block, shift);
                 }
             }
         }
@@ -765,6 +787,7 @@ impl VoteSlam {
                         alignment: fused.alignments.get(i).copied().flatten(),
                         map,
                         agreement: fused.agreement.get(i).copied().flatten(),
+                        local_blocks: fused.local_blocks.get(i).copied().unwrap_or(0),
                     }
                 })
                 .collect(),
@@ -1091,6 +1114,10 @@ impl SlamBackend for VoteSlam {
                 .iter()
                 .filter_map(|m| m.alignment.map(|a| a.residual_m))
                 .fold(0.0, f64::max),
+        );
+        emit(
+            "vote_local_blocks",
+            st.members.iter().map(|m| f64::from(m.local_blocks)).sum(),
         );
         emit("vote_fuse_ms", st.last_fuse_ms);
         emit("vote_fuses", st.fuses as f64);

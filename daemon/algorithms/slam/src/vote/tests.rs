@@ -447,3 +447,75 @@ fn with_a_member_out_two_maps_do_not_vote_their_union() {
         );
     }
 }
+
+#[test]
+fn a_wall_one_member_drew_a_cell_off_in_one_region_is_re_aligned_there_and_drawn_once() {
+    use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
+    // A 8 m × 3 m hall (160 × 60 cells) with a partition at x = 40 for
+    // y < 30. Member 1 drew the partition one cell east (x = 41) and every
+    // other wall where the reference has it: no rigid transform lays both
+    // on the reference. Member 2 never saw the partition (unknown there).
+    let (w, h) = (160, 60);
+    let hall = |partition_x: Option<usize>| {
+        let mut g = OccupancyGrid::new(w, h, 0.05, [0.0, 0.0, 0.0]);
+        for y in 0..h {
+            for x in 0..w {
+                let wall = x < 2 || y < 2 || x >= w - 2 || y >= h - 2;
+                let part = partition_x == Some(x) && y < 30;
+                g.cells[y * w + x] = if wall || part { OCCUPIED } else { FREE };
+            }
+        }
+        g
+    };
+    let mut unseen = hall(None);
+    for y in 2..30 {
+        for x in 38..44 {
+            unseen.cells[y * w + x] = UNKNOWN;
+        }
+    }
+    let inputs = inputs_of(vec![hall(Some(40)), hall(Some(41)), unseen], |_| false);
+    let fuse = |local_residual_m: f64| {
+        let section = VoteSection {
+            rule: VoteRule::Majority,
+            local_residual_m,
+            local_block_m: 1.5,
+            ..VoteSection::default()
+        };
+        let f = fused_once(section, &inputs);
+        (f.out.map.clone().unwrap(), f.out.local_blocks.clone())
+    };
+    // Rigid only: the three-way split (wall, free, unknown) is a wall under
+    // the paper's rule on both columns, the partition drawn twice.
+    let (rigid, blocks) = fuse(10.0);
+    assert_eq!(blocks, [0, 0, 0]);
+    for y in 2..30 {
+        assert_eq!(
+            [rigid.cells[y * w + 40], rigid.cells[y * w + 41]],
+            [OCCUPIED; 2]
+        );
+    }
+    // Re-aligned block by block (every member, whatever its residual): the
+    // block holding member 1's partition moves a cell west, the wall is
+    // drawn once, and the hall's walls elsewhere stay where they were.
+    let (local, blocks) = fuse(0.0);
+    assert!(
+        blocks[1] >= 1,
+        "member 1's partition block moved: {blocks:?}"
+    );
+    for y in 2..30 {
+        assert_eq!(local.cells[y * w + 40], OCCUPIED, "y {y}");
+        assert_eq!(local.cells[y * w + 41], FREE, "y {y}");
+    }
+    for x in 0..w {
+        assert_eq!(local.cells[x], OCCUPIED, "the bottom wall at x {x}");
+        assert_eq!(
+            local.cells[(h - 1) * w + x],
+            OCCUPIED,
+            "the top wall at x {x}"
+        );
+    }
+    // The default gate leaves member 1 alone: its rigid residual is ~0 (the
+    // partition is under a fifth of its walls), so nothing is nudged.
+    let (_, blocks) = fuse(VoteSection::default().local_residual_m);
+    assert_eq!(blocks[1], 0);
+}
