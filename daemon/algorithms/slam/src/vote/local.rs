@@ -171,52 +171,29 @@ mod tests {
     #[test]
     fn a_block_with_few_reference_walls_or_no_gain_is_left_alone() {
         let (w, h) = (40, 40);
+        // Blocks re-aligned, and whether the member's layer stayed as it was.
+        let run = |reference: &OccupancyGrid, member: &OccupancyGrid, block: usize| {
+            let mut layer = resample(member);
+            let n = realign_blocks(
+                &mut layer,
+                &resample(reference),
+                (w, h),
+                member,
+                &IDENTITY,
+                block,
+                1,
+            );
+            (n, layer == resample(member))
+        };
         // Ten reference walls only (below MIN_WALLS): nothing moves.
         let few = map(w, h, &(0..10).map(|y| (5, y)).collect::<Vec<_>>());
         let member = map(w, h, &(0..10).map(|y| (6, y)).collect::<Vec<_>>());
-        let mut layer = resample(&member);
-        assert_eq!(
-            realign_blocks(
-                &mut layer,
-                &resample(&few),
-                (w, h),
-                &member,
-                &IDENTITY,
-                40,
-                1
-            ),
-            0
-        );
-        assert_eq!(layer, resample(&member));
+        assert_eq!(run(&few, &member, 40), (0, true));
         // Walls on top of each other already: no shift beats none.
         let same = map(w, h, &(0..h).map(|y| (5, y)).collect::<Vec<_>>());
-        let mut layer = resample(&same);
-        assert_eq!(
-            realign_blocks(
-                &mut layer,
-                &resample(&same),
-                (w, h),
-                &same,
-                &IDENTITY,
-                40,
-                1
-            ),
-            0
-        );
-        // Shift 0 or block 0: off.
-        let mut layer = resample(&member);
-        assert_eq!(
-            realign_blocks(
-                &mut layer,
-                &resample(&few),
-                (w, h),
-                &member,
-                &IDENTITY,
-                0,
-                1
-            ),
-            0
-        );
+        assert_eq!(run(&same, &same, 40), (0, true));
+        // Block 0: off.
+        assert_eq!(run(&few, &member, 0), (0, true));
     }
 
     #[test]
