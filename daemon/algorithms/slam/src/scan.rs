@@ -40,6 +40,10 @@ pub struct RangeScan {
     /// rejected, as `(transducer index, range m)`; empty for a laser scan.
     /// Only a back-end that maps out of the laser plane reads them.
     pub sonar: Vec<(u8, f64)>,
+    /// Per beam (empty for a laser scan): for a beam painted from a sonar,
+    /// how far from the middle of its section's painted arc it lies, 0 (the
+    /// middle) to 1 (an end); for any other beam, `f32::NAN`.
+    pub arc_offset: Vec<f32>,
     /// Time between consecutive beams, s (0 where unknown, as in a CARMEN
     /// log): a laser that sweeps takes its beams while the robot moves.
     pub time_increment_s: f64,
@@ -125,6 +129,7 @@ impl RangeScan {
         self.laser_noise_factor = 1.0;
         self.withheld_share = 0.0;
         self.sonar.clear();
+        self.arc_offset.clear();
         self.time_increment_s = 0.0;
         self.sensor_pose = Pose2::default();
         self.stamp_ns = 0;
@@ -218,6 +223,25 @@ impl RangeScan {
         }
         self.withheld_share = withheld as f64 / self.beams.len().max(1) as f64;
         let used = (fused.section_count as usize).min(fused.sections.len());
+        let n = self.beams.len();
+        self.arc_offset.resize(n, f32::NAN);
+        for d in &fused.sections[..used] {
+            let (a, b) = ((d.first_beam as usize).min(n), (d.end_beam as usize).min(n));
+            let painted = |i: &usize| fused.beam_source(*i) == SectionSource::Sonar;
+            let (Some(first), Some(last)) = ((a..b).find(painted), (a..b).rev().find(painted))
+            else {
+                continue;
+            };
+            let (mid, half) = (
+                (first + last) as f32 / 2.0,
+                ((last - first) as f32 / 2.0).max(0.5),
+            );
+            for i in first..=last {
+                if painted(&i) {
+                    self.arc_offset[i] = ((i as f32 - mid).abs() / half).min(1.0);
+                }
+            }
+        }
         self.sonar.extend(
             fused.sections[..used]
                 .iter()
@@ -297,6 +321,38 @@ mod tests {
         r.clear();
         assert_eq!(r.withheld_share, 0.0);
         assert!(r.sonar.is_empty());
+        assert!(r.arc_offset.is_empty());
+    }
+
+    #[test]
+    fn a_painted_arc_s_beams_know_how_far_they_lie_from_its_middle() {
+        let mut f = FusedScan::default();
+        f.scan.count = 30;
+        f.scan.range_max = 5.6;
+        for i in 0..30 {
+            f.scan.set_beam(i, BeamReading::Range(2.0));
+        }
+        // Section 0 (beams 0..20) painted from its sonar over beams 5..=15,
+        // one of them (10) kept from the laser (`Both`); section 1 the laser's.
+        f.section_count = 2;
+        f.sections[0].first_beam = 0;
+        f.sections[0].end_beam = 20;
+        f.sections[1].first_beam = 20;
+        f.sections[1].end_beam = 30;
+        for i in 5..=15 {
+            f.beam_source[i] = SectionSource::Sonar as u8;
+        }
+        f.beam_source[10] = SectionSource::Both as u8;
+        let mut r = RangeScan::default();
+        r.fill_from_fused(&f, Pose2::default(), 1.0);
+        assert_eq!(r.arc_offset.len(), 30);
+        assert_eq!(r.arc_offset[5], 1.0);
+        assert_eq!(r.arc_offset[15], 1.0);
+        assert!((r.arc_offset[8] - 0.4).abs() < 1e-6);
+        assert!((r.arc_offset[12] - 0.4).abs() < 1e-6);
+        for i in [0, 4, 10, 16, 25] {
+            assert!(r.arc_offset[i].is_nan(), "beam {i}: not painted");
+        }
     }
 
     /// Distance from `(x, y)` to the nearest wall of the test room.

@@ -263,6 +263,15 @@ slam_section! {
     /// weaker evidence than a laser endpoint (Tran et al. 2021: weigh each sensor by
     /// its precision). The free space before the arc is as sure as a laser's.
     sonar_hit_logodds: f64 = (0.3, 0.3),
+    /// Share of a painted sonar arc, about its middle, that the graph's map
+    /// draws as occupied (1 = the whole arc). The fused scan paints an echo
+    /// across the sonar's whole section, but the echo came from one place on
+    /// it, most likely near the cone's axis, where a transducer is most
+    /// sensitive (the angular term of Moravec and Elfes's sonar model): an
+    /// arc's ends stand in front of an oblique wall. Free space is still
+    /// cleared across the whole cone. Only the graph's map: the particle
+    /// filter matches its sonar beams against its own map and keeps them.
+    sonar_arc_middle: f64 = (1.0 / 3.0, 1.0),
     /// Log-odds removed from a cell a beam passes through.
     miss_logodds: f64 = (0.4, 0.4),
     /// Log-odds saturate at ± this value, so the map can still change.
@@ -427,6 +436,7 @@ impl Validate for SlamSection {
         v.within(&k("resample_threshold"), self.resample_threshold, 0.0, 1.0);
         v.within(&k("hit_logodds"), self.hit_logodds, 0.01, 20.0);
         v.within(&k("sonar_hit_logodds"), self.sonar_hit_logodds, 0.01, 20.0);
+        v.within(&k("sonar_arc_middle"), self.sonar_arc_middle, 0.0, 1.0);
         v.within(&k("miss_logodds"), self.miss_logodds, 0.01, 20.0);
         v.within(&k("max_logodds"), self.max_logodds, 0.1, 50.0);
         v.within(&k("sonar_sigma_m"), self.sonar_sigma_m, 0.001, 5.0);

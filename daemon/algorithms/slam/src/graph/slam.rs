@@ -1368,7 +1368,7 @@ impl SlamBackend for GraphSlam {
                         .map(|b| BeamEnd {
                             ex: pose.x + c * b.x - s * b.y,
                             ey: pose.y + s * b.x + c * b.y,
-                            hit: b.hit,
+                            hit: b.hit && !b.arc_flank,
                         }),
                 );
                 let model = if sonar {
@@ -1564,6 +1564,74 @@ mod tests {
             slam.process(&scan, &Pose2::new(truth.x * 1.01, 0.0, 0.0));
         }
         slam.graph().edges().to_vec()
+    }
+
+    /// One sonar section seen from the origin: beams 40°–80° painted at the
+    /// range of the echo (a wall at y = 1 m, its nearest point in the cone at
+    /// 80°), the rest without a return. Its map under `sonar_arc_middle`.
+    fn sonar_arc_map(sonar_arc_middle: f64) -> OccupancyGrid {
+        let cfg = SlamSection {
+            sonar_hit_logodds: 2.0,
+            sonar_arc_middle,
+            ..SlamSection::default()
+        };
+        let mut slam = GraphSlam::new(&cfg, GraphParams::default());
+        let r = 1.0 / 80f64.to_radians().sin();
+        let mut scan = RangeScan {
+            stamp_ns: 1,
+            laser_noise_factor: 1.0,
+            ..Default::default()
+        };
+        for deg in -90..=90i32 {
+            let arc = (40..=80).contains(&deg);
+            scan.beams.push(Beam {
+                angle: (deg as f32).to_radians(),
+                range: arc.then_some(r as f32),
+                kind: if arc {
+                    BeamKind::Sonar
+                } else {
+                    BeamKind::Laser
+                },
+            });
+            scan.arc_offset.push(if arc {
+                (deg - 60).abs() as f32 / 20.0
+            } else {
+                f32::NAN
+            });
+        }
+        slam.process(&scan, &Pose2::default());
+        slam.map().expect("one node")
+    }
+
+    #[test]
+    fn the_map_draws_a_sonar_arc_s_middle_as_a_wall_and_clears_its_whole_cone() {
+        let at = |g: &OccupancyGrid, deg: f64, r: f64| {
+            let (s, c) = deg.to_radians().sin_cos();
+            let (x, y) = g.world_to_cell(r * c, r * s).expect("inside the map");
+            g.get(x, y).expect("inside the map")
+        };
+        let r = 1.0 / 80f64.to_radians().sin();
+        let whole = sonar_arc_map(1.0);
+        let middle = sonar_arc_map(1.0 / 3.0);
+        // The end of the arc at 40° stands 0.35 m in front of the wall.
+        assert!(
+            at(&whole, 42.0, r) >= 65,
+            "the whole arc is drawn: {}",
+            at(&whole, 42.0, r)
+        );
+        assert!(
+            at(&middle, 42.0, r) < 65,
+            "its end is not: {}",
+            at(&middle, 42.0, r)
+        );
+        // The middle third (53°–67°) is drawn either way.
+        assert!(at(&middle, 60.0, r) >= 65);
+        // The cone before the arc is seen free (one miss: below even) either
+        // way, its ends too.
+        for g in [&whole, &middle] {
+            assert!((0..50).contains(&at(g, 42.0, r - 0.2)));
+            assert!((0..50).contains(&at(g, 60.0, r - 0.2)));
+        }
     }
 
     const CORRIDOR: [(f64, f64, f64, f64); 2] =
@@ -2108,12 +2176,14 @@ mod tests {
                 y: 0.0,
                 hit: true,
                 sonar: false,
+                arc_flank: false,
             },
             RobotBeam {
                 x: 0.2,
                 y: 2.0,
                 hit: true,
                 sonar: false,
+                arc_flank: false,
             },
         ];
         let node = Node::new(Vec::new(), beams, Pose2::new(0.2, 0.0, 0.0), 0.0);

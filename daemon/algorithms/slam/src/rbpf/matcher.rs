@@ -52,6 +52,10 @@ pub struct RobotBeam {
     pub hit: bool,
     /// Painted from a sonar cone: its end is somewhere on an arc, not a point.
     pub sonar: bool,
+    /// Painted from a sonar, off the middle of its arc (beyond
+    /// `[slam] sonar_arc_middle`): the graph's map clears its cone but draws
+    /// no wall at its end.
+    pub arc_flank: bool,
 }
 
 /// A scan turned into what matching and mapping need, computed once per scan
@@ -87,6 +91,8 @@ pub struct MatchParams {
     pub iterations: u32,
     pub null_likelihood: f64,
     pub degeneracy: DegeneracyParams,
+    /// `[slam] sonar_arc_middle`.
+    pub sonar_arc_middle: f64,
 }
 
 impl MatchParams {
@@ -105,6 +111,7 @@ impl MatchParams {
             iterations: c.iterations,
             null_likelihood: c.null_likelihood,
             degeneracy: DegeneracyParams::default(),
+            sonar_arc_middle: c.sonar_arc_middle,
         }
     }
 }
@@ -135,7 +142,7 @@ impl PreparedScan {
         } else {
             1.0
         };
-        for beam in &scan.beams {
+        for (i, beam) in scan.beams.iter().enumerate() {
             let Some(r) = beam.range else { continue };
             let r = r as f64;
             if !(r > 0.0 && r < p.max_range && beam.angle.is_finite()) {
@@ -149,6 +156,10 @@ impl PreparedScan {
                 y: self.sensor.y + s * re,
                 hit: !cropped,
                 sonar: beam.kind == BeamKind::Sonar,
+                arc_flank: scan
+                    .arc_offset
+                    .get(i)
+                    .is_some_and(|&o| f64::from(o) > p.sonar_arc_middle),
             });
         }
         scan.endpoints(&p.endpoint_limits(), &mut self.endpoints);

@@ -14,7 +14,7 @@
 //! ROBUST <edge index> …          edges (g2o order) with the robust kernel: loop closures
 //! NODE <id> <sx> <sy> <sθ> <p> <b>   the laser's pose on the robot, then
 //! P <x> <y> …                    p decimated laser endpoints (robot frame, m)
-//! B <x> <y> <flags> …            b beams for the map (robot frame, m; flags: 1 hit, 2 sonar)
+//! B <x> <y> <flags> …            b beams for the map (robot frame, m; flags: 1 hit, 2 sonar, 4 off the middle of a sonar arc)
 //! ```
 //!
 //! Every number is written at full precision (`f32`/`f64` round-trip), so a
@@ -139,7 +139,7 @@ fn scans_text(g: &GraphSlam) -> String {
         }
         s.push_str("\nB");
         for b in &n.beams {
-            let flags = u8::from(b.hit) | (u8::from(b.sonar) << 1);
+            let flags = u8::from(b.hit) | (u8::from(b.sonar) << 1) | (u8::from(b.arc_flank) << 2);
             let _ = write!(s, " {} {} {flags}", b.x, b.y);
         }
         s.push('\n');
@@ -288,12 +288,13 @@ fn read_scans<R: BufRead>(input: R, file: &Path) -> Result<SavedScans, SavedGrap
         let f = l.expect("B", Some(3 * nb))?;
         let beams = (0..nb)
             .map(|i| {
-                let flags: u8 = l.num(&f, 3 * i + 2, "flags", |v: u8| v <= 3)?;
+                let flags: u8 = l.num(&f, 3 * i + 2, "flags", |v: u8| v <= 7)?;
                 Ok(RobotBeam {
                     x: l.num(&f, 3 * i, "x", fin)?,
                     y: l.num(&f, 3 * i + 1, "y", fin)?,
                     hit: flags & 1 != 0,
                     sonar: flags & 2 != 0,
+                    arc_flank: flags & 4 != 0,
                 })
             })
             .collect::<Result<Vec<_>, SavedGraphError>>()?;
