@@ -29,9 +29,10 @@ pub const MIN_WALLS: u32 = 20;
 
 /// The member's value at reference cell `(x, y)` through the affine `a`
 /// (reference cell → member cell), shifted by `(dx, dy)` member cells;
-/// −1 (unknown) outside the member's map.
+/// −1 (unknown) outside the member's map. The one lookup of a member's
+/// cell: the vote's resampling uses it unshifted.
 #[inline]
-fn sample(g: &OccupancyGrid, a: &[f64; 6], x: f64, y: f64, dx: i64, dy: i64) -> i8 {
+pub(super) fn sample(g: &OccupancyGrid, a: &[f64; 6], x: f64, y: f64, dx: i64, dy: i64) -> i8 {
     let mx = (a[0] * x + a[1] * y + a[2]).floor();
     let my = (a[3] * x + a[4] * y + a[5]).floor();
     if !(mx.is_finite() && my.is_finite()) {

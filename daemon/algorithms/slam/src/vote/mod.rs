@@ -386,15 +386,8 @@ impl Fuser {
         for (k, (_, g, a, _)) in maps.iter().enumerate() {
             let layer = &mut self.values[k * n..(k + 1) * n];
             for y in 0..h {
-                let fy = y as f64;
                 for x in 0..w {
-                    let fx = x as f64;
-                    let mx = a[0] * fx + a[1] * fy + a[2];
-                    let my = a[3] * fx + a[4] * fy + a[5];
-                    if mx >= 0.0 && my >= 0.0 && (mx as usize) < g.width && (my as usize) < g.height
-                    {
-                        layer[y * w + x] = g.cells[my as usize * g.width + mx as usize];
-                    }
+                    layer[y * w + x] = local::sample(g, a, x as f64, y as f64, 0, 0);
                 }
             }
         }
@@ -483,14 +476,7 @@ impl Fuser {
                     let seen = height
                         .iter()
                         .filter(|&&(a, b)| {
-                            let mx = a[0] * fx + a[1] * fy + a[2];
-                            let my = a[3] * fx + a[4] * fy + a[5];
-                            mx >= 0.0
-                                && my >= 0.0
-                                && (mx as usize) < b.width
-                                && (my as usize) < b.height
-                                && CellState::of(b.cells[my as usize * b.width + mx as usize])
-                                    == CellState::Occupied
+                            CellState::of(local::sample(b, &a, fx, fy, 0, 0)) == CellState::Occupied
                         })
                         .count();
                     if 2 * seen > height.len()
