@@ -47,6 +47,9 @@ pub struct LaserRecord {
     /// Odometry pose of the robot.
     pub robot_pose: Pose2,
     pub ipc_timestamp_ns: u64,
+    /// The smallest step the stamp as written can show, ns (1 000 for
+    /// `1134864629.895182`; 10¹³ for GMapping's `1.13486e+09`).
+    pub stamp_resolution_ns: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -209,6 +212,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
             let laser_pose = f.pose(1 + n, "laser pose")?;
             let robot_pose = f.pose(1 + n + 3, "odometry pose")?;
             let ipc_timestamp_ns = f.stamp(1 + n + 6)?;
+            let stamp_resolution_ns = stamp_resolution_ns(f.text(1 + n + 6)?);
             let fov = std::f64::consts::PI;
             let angular_resolution = match n {
                 0 | 1 => fov,
@@ -224,6 +228,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
                 laser_pose,
                 robot_pose,
                 ipc_timestamp_ns,
+                stamp_resolution_ns,
             })))
         }
         "ROBOTLASER1" => {
@@ -240,6 +245,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
             let laser_pose = f.pose(base, "laser pose")?;
             let robot_pose = f.pose(base + 3, "robot pose")?;
             let ipc_timestamp_ns = f.stamp(base + 11)?;
+            let stamp_resolution_ns = stamp_resolution_ns(f.text(base + 11)?);
             Ok(Some(Record::Laser(LaserRecord {
                 kind: LaserRecordKind::RobotLaser1,
                 start_angle,
@@ -249,6 +255,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
                 laser_pose,
                 robot_pose,
                 ipc_timestamp_ns,
+                stamp_resolution_ns,
             })))
         }
         _ => {
@@ -385,6 +392,21 @@ impl<R: BufRead> Iterator for CarmenReader<R> {
         }
         None
     }
+}
+
+/// The smallest step a stamp written as `text` can show, ns: `0.5` → 10⁸,
+/// `1134864629.895182` → 10³, `1.13486e+09` → 10¹³ (six significant
+/// digits, as C's `%g` writes them: a whole log under one stamp). At least 1.
+pub fn stamp_resolution_ns(text: &str) -> u64 {
+    let t = text.trim();
+    let (mantissa, exp) = match t.split_once(['e', 'E']) {
+        Some((m, e)) => (m, e.parse::<i32>().unwrap_or(0)),
+        None => (t, 0),
+    };
+    let decimals = mantissa.split_once('.').map_or(0, |(_, f)| f.len()) as i32;
+    // 10^(exp − decimals) s in ns, clamped to what a u64 holds.
+    let power = (exp - decimals + 9).clamp(0, 18);
+    10u64.pow(power as u32)
 }
 
 /// Parses a decimal timestamp in seconds (`1134864629.895182`, or `1.13486e+09`)
@@ -524,6 +546,25 @@ mod tests {
         r.fill_range_scan(&mut scan);
         assert_eq!(scan.beams.len(), 3);
         assert_eq!(scan.valid_count(), 0);
+    }
+
+    #[test]
+    fn a_stamps_resolution_is_what_its_text_can_show() {
+        assert_eq!(stamp_resolution_ns("1134864629.895182"), 1_000);
+        assert_eq!(stamp_resolution_ns("0.5"), 100_000_000);
+        assert_eq!(stamp_resolution_ns("12"), 1_000_000_000);
+        // GMapping's corrected logs (`%g`): a whole run under one stamp.
+        assert_eq!(stamp_resolution_ns("1.13486e+09"), 10_000_000_000_000);
+        assert_eq!(stamp_resolution_ns("1.13486E9"), 10_000_000_000_000);
+        assert_eq!(stamp_resolution_ns("1e-3"), 1_000_000);
+        assert_eq!(stamp_resolution_ns("1.5e-12"), 1);
+        assert_eq!(stamp_resolution_ns("1e99"), 10u64.pow(18));
+        let line = "FLASER 3 1.0 2.0 3.0 0.5 0.25 0.1 0.5 0.25 0.1 1.13486e+09 host 1.13486e+09";
+        let Ok(Some(Record::Laser(l))) = parse_line(line) else {
+            panic!("{line}")
+        };
+        assert_eq!(l.ipc_timestamp_ns, 1_134_860_000_000_000_000);
+        assert_eq!(l.stamp_resolution_ns, 10_000_000_000_000);
     }
 
     #[test]

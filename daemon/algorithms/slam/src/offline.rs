@@ -116,6 +116,9 @@ pub struct OdometryGate {
     stitch: Pose2,
     /// Resets detected.
     pub resets: usize,
+    /// The coarsest step the log's stamps can show, ns: two records under
+    /// one stamp may be that far apart in time.
+    stamp_resolution_ns: u64,
 }
 
 impl OdometryGate {
@@ -126,7 +129,21 @@ impl OdometryGate {
             suspects: Vec::with_capacity(limits.reset_after),
             stitch: Pose2::default(),
             resets: 0,
+            stamp_resolution_ns: 1,
         }
+    }
+
+    /// Widens the time between records by the stamps' resolution (see
+    /// [`crate::carmen::stamp_resolution_ns`]): GMapping writes its corrected
+    /// logs with `%g` stamps, every record of a run under one or two values,
+    /// and a speed check against 0 s would refuse every step. Only ever grows.
+    pub fn note_stamp_resolution(&mut self, resolution_ns: u64) {
+        self.stamp_resolution_ns = self.stamp_resolution_ns.max(resolution_ns);
+    }
+
+    /// See [`Self::note_stamp_resolution`].
+    pub fn stamp_resolution_ns(&self) -> u64 {
+        self.stamp_resolution_ns
     }
 
     fn step(&self, from: (u64, Pose2), to: (u64, Pose2)) -> Result<(), ImplausibleOdometry> {
@@ -137,7 +154,8 @@ impl OdometryGate {
         }
         let dt_s = (to.0 - from.0) as f64 / 1e9;
         let jump_m = from.1.between(&to.1).translation_norm();
-        let allowed_m = self.limits.slack_m + self.limits.max_speed_mps * dt_s;
+        let longest_s = dt_s + self.stamp_resolution_ns.saturating_sub(1) as f64 / 1e9;
+        let allowed_m = self.limits.slack_m + self.limits.max_speed_mps * longest_s;
         if jump_m > allowed_m {
             return Err(ImplausibleOdometry::Jump {
                 jump_m,
@@ -234,6 +252,7 @@ impl<R: BufRead> LogScans<R> {
             match self.reader.next()? {
                 Ok(Record::Laser(l)) => {
                     self.laser_records += 1;
+                    self.gate.note_stamp_resolution(l.stamp_resolution_ns);
                     match self.gate.check(l.ipc_timestamp_ns, l.robot_pose) {
                         Ok(odom) => {
                             l.fill_range_scan(&mut self.scan);
@@ -252,6 +271,11 @@ impl<R: BufRead> LogScans<R> {
                 Err(e) => self.bad_line(e),
             }
         }
+    }
+
+    /// The coarsest step the log's laser stamps can show, ns.
+    pub fn stamp_resolution_ns(&self) -> u64 {
+        self.gate.stamp_resolution_ns()
     }
 
     /// Odometry resets found in the log (runs of records that jumped together).
@@ -274,6 +298,28 @@ mod tests {
     /// A robot driving 0.5 m/s along x, one scan per 0.2 s.
     fn drive(n: u64) -> impl Iterator<Item = (u64, Pose2)> {
         (0..n).map(|i| (i * S / 5, Pose2::new(0.1 * i as f64, 0.0, 0.0)))
+    }
+
+    /// GMapping's corrected logs stamp a whole run alike (`%g`) and keep one
+    /// scan per metre: checked against 0 s, every step was refused.
+    #[test]
+    fn steps_under_one_coarse_stamp_are_checked_against_the_stamps_resolution() {
+        let metre_apart = |gate: &mut OdometryGate| {
+            (0..10)
+                .filter(|&i| gate.check(5 * S, Pose2::new(i as f64, 0.0, 0.0)).is_err())
+                .count()
+        };
+        let mut fine = OdometryGate::new(OdometryLimits::default());
+        // 1 m in 0 s: every step refused (and never by each other agreed: no reset).
+        assert_eq!(metre_apart(&mut fine), 9);
+        let mut coarse = OdometryGate::new(OdometryLimits::default());
+        coarse.note_stamp_resolution(10_000 * S);
+        assert_eq!(metre_apart(&mut coarse), 0);
+        // A flipped digit is still refused: 10 m/s for 10⁴ s is 100 km.
+        assert!(coarse.check(5 * S, Pose2::new(2.0e5, 0.0, 0.0)).is_err());
+        // Only ever coarser.
+        coarse.note_stamp_resolution(1_000);
+        assert_eq!(coarse.stamp_resolution_ns(), 10_000 * S);
     }
 
     #[test]

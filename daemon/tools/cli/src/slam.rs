@@ -31,7 +31,7 @@ use smokenav_platform_recording::bag::{Bag, RoleMap};
 use smokenav_shared_types::{AnyMessage, FusedScan, Pose2};
 use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::io::{BufReader, IsTerminal};
+use std::io::{BufRead, BufReader, IsTerminal};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -273,6 +273,20 @@ fn progress_bar(len: u64) -> indicatif::ProgressBar {
     bar
 }
 
+/// A CARMEN log's text: logs are often shipped gzip-compressed (Radish's,
+/// the corrected CSAIL log), so a gzip stream is decompressed on the fly,
+/// told by its magic bytes rather than by the file's name.
+fn carmen_text<R: BufRead + 'static>(mut input: R) -> std::io::Result<Box<dyn BufRead>> {
+    const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
+    let head = input.fill_buf()?;
+    Ok(if head.starts_with(&GZIP_MAGIC) {
+        // Multi-member: `cat a.gz b.gz` and block-wise compressors write several.
+        Box::new(BufReader::new(flate2::bufread::MultiGzDecoder::new(input)))
+    } else {
+        Box::new(input)
+    })
+}
+
 /// A CARMEN log: each scan with the odometry the logger attached.
 fn run_carmen(
     args: &SlamArgs,
@@ -283,7 +297,9 @@ fn run_carmen(
     mut reference_map: Option<&mut ReferenceMap>,
 ) -> anyhow::Result<String> {
     let bar = progress_bar(file.metadata().map(|m| m.len()).unwrap_or(0));
-    let mut scans = LogScans::new(BufReader::new(bar.wrap_read(file)));
+    let input = carmen_text(BufReader::new(bar.wrap_read(file)))
+        .with_context(|| format!("cannot read {}", log.display()))?;
+    let mut scans = LogScans::new(input);
     while let Some((scan, odom)) = scans.next_scan() {
         if let Some(rm) = reference_map.as_deref_mut() {
             rm.add(scan);
@@ -306,6 +322,14 @@ fn run_carmen(
         scans.odom_records,
         scans.odometry_resets()
     );
+    let resolution_s = scans.stamp_resolution_ns() as f64 / 1e9;
+    if resolution_s >= 0.1 {
+        // GMapping's corrected logs: `%g` stamps, a whole run under one or two values.
+        let _ = writeln!(
+            report,
+            "stamps             written to {resolution_s} s only: odometry steps checked against that, and poses paired with a --reference by stamp are ambiguous"
+        );
+    }
     for e in &scans.errors {
         let _ = writeln!(report, "bad line           {e}");
     }
@@ -626,6 +650,12 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             Ok(text)
         }
     }?;
+    // A file that holds no scan (not a log, a compressed format we do not
+    // read) is an error, not an empty result that looks like success.
+    anyhow::ensure!(
+        !run.online.is_empty(),
+        "no laser scan could be read from the input\n{input_report}"
+    );
     let total_cpu_ns =
         cpu_ns(nix::time::ClockId::CLOCK_PROCESS_CPUTIME_ID).saturating_sub(process_cpu_start);
     let wall_total = wall_start.elapsed();
