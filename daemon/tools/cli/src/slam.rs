@@ -70,7 +70,7 @@ pub struct SlamArgs {
     /// Robot profile whose `[slam]` section to use.
     #[arg(long, value_name = "PROFILE", conflicts_with = "slam_params")]
     profile: Option<PathBuf>,
-    /// A TOML file holding only `[slam]` keys (e.g. `preset = "seed-table3"`).
+    /// A TOML file holding only `[slam]` keys (e.g. `preset = "seed-table3"`), bare or under a `[slam]` header.
     #[arg(long, value_name = "FILE")]
     slam_params: Option<PathBuf>,
     /// Random seed (overrides the configuration).
@@ -164,6 +164,13 @@ fn percentile(sorted: &[u64], q: f64) -> u64 {
     sorted[idx]
 }
 
+/// A `--slam-params` file whose keys sit under `[slam]`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SlamUnderHeader {
+    slam: SlamSection,
+}
+
 fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     let mut cfg = if let Some(p) = &args.profile {
         RobotConfig::load(p)
@@ -172,7 +179,16 @@ fn load_config(args: &SlamArgs) -> anyhow::Result<SlamSection> {
     } else if let Some(p) = &args.slam_params {
         let text =
             std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-        parse_toml::<SlamSection>(&text, p)?
+        // The keys bare, or under the `[slam]` header they carry in a profile
+        // (copied from one): the header alone used to be "unknown field `slam`".
+        let under_header = text
+            .parse::<toml::Table>()
+            .is_ok_and(|t| t.len() == 1 && t.get("slam").is_some_and(toml::Value::is_table));
+        if under_header {
+            parse_toml::<SlamUnderHeader>(&text, p)?.slam
+        } else {
+            parse_toml::<SlamSection>(&text, p)?
+        }
     } else {
         SlamSection::default()
     };

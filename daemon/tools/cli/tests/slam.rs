@@ -200,6 +200,55 @@ fn a_log_stamped_to_six_digits_with_sparse_scans_is_mapped_whole() {
     assert!(stdout.contains("written to 10000 s only"), "{stdout}");
 }
 
+/// `--slam-params` takes the keys bare or under the `[slam]` header they
+/// have in a profile (a user copies them from one); under the header a wrong
+/// key is still named with its file and line.
+#[test]
+fn slam_params_are_read_bare_or_under_their_profile_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = data().join("csail-prefix-200.clf");
+    let mut trajectories = Vec::new();
+    for (name, text) in [
+        ("bare.toml", "particles = 4\nseed = 9\n"),
+        (
+            "header.toml",
+            "# copied from a profile\n[slam]\nparticles = 4\nseed = 9\n",
+        ),
+    ] {
+        let params = dir.path().join(name);
+        std::fs::write(&params, text).unwrap();
+        let out = dir.path().join(name).with_extension("run");
+        let (ok, _, stderr) = slam(&[
+            "--carmen",
+            log.to_str().unwrap(),
+            "--slam-params",
+            params.to_str().unwrap(),
+            "--max-scans",
+            "40",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{name}: {stderr}");
+        let stats = std::fs::read_to_string(out.join("stats.txt")).unwrap();
+        assert!(stats.contains("rbpf (4 particles)"), "{name}: {stats}");
+        trajectories.push(std::fs::read_to_string(out.join("trajectory.txt")).unwrap());
+    }
+    assert_eq!(trajectories[0], trajectories[1]);
+    let bad = dir.path().join("typo.toml");
+    std::fs::write(&bad, "[slam]\nparticles = 4\nparticle = 5\n").unwrap();
+    let (ok, _, stderr) = slam(&[
+        "--carmen",
+        log.to_str().unwrap(),
+        "--slam-params",
+        bad.to_str().unwrap(),
+        "--out",
+        dir.path().join("typo").to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("typo.toml:3"), "{stderr}");
+    assert!(stderr.contains("particle"), "{stderr}");
+}
+
 /// A file with no scan in it is an error naming what was wrong with it, not
 /// a success with an empty trajectory.
 #[test]
