@@ -2,17 +2,23 @@
 //! or a surveyed one): the k-nearest-neighbour map error of SmokeNav (Santos et
 //! al. 2015) in both directions, the pixel error of SLAMfusion (Fernandes &
 //! Alexandre), ATE/RPE for trajectories, and, with no reference at all, how
-//! well scans placed at a trajectory's poses agree with each other.
+//! well scans placed at a trajectory's poses agree with each other; and the
+//! relations metric against a published relations file (Kümmerle et al. 2009).
 //! Pure functions over loaded data plus loaders whose errors name the file;
 //! `smokenav eval` is the command-line front end.
 
 pub mod consistency;
 pub mod map;
 pub mod nn;
+pub mod relations;
 pub mod trajectory;
 
 pub use consistency::{ConsistencyOptions, ScanConsistency, scan_consistency};
 pub use map::{Alignment, DistanceStats, MapMetricError, MapOptions, MapReport, evaluate_maps};
+pub use relations::{
+    Relation, RelationsError, RelationsMetricError, RelationsReport, evaluate_relations,
+    load_relations, parse_relations,
+};
 pub use trajectory::{
     ErrorStats, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryFormat,
     TrajectoryMetricError, TrajectoryOptions, TrajectoryReport, evaluate_trajectories,

@@ -258,7 +258,7 @@ pub struct MeanStd {
 }
 
 impl MeanStd {
-    fn from(v: &[f64]) -> Self {
+    pub(crate) fn from(v: &[f64]) -> Self {
         if v.is_empty() {
             return Self::default();
         }
@@ -306,7 +306,7 @@ pub struct TrajectoryReport {
 
 /// Error of an estimated relative motion `p` against the true one `q`:
 /// translation of q⁻¹·p and its rotation.
-fn relative_error(p: (f64, f64, f64), q: (f64, f64, f64)) -> (f64, f64) {
+pub(crate) fn relative_error(p: (f64, f64, f64), q: (f64, f64, f64)) -> (f64, f64) {
     let (s, c) = q.2.sin_cos();
     let (dx, dy) = (p.0 - q.0, p.1 - q.1);
     let ex = c * dx + s * dy;
@@ -398,7 +398,7 @@ fn truth_near(truth: &[StampedPose], t: f64, tolerance: f64) -> Option<StampedPo
 }
 
 /// Relative motion from `a` to `b` in `a`'s frame: (dx, dy, dθ).
-fn relative(a: &StampedPose, b: &StampedPose) -> (f64, f64, f64) {
+pub(crate) fn relative(a: &StampedPose, b: &StampedPose) -> (f64, f64, f64) {
     let (s, c) = a.theta.sin_cos();
     let (dx, dy) = (b.x - a.x, b.y - a.y);
     (c * dx + s * dy, -s * dx + c * dy, wrap(b.theta - a.theta))

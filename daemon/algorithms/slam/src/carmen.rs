@@ -405,7 +405,7 @@ pub fn stamp_resolution_ns(text: &str) -> u64 {
     };
     let decimals = mantissa.split_once('.').map_or(0, |(_, f)| f.len()) as i32;
     // 10^(exp − decimals) s in ns, clamped to what a u64 holds.
-    let power = (exp - decimals + 9).clamp(0, 18);
+    let power = exp.saturating_sub(decimals).saturating_add(9).clamp(0, 18);
     10u64.pow(power as u32)
 }
 
@@ -559,6 +559,10 @@ mod tests {
         assert_eq!(stamp_resolution_ns("1e-3"), 1_000_000);
         assert_eq!(stamp_resolution_ns("1.5e-12"), 1);
         assert_eq!(stamp_resolution_ns("1e99"), 10u64.pow(18));
+        // Exponents at i32's ends (the stamp itself parses: 0 s) do not overflow.
+        assert_eq!(stamp_resolution_ns("1.5e-2147483648"), 1);
+        assert_eq!(stamp_resolution_ns("1e2147483647"), 10u64.pow(18));
+        assert!(parse_line("FLASER 0 0 0 0 0 0 0 1.5e-2147483648 h 0").is_ok());
         let line = "FLASER 3 1.0 2.0 3.0 0.5 0.25 0.1 0.5 0.25 0.1 1.13486e+09 host 1.13486e+09";
         let Ok(Some(Record::Laser(l))) = parse_line(line) else {
             panic!("{line}")

@@ -1,29 +1,38 @@
 //! `smokenav eval`: how far an estimated map (and trajectory) is from the
 //! ground truth: the k-nearest-neighbour map error of SmokeNav (Santos et al.
 //! 2015) in both directions, the pixel error of SLAMfusion (Fernandes &
-//! Alexandre), and ATE/RPE. Text for people, `--json` for scripts.
+//! Alexandre), ATE/RPE, and the relations metric against a published
+//! relations file (Kümmerle et al. 2009). Text for people, `--json` for scripts.
 
+use crate::slam::{RELATIONS_MAX_GAP_S, relations_line};
 use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
-use smokenav_algorithms_eval::{MapOptions, MapReport, TrajectoryOptions, TrajectoryReport};
+use smokenav_algorithms_eval::{
+    MapOptions, MapReport, RelationsReport, TrajectoryOptions, TrajectoryReport,
+    evaluate_relations, load_relations, load_trajectory,
+};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct EvalArgs {
     /// Ground-truth map (map_server YAML), e.g. the one the simulator writes.
-    #[arg(long, value_name = "GT.yaml")]
-    pub truth_map: PathBuf,
+    #[arg(long, value_name = "GT.yaml", requires = "map")]
+    pub truth_map: Option<PathBuf>,
     /// Estimated map (map_server YAML) to score.
-    #[arg(long, value_name = "EST.yaml")]
-    pub map: PathBuf,
+    #[arg(long, value_name = "EST.yaml", requires = "truth_map")]
+    pub map: Option<PathBuf>,
     /// Ground-truth trajectory: `timestamp x y theta` lines.
     #[arg(long, value_name = "T.txt", requires = "trajectory")]
     pub truth_trajectory: Option<PathBuf>,
-    /// Estimated trajectory: `timestamp x y theta` lines.
-    #[arg(long, value_name = "E.txt", requires = "truth_trajectory")]
+    /// Estimated trajectory: `timestamp x y theta` lines (or TUM's eight columns).
+    #[arg(long, value_name = "E.txt")]
     pub trajectory: Option<PathBuf>,
+    /// Relations file of the SLAM benchmark (Kümmerle et al. 2009; `t1 t2 x
+    /// y z roll pitch yaw` per line) to score `--trajectory`'s relative motions against.
+    #[arg(long, value_name = "R.relations", requires = "trajectory")]
+    pub relations: Option<PathBuf>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -52,9 +61,21 @@ struct TrajectorySection<'a> {
 }
 
 #[derive(Serialize)]
+struct RelationsSection<'a> {
+    relations_file: &'a PathBuf,
+    estimate: &'a PathBuf,
+    #[serde(flatten)]
+    report: &'a RelationsReport,
+}
+
+#[derive(Serialize)]
 struct Output<'a> {
-    map: MapSection<'a>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    map: Option<MapSection<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     trajectory: Option<TrajectorySection<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    relations: Option<RelationsSection<'a>>,
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -69,12 +90,37 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
         "--rpe-delta must be a positive number of seconds, got {}",
         args.rpe_delta
     );
+    anyhow::ensure!(
+        args.truth_map.is_some() || args.truth_trajectory.is_some() || args.relations.is_some(),
+        "nothing to score: give --truth-map with --map, --truth-trajectory with --trajectory, or --relations with --trajectory"
+    );
+    anyhow::ensure!(
+        args.trajectory.is_none() || args.truth_trajectory.is_some() || args.relations.is_some(),
+        "--trajectory is scored against --truth-trajectory or --relations: give one"
+    );
     let map_opts = MapOptions {
         align: !args.no_align,
         ..Default::default()
     };
-    let map = smokenav_algorithms_eval::evaluate_map_files(&args.truth_map, &args.map, &map_opts)
-        .context("cannot evaluate the map")?;
+    let map = match (&args.truth_map, &args.map) {
+        (Some(t), Some(m)) => Some((
+            t,
+            m,
+            smokenav_algorithms_eval::evaluate_map_files(t, m, &map_opts)
+                .context("cannot evaluate the map")?,
+        )),
+        _ => None,
+    };
+    let relations = match (&args.relations, &args.trajectory) {
+        (Some(r), Some(e)) => {
+            let rel = load_relations(r).context("bad relations file")?;
+            let est = load_trajectory(e).context("bad trajectory file")?;
+            let report = evaluate_relations(&est, &rel, RELATIONS_MAX_GAP_S)
+                .with_context(|| format!("{} against {}", e.display(), r.display()))?;
+            Some((r, e, report))
+        }
+        _ => None,
+    };
     let traj = match (&args.truth_trajectory, &args.trajectory) {
         (Some(t), Some(e)) => {
             let opts = TrajectoryOptions {
@@ -93,11 +139,16 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
     };
     if args.json {
         let out = Output {
-            map: MapSection {
-                truth: &args.truth_map,
-                estimate: &args.map,
-                report: &map,
-            },
+            map: map.as_ref().map(|(t, m, r)| MapSection {
+                truth: t,
+                estimate: m,
+                report: r,
+            }),
+            relations: relations.as_ref().map(|(f, e, r)| RelationsSection {
+                relations_file: f,
+                estimate: e,
+                report: r,
+            }),
             trajectory: traj.as_ref().map(|(t, e, r)| TrajectorySection {
                 truth: t,
                 estimate: e,
@@ -107,43 +158,9 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
         return Ok(serde_json::to_string(&out)? + "\n");
     }
     let mut s = String::new();
-    let m = &map;
-    let _ = writeln!(
-        s,
-        "map {} against {} ({} m cells)",
-        args.map.display(),
-        args.truth_map.display(),
-        m.resolution_m
-    );
-    let a = &m.alignment;
-    let _ = writeln!(
-        s,
-        "  alignment     dx {:+.3} m  dy {:+.3} m  dθ {:+.2}°{}",
-        a.dx_m,
-        a.dy_m,
-        a.dtheta_deg,
-        if args.no_align { " (not searched)" } else { "" }
-    );
-    let _ = writeln!(
-        s,
-        "  k-NN error    {:.4} m = {:.2} cells  (SmokeNav paper; mean of both directions)",
-        m.knn_error_m, m.knn_error_cells
-    );
-    for (label, d) in [
-        ("  truth → map  ", &m.truth_to_map),
-        ("  map → truth  ", &m.map_to_truth),
-    ] {
-        let _ = writeln!(
-            s,
-            "{label}mean {:.4} m  rms {:.4}  median {:.4}  max {:.4}  ({} cells)",
-            d.mean_m, d.rms_m, d.median_m, d.max_m, d.count
-        );
+    if let Some((truth, est, m)) = &map {
+        map_text(&mut s, truth, est, m, args.no_align);
     }
-    let _ = writeln!(
-        s,
-        "  pixel error   {:.3}  (SLAMfusion: √Σ(T−M)² over {} cells; rms {:.4})",
-        m.pixel_error, m.pixel_count, m.pixel_rms
-    );
     if let Some((t, e, r)) = &traj {
         let _ = writeln!(
             s,
@@ -182,7 +199,56 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
             r.relations
         );
     }
+    if let Some((f, e, r)) = &relations {
+        let _ = writeln!(
+            s,
+            "relations {} against {} (Kümmerle et al. 2009)\n  {}",
+            e.display(),
+            f.display(),
+            relations_line(r)
+        );
+    }
     Ok(s)
+}
+
+/// The map section of the text report.
+fn map_text(s: &mut String, truth: &Path, est: &Path, m: &MapReport, no_align: bool) {
+    let _ = writeln!(
+        s,
+        "map {} against {} ({} m cells)",
+        est.display(),
+        truth.display(),
+        m.resolution_m
+    );
+    let a = &m.alignment;
+    let _ = writeln!(
+        s,
+        "  alignment     dx {:+.3} m  dy {:+.3} m  dθ {:+.2}°{}",
+        a.dx_m,
+        a.dy_m,
+        a.dtheta_deg,
+        if no_align { " (not searched)" } else { "" }
+    );
+    let _ = writeln!(
+        s,
+        "  k-NN error    {:.4} m = {:.2} cells  (SmokeNav paper; mean of both directions)",
+        m.knn_error_m, m.knn_error_cells
+    );
+    for (label, d) in [
+        ("  truth → map  ", &m.truth_to_map),
+        ("  map → truth  ", &m.map_to_truth),
+    ] {
+        let _ = writeln!(
+            s,
+            "{label}mean {:.4} m  rms {:.4}  median {:.4}  max {:.4}  ({} cells)",
+            d.mean_m, d.rms_m, d.median_m, d.max_m, d.count
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  pixel error   {:.3}  (SLAMfusion: √Σ(T−M)² over {} cells; rms {:.4})",
+        m.pixel_error, m.pixel_count, m.pixel_rms
+    );
 }
 
 #[cfg(test)]
@@ -211,10 +277,11 @@ mod tests {
 
     fn args(dir: &Path, est: &str) -> EvalArgs {
         EvalArgs {
-            truth_map: save_map_server(&room(false), dir, "gt").unwrap(),
-            map: save_map_server(&room(est == "phantom"), dir, est).unwrap(),
+            truth_map: Some(save_map_server(&room(false), dir, "gt").unwrap()),
+            map: Some(save_map_server(&room(est == "phantom"), dir, est).unwrap()),
             truth_trajectory: None,
             trajectory: None,
+            relations: None,
             json: false,
             no_align: false,
             rpe_delta: 1.0,
@@ -263,11 +330,63 @@ mod tests {
         );
     }
 
+    /// The benchmark's relations need no map and no truth trajectory.
+    #[test]
+    fn a_trajectory_is_scored_against_a_relations_file_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = dir.path().join("e.txt");
+        let r = dir.path().join("intel.relations");
+        // Straight along x at 1 m/s, read 10 % short by the relations.
+        std::fs::write(&e, "0 0 0 0\n1 1 0 0\n2 2 0 0\n3 3 0 0\n").unwrap();
+        std::fs::write(
+            &r,
+            "0 1 0.9 0 0 0 0 0\n1 3 1.8 0 0 0 0 0\n2 9 1 0 0 0 0 0\n",
+        )
+        .unwrap();
+        let mut a = args(dir.path(), "same");
+        a.truth_map = None;
+        a.map = None;
+        a.trajectory = Some(e);
+        a.relations = Some(r);
+        let text = evaluate(&a).unwrap();
+        assert!(!text.contains("k-NN"), "{text}");
+        assert!(text.contains("translation 0.1500 ± 0.0500 m"), "{text}");
+        assert!(
+            text.contains("2 relations, 1 outside the trajectory"),
+            "{text}"
+        );
+        a.json = true;
+        let v: serde_json::Value = serde_json::from_str(&evaluate(&a).unwrap()).unwrap();
+        assert!(v.get("map").is_none(), "{v}");
+        assert_eq!(v["relations"]["relations"], 2);
+        assert_eq!(v["relations"]["unmatched"], 1);
+        assert!((v["relations"]["translation_m"]["mean"].as_f64().unwrap() - 0.15).abs() < 1e-9);
+    }
+
+    #[test]
+    fn nothing_to_score_is_an_error_that_says_what_to_give() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut a = args(dir.path(), "same");
+        a.truth_map = None;
+        a.map = None;
+        let e = format!("{:#}", evaluate(&a).unwrap_err());
+        assert!(e.contains("nothing to score"), "{e}");
+        let t = dir.path().join("e.txt");
+        std::fs::write(&t, "0 0 0 0\n1 1 0 0\n").unwrap();
+        a.trajectory = Some(t);
+        let e = format!("{:#}", evaluate(&a).unwrap_err());
+        assert!(e.contains("nothing to score"), "{e}");
+        let mut b = args(dir.path(), "same");
+        b.trajectory = a.trajectory.clone();
+        let e = format!("{:#}", evaluate(&b).unwrap_err());
+        assert!(e.contains("--truth-trajectory or --relations"), "{e}");
+    }
+
     #[test]
     fn bad_map_file_error_names_it() {
         let dir = tempfile::tempdir().unwrap();
         let mut a = args(dir.path(), "same");
-        a.map = dir.path().join("missing.yaml");
+        a.map = Some(dir.path().join("missing.yaml"));
         let e = format!("{:#}", evaluate(&a).unwrap_err());
         assert!(e.contains("missing.yaml"), "{e}");
     }

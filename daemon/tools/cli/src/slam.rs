@@ -10,7 +10,8 @@
 use anyhow::Context;
 use smokenav_algorithms_eval::{
     TrajectoryFormat, TrajectoryMetricError, TrajectoryOptions, TrajectoryReport,
-    evaluate_trajectories, format_trajectory_as, load_trajectory,
+    evaluate_relations, evaluate_trajectories, format_trajectory_as, load_relations,
+    load_trajectory,
 };
 use smokenav_algorithms_fusion::pipeline::FusionPipeline;
 use smokenav_algorithms_slam::backend::footprint_radius;
@@ -85,6 +86,11 @@ pub struct SlamArgs {
     /// simulator's truth, sampled on its own clock; the report says which).
     #[arg(long, value_name = "FILE")]
     reference: Option<PathBuf>,
+    /// A relations file of the SLAM benchmark of Kümmerle et al. 2009 (`t1 t2
+    /// x y z roll pitch yaw` per line, as published for Intel, ACES, FR079,
+    /// MIT CSAIL, …): the trajectory's relative motions scored against it.
+    #[arg(long, value_name = "FILE")]
+    relations: Option<PathBuf>,
     /// Stop after this many scans.
     #[arg(long)]
     max_scans: Option<usize>,
@@ -550,6 +556,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         Some(p) => Some(load_trajectory(p).context("bad reference file")?),
         None => None,
     };
+    // Read before the run: a bad file should not cost the run.
+    let relations = match &args.relations {
+        Some(p) => Some(load_relations(p).context("bad relations file")?),
+        None => None,
+    };
     let input = match (&args.carmen, &args.bag) {
         (Some(log), _) => {
             anyhow::ensure!(
@@ -880,6 +891,20 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             }
         }
     }
+    if let (Some(relations), Some(path)) = (&relations, &args.relations) {
+        for (name, est) in [("trajectory", &trajectory), ("online", &online)] {
+            let line = match evaluate_relations(est, relations, RELATIONS_MAX_GAP_S) {
+                Ok(r) => relations_line(&r),
+                Err(e) => e.to_string(),
+            };
+            let label = if name == "online" {
+                "relations online"
+            } else {
+                "relations"
+            };
+            let _ = writeln!(report, "{label:<19}{line} ({})", path.display());
+        }
+    }
     let truth = truth_map.or_else(|| reference_map.map(|r| r.grid()));
     if let Some(vote) = slam.backend().as_any().downcast_ref::<VoteSlam>() {
         vote_report(vote, truth.as_ref(), map.as_ref(), &args.out, &mut report)?;
@@ -889,6 +914,32 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     write(&args.out.join("stats.txt"), &report)?;
     print!("{report}");
     Ok(())
+}
+
+/// Longest gap between an estimate's poses a relation's stamp is
+/// interpolated across, s: a laser's scans are 0.02–0.2 s apart, a log's
+/// gap of seconds is not motion we know.
+pub const RELATIONS_MAX_GAP_S: f64 = 0.5;
+
+/// The relations metric as the benchmark's tables print it.
+pub fn relations_line(r: &smokenav_algorithms_eval::RelationsReport) -> String {
+    format!(
+        "translation {:.4} ± {:.4} m (squared {:.5} ± {:.5} m²), rotation {:.3} ± {:.3}° (squared {:.3} ± {:.3}°²), {} relations{}",
+        r.translation_m.mean,
+        r.translation_m.std,
+        r.translation_sq_m2.mean,
+        r.translation_sq_m2.std,
+        r.rotation_deg.mean,
+        r.rotation_deg.std,
+        r.rotation_sq_deg2.mean,
+        r.rotation_sq_deg2.std,
+        r.relations,
+        if r.unmatched > 0 {
+            format!(", {} outside the trajectory", r.unmatched)
+        } else {
+            String::new()
+        }
+    )
 }
 
 /// The trajectory against `--reference`: paired at equal stamps when the

@@ -249,6 +249,82 @@ fn slam_params_are_read_bare_or_under_their_profile_header() {
     assert!(stderr.contains("particle"), "{stderr}");
 }
 
+/// `--relations`: a benchmark relations file (`t1 t2 x y z roll pitch
+/// yaw`) at the log's own scan stamps. Written from one run's trajectory,
+/// a second run scores zero against it; moved 5 cm, 5 cm; from another
+/// log, an error naming both spans.
+#[test]
+fn relations_at_the_logs_stamps_score_the_trajectory() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = data().join("csail-prefix-200.clf");
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut a = vec![
+            "--carmen",
+            log.to_str().unwrap(),
+            "--backend",
+            "graph",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        slam(&a)
+    };
+    let (ok, _, stderr) = run("first", &[]);
+    assert!(ok, "{stderr}");
+    let poses: Vec<Vec<f64>> = std::fs::read_to_string(dir.path().join("first/trajectory.txt"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_whitespace().map(|t| t.parse().unwrap()).collect())
+        .collect();
+    let relations = |shift: f64| {
+        let mut s = String::from("# t1 t2 x y z roll pitch yaw\n");
+        for w in poses.windows(5).step_by(5) {
+            let (a, b) = (&w[0], &w[4]);
+            let (sn, cs) = a[3].sin_cos();
+            let (dx, dy) = (b[1] - a[1], b[2] - a[2]);
+            s.push_str(&format!(
+                "{:.6} {:.6} {} {} 0 0 0 {}\n",
+                a[0],
+                b[0],
+                cs * dx + sn * dy + shift,
+                -sn * dx + cs * dy,
+                b[3] - a[3]
+            ));
+        }
+        s
+    };
+    for (name, shift, says) in [
+        ("same.relations", 0.0, "translation 0.0000 ± 0.0000 m"),
+        ("shifted.relations", 0.05, "translation 0.0500 ± 0.0000 m"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, relations(shift)).unwrap();
+        let (ok, stdout, stderr) = run(
+            &format!("{name}.run"),
+            &["--relations", path.to_str().unwrap()],
+        );
+        assert!(ok, "{stderr}");
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with("relations   "))
+            .unwrap_or_else(|| panic!("{stdout}"));
+        assert!(line.contains(says), "{line}");
+        assert!(!line.contains("outside"), "{line}");
+    }
+    let other = dir.path().join("other.relations");
+    std::fs::write(&other, "5.0 6.0 1 0 0 0 0 0\n").unwrap();
+    let (ok, stdout, _) = run("other", &["--relations", other.to_str().unwrap()]);
+    assert!(ok);
+    assert!(stdout.contains("is it the same log?"), "{stdout}");
+    let bad = dir.path().join("bad.relations");
+    std::fs::write(&bad, "5.0 6.0 1 0 0 0 0\n").unwrap();
+    let (ok, _, stderr) = run("bad", &["--relations", bad.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(stderr.contains("bad.relations:1"), "{stderr}");
+}
+
 /// A file with no scan in it is an error naming what was wrong with it, not
 /// a success with an empty trajectory.
 #[test]
