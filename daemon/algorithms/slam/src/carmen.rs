@@ -301,6 +301,10 @@ pub struct CarmenReader<R> {
     line_no: usize,
     buf: Vec<u8>,
     done: bool,
+    /// Laser records of kinds not read (`RAWLASER1`–`4`: no pose of their
+    /// own; `RLASER`: a rear laser), counted so a log of only those can say why
+    /// it gave no scan.
+    pub unread_laser_records: usize,
 }
 
 impl<R: BufRead> CarmenReader<R> {
@@ -310,6 +314,7 @@ impl<R: BufRead> CarmenReader<R> {
             line_no: 0,
             buf: Vec::new(),
             done: false,
+            unread_laser_records: 0,
         }
     }
 
@@ -386,7 +391,12 @@ impl<R: BufRead> Iterator for CarmenReader<R> {
             };
             match parse_line(text) {
                 Ok(Some(r)) => return Some(Ok(r)),
-                Ok(None) => continue,
+                Ok(None) => {
+                    if text.starts_with("RAWLASER") || text.starts_with("RLASER") {
+                        self.unread_laser_records += 1;
+                    }
+                    continue;
+                }
                 Err(error) => return Some(Err(LineError { line, error })),
             }
         }

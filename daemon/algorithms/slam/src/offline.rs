@@ -273,6 +273,11 @@ impl<R: BufRead> LogScans<R> {
         }
     }
 
+    /// Laser records of kinds not read (`RAWLASER*`, `RLASER`).
+    pub fn unread_laser_records(&self) -> usize {
+        self.reader.unread_laser_records
+    }
+
     /// The coarsest step the log's laser stamps can show, ns.
     pub fn stamp_resolution_ns(&self) -> u64 {
         self.gate.stamp_resolution_ns()

@@ -344,6 +344,13 @@ fn run_carmen(
         scans.odom_records,
         scans.odometry_resets()
     );
+    if scans.unread_laser_records() > 0 {
+        let _ = writeln!(
+            report,
+            "unread records     {} RAWLASER/RLASER (no pose of their own, or a rear laser): scans come from FLASER and ROBOTLASER1",
+            scans.unread_laser_records()
+        );
+    }
     let resolution_s = scans.stamp_resolution_ns() as f64 / 1e9;
     if resolution_s >= 0.1 {
         // GMapping's corrected logs: `%g` stamps, a whole run under one or two values.

@@ -347,6 +347,23 @@ fn a_file_without_scans_is_an_error_that_says_what_was_read() {
     assert!(stderr.contains("no laser scan could be read"), "{stderr}");
     assert!(stderr.contains("not UTF-8"), "{stderr}");
     assert!(!dir.path().join("run/trajectory.txt").exists());
+    // A log of laser records without a pose of their own: the error says so.
+    let raw = dir.path().join("raw.clf");
+    std::fs::write(
+        &raw,
+        "ODOM 0 0 0 0 0 0 1.0 h 1.0\n\
+         RAWLASER1 0 -1.57 3.14 0.0175 80 0.01 0 3 1 1 1 0 1.1 h 1.1\n\
+         RAWLASER1 0 -1.57 3.14 0.0175 80 0.01 0 3 1 1 1 0 1.2 h 1.2\n",
+    )
+    .unwrap();
+    let (ok, _, stderr) = slam(&[
+        "--carmen",
+        raw.to_str().unwrap(),
+        "--out",
+        dir.path().join("raw-run").to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("2 RAWLASER/RLASER"), "{stderr}");
 }
 
 /// `--save-graph` on the first half of a real log, then `--load-graph
