@@ -221,6 +221,25 @@ pub struct LogScans<R> {
     pub error_count: usize,
     pub odom_records: usize,
     pub laser_records: usize,
+    mount: LaserMount,
+}
+
+/// Farthest a record's laser pose may sit from its odometry pose plus the
+/// first record's mount, m and rad. A raw log's two poses are one
+/// odometry pose apart by a fixed offset (to the log's 1 mm / 1 µrad print
+/// precision); a corrected log (GMapping's `.gfs.log`: the laser pose
+/// corrected, the odometry raw) drifts apart by metres.
+pub const MOUNT_TOLERANCE: (f64, f64) = (0.05, 0.05);
+
+/// Farthest a laser is taken to sit from the robot's origin, m.
+pub const MAX_MOUNT_M: f64 = 2.0;
+
+/// The laser's mount as the log's records state it, checked for staying fixed.
+#[derive(Debug, Clone, Copy, Default)]
+struct LaserMount {
+    first: Option<Pose2>,
+    /// The record (1-based, among laser records) whose mount first moved, and by how much (m).
+    moved: Option<(usize, f64)>,
 }
 
 impl<R: BufRead> LogScans<R> {
@@ -233,7 +252,45 @@ impl<R: BufRead> LogScans<R> {
             error_count: 0,
             odom_records: 0,
             laser_records: 0,
+            mount: LaserMount::default(),
         }
+    }
+
+    /// Where the log's laser poses stopped being its odometry poses plus one
+    /// fixed mount: (laser record, how far the mount had moved, m). From
+    /// there on every scan is taken at its odometry pose with the laser at
+    /// the robot's origin, and the scans before it keep the first mount.
+    pub fn mount_moved(&self) -> Option<(usize, f64)> {
+        self.mount.moved
+    }
+
+    /// Keeps the scan's mount while the records agree on one; once they do not, the robot's origin.
+    fn check_mount(&mut self) {
+        let m = self.scan.sensor_pose;
+        if self.mount.moved.is_none() {
+            let (dt, dr) = match self.mount.first {
+                Some(first) => {
+                    let d = first.between(&m);
+                    (d.translation_norm(), d.theta.abs())
+                }
+                None if m.translation_norm() <= MAX_MOUNT_M => {
+                    self.mount.first = Some(m);
+                    return;
+                }
+                // No laser sits metres from its base: the two poses are in different frames.
+                None => (m.translation_norm(), 0.0),
+            };
+            if dt <= MOUNT_TOLERANCE.0 && dr <= MOUNT_TOLERANCE.1 {
+                return;
+            }
+            tracing::warn!(
+                record = self.laser_records,
+                moved_m = dt,
+                "the log's laser poses are not its odometry plus a fixed mount (a corrected log?): scans taken at the odometry pose from here on"
+            );
+            self.mount.moved = Some((self.laser_records, dt));
+        }
+        self.scan.sensor_pose = Pose2::default();
     }
 
     fn bad_line(&mut self, e: LineError) {
@@ -256,6 +313,7 @@ impl<R: BufRead> LogScans<R> {
                     match self.gate.check(l.ipc_timestamp_ns, l.robot_pose) {
                         Ok(odom) => {
                             l.fill_range_scan(&mut self.scan);
+                            self.check_mount();
                             return Some((&self.scan, odom));
                         }
                         Err(e) => {
@@ -303,6 +361,62 @@ mod tests {
     /// A robot driving 0.5 m/s along x, one scan per 0.2 s.
     fn drive(n: u64) -> impl Iterator<Item = (u64, Pose2)> {
         (0..n).map(|i| (i * S / 5, Pose2::new(0.1 * i as f64, 0.0, 0.0)))
+    }
+
+    /// FLASER lines of a robot driving along x, 0.1 m per record: the laser
+    /// pose given by `laser(i, odometry x)`.
+    fn flaser_log(n: usize, laser: impl Fn(usize, f64) -> (f64, f64, f64)) -> String {
+        (0..n)
+            .map(|i| {
+                let x = 0.1 * i as f64;
+                let (lx, ly, lt) = laser(i, x);
+                format!(
+                    "FLASER 3 1.0 2.0 3.0 {lx:.6} {ly:.6} {lt:.6} {x:.6} 0.000000 0.000000 {}.{:06} h 0\n",
+                    100 + i / 5,
+                    (i % 5) * 200_000
+                )
+            })
+            .collect()
+    }
+
+    /// The mount every record's laser pose sits at, and what the log says moved.
+    fn mounts(log: &str) -> (Vec<Pose2>, Option<(usize, f64)>) {
+        let mut scans = LogScans::new(log.as_bytes());
+        let mut out = Vec::new();
+        while let Some((scan, _)) = scans.next_scan() {
+            out.push(scan.sensor_pose);
+        }
+        (out, scans.mount_moved())
+    }
+
+    #[test]
+    fn a_raw_logs_fixed_laser_offset_is_its_mount() {
+        // The laser 0.12 m ahead of the base, as CARMEN writes FLASER's laser pose.
+        let (m, moved) = mounts(&flaser_log(20, |_, x| (x + 0.12, 0.0, 0.0)));
+        assert_eq!(moved, None);
+        assert_eq!(m.len(), 20);
+        assert!(
+            m.iter()
+                .all(|p| (p.x - 0.12).abs() < 1e-6 && p.y.abs() < 1e-6)
+        );
+    }
+
+    /// GMapping's `.gfs.log`: the laser pose corrected, the odometry raw. The
+    /// mount between them was taken as the laser's: every scan metres off
+    /// (a CSAIL log built so: 8.67 m ATE, 0.14 m with this).
+    #[test]
+    fn laser_poses_in_another_frame_leave_the_scans_at_the_odometry() {
+        // Corrected poses drifting 2 cm per record from the odometry.
+        let (m, moved) = mounts(&flaser_log(20, |i, x| (x + 0.02 * i as f64, 0.0, 0.0)));
+        let (record, by) = moved.expect("the mount moved");
+        assert_eq!(record, 4);
+        assert!(by > MOUNT_TOLERANCE.0, "{by}");
+        assert!(m[..3].iter().all(|p| p.x.abs() <= MOUNT_TOLERANCE.0));
+        assert!(m[3..].iter().all(|p| *p == Pose2::default()));
+        // The frames hundreds of metres apart from the start: no record's mount is used.
+        let (m, moved) = mounts(&flaser_log(5, |_, x| (x + 400.0, -12.0, 1.0)));
+        assert_eq!(moved.map(|(r, _)| r), Some(1));
+        assert!(m.iter().all(|p| *p == Pose2::default()));
     }
 
     /// GMapping's corrected logs stamp a whole run alike (`%g`) and keep one

@@ -344,6 +344,12 @@ fn run_carmen(
         scans.odom_records,
         scans.odometry_resets()
     );
+    if let Some((record, moved_m)) = scans.mount_moved() {
+        let _ = writeln!(
+            report,
+            "laser poses        not the odometry plus a fixed mount from laser record {record} on (moved {moved_m:.2} m: a corrected log, as GMapping's .gfs.log?): those scans taken at their odometry pose, the laser at the robot's origin"
+        );
+    }
     if scans.unread_laser_records() > 0 {
         let _ = writeln!(
             report,
