@@ -18,7 +18,10 @@
 //! absolute and the squared translational (m, m²) and rotational (°, °²)
 //! errors, each as mean ± standard deviation. No alignment is involved.
 
-use crate::trajectory::{MeanStd, StampedPose, relative, relative_error, truth_at};
+use crate::trajectory::{
+    MeanStd, ReadFailure, StampedPose, finite_numbers, read_bounded, relative, relative_error,
+    truth_at,
+};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -79,14 +82,7 @@ pub fn parse_relations(text: &str, path: &Path) -> Result<Vec<Relation>, Relatio
                 )));
             }
         };
-        let mut v = [0.0f64; 8];
-        for (k, (f, name)) in fields.iter().zip(names).enumerate() {
-            v[k] = f
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| err(format!("{name}: expected a finite number, got {f:?}")))?;
-        }
+        let v = finite_numbers(&fields, names).map_err(err)?;
         let dtheta = if fields.len() == 8 { v[7] } else { v[4] };
         out.push(Relation {
             t1: v[0],
@@ -106,18 +102,16 @@ pub fn parse_relations(text: &str, path: &Path) -> Result<Vec<Relation>, Relatio
 
 /// Reads a relations file.
 pub fn load_relations(path: &Path) -> Result<Vec<Relation>, RelationsError> {
-    let io = |e| RelationsError::Io {
-        path: path.to_owned(),
-        source: e,
-    };
-    let len = std::fs::metadata(path).map_err(io)?.len();
-    if len > MAX_FILE_BYTES {
-        return Err(RelationsError::TooLarge {
+    let text = read_bounded(path, MAX_FILE_BYTES).map_err(|e| match e {
+        ReadFailure::Io(source) => RelationsError::Io {
+            path: path.to_owned(),
+            source,
+        },
+        ReadFailure::TooLarge(len) => RelationsError::TooLarge {
             path: path.to_owned(),
             len,
-        });
-    }
-    let text = std::fs::read_to_string(path).map_err(io)?;
+        },
+    })?;
     parse_relations(&text, path)
 }
 

@@ -120,14 +120,7 @@ pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, Tra
                 )));
             }
         };
-        let mut v = [0.0f64; 8];
-        for (k, (f, name)) in fields.iter().zip(names).enumerate() {
-            v[k] = f
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| err(format!("{name}: expected a finite number, got {f:?}")))?;
-        }
+        let mut v = finite_numbers(&fields, names).map_err(err)?;
         if fields.len() == 8 {
             // Yaw of the quaternion; a planar evaluation ignores z, roll and pitch.
             let [qx, qy, qz, qw] = [v[4], v[5], v[6], v[7]];
@@ -159,20 +152,47 @@ pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, Tra
     Ok(out)
 }
 
+/// The (up to 8) numbers of a line's fields, each named for the message when it is not a finite number.
+pub(crate) fn finite_numbers(fields: &[&str], names: &[&str]) -> Result<[f64; 8], String> {
+    let mut v = [0.0f64; 8];
+    for (k, (f, name)) in fields.iter().zip(names).take(8).enumerate() {
+        v[k] = f
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("{name}: expected a finite number, got {f:?}"))?;
+    }
+    Ok(v)
+}
+
+/// Why a text file could not be read whole.
+pub(crate) enum ReadFailure {
+    Io(std::io::Error),
+    /// Its length, over the limit.
+    TooLarge(u64),
+}
+
+/// Reads a text file of at most `max_bytes` (crafted files must not exhaust memory).
+pub(crate) fn read_bounded(path: &Path, max_bytes: u64) -> Result<String, ReadFailure> {
+    let len = std::fs::metadata(path).map_err(ReadFailure::Io)?.len();
+    if len > max_bytes {
+        return Err(ReadFailure::TooLarge(len));
+    }
+    std::fs::read_to_string(path).map_err(ReadFailure::Io)
+}
+
 /// Reads a trajectory file.
 pub fn load_trajectory(path: &Path) -> Result<Vec<StampedPose>, TrajectoryError> {
-    let io = |e| TrajectoryError::Io {
-        path: path.to_owned(),
-        source: e,
-    };
-    let len = std::fs::metadata(path).map_err(io)?.len();
-    if len > MAX_FILE_BYTES {
-        return Err(TrajectoryError::TooLarge {
+    let text = read_bounded(path, MAX_FILE_BYTES).map_err(|e| match e {
+        ReadFailure::Io(source) => TrajectoryError::Io {
+            path: path.to_owned(),
+            source,
+        },
+        ReadFailure::TooLarge(len) => TrajectoryError::TooLarge {
             path: path.to_owned(),
             len,
-        });
-    }
-    let text = std::fs::read_to_string(path).map_err(io)?;
+        },
+    })?;
     parse_trajectory(&text, path)
 }
 

@@ -64,6 +64,18 @@ fn slam_in(cwd: Option<&std::path::Path>, args: &[&str]) -> (bool, String, Strin
     (out.status.success(), stdout, stderr)
 }
 
+/// `smokenav slam --carmen LOG --out OUT EXTRA…`.
+fn slam_on(log: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> (bool, String, String) {
+    let mut args = vec![
+        "--carmen",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    slam(&args)
+}
+
 /// The report's `ATE trajectory` line and its RMS, m.
 fn ate_rms(report: &str) -> (f64, &str) {
     let line = report
@@ -139,14 +151,7 @@ fn a_gzip_compressed_log_maps_as_its_text_does() {
         (gz.clone(), "gz"),
     ] {
         let out = dir.path().join(out);
-        let (ok, stdout, stderr) = slam(&[
-            "--carmen",
-            log.to_str().unwrap(),
-            "--backend",
-            "graph",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        let (ok, stdout, stderr) = slam_on(&log, &out, &["--backend", "graph"]);
         assert!(ok, "{stderr}");
         assert!(stdout.contains(" 0 bad lines,"), "{stdout}");
         trajectories.push(std::fs::read_to_string(out.join("trajectory.txt")).unwrap());
@@ -186,14 +191,7 @@ fn a_log_stamped_to_six_digits_with_sparse_scans_is_mapped_whole() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("coarse.clf");
     std::fs::write(&path, log).unwrap();
-    let (ok, stdout, stderr) = slam(&[
-        "--carmen",
-        path.to_str().unwrap(),
-        "--backend",
-        "graph",
-        "--out",
-        dir.path().join("run").to_str().unwrap(),
-    ]);
+    let (ok, stdout, stderr) = slam_on(&path, &dir.path().join("run"), &["--backend", "graph"]);
     assert!(ok, "{stderr}");
     assert!(stdout.contains("scans              40 read,"), "{stdout}");
     assert!(stdout.contains(" 0 bad lines,"), "{stdout}");
@@ -218,16 +216,16 @@ fn slam_params_are_read_bare_or_under_their_profile_header() {
         let params = dir.path().join(name);
         std::fs::write(&params, text).unwrap();
         let out = dir.path().join(name).with_extension("run");
-        let (ok, _, stderr) = slam(&[
-            "--carmen",
-            log.to_str().unwrap(),
-            "--slam-params",
-            params.to_str().unwrap(),
-            "--max-scans",
-            "40",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        let (ok, _, stderr) = slam_on(
+            &log,
+            &out,
+            &[
+                "--slam-params",
+                params.to_str().unwrap(),
+                "--max-scans",
+                "40",
+            ],
+        );
         assert!(ok, "{name}: {stderr}");
         let stats = std::fs::read_to_string(out.join("stats.txt")).unwrap();
         assert!(stats.contains("rbpf (4 particles)"), "{name}: {stats}");
@@ -236,14 +234,11 @@ fn slam_params_are_read_bare_or_under_their_profile_header() {
     assert_eq!(trajectories[0], trajectories[1]);
     let bad = dir.path().join("typo.toml");
     std::fs::write(&bad, "[slam]\nparticles = 4\nparticle = 5\n").unwrap();
-    let (ok, _, stderr) = slam(&[
-        "--carmen",
-        log.to_str().unwrap(),
-        "--slam-params",
-        bad.to_str().unwrap(),
-        "--out",
-        dir.path().join("typo").to_str().unwrap(),
-    ]);
+    let (ok, _, stderr) = slam_on(
+        &log,
+        &dir.path().join("typo"),
+        &["--slam-params", bad.to_str().unwrap()],
+    );
     assert!(!ok);
     assert!(stderr.contains("typo.toml:3"), "{stderr}");
     assert!(stderr.contains("particle"), "{stderr}");
@@ -258,17 +253,9 @@ fn relations_at_the_logs_stamps_score_the_trajectory() {
     let dir = tempfile::tempdir().unwrap();
     let log = data().join("csail-prefix-200.clf");
     let run = |name: &str, extra: &[&str]| {
-        let out = dir.path().join(name);
-        let mut a = vec![
-            "--carmen",
-            log.to_str().unwrap(),
-            "--backend",
-            "graph",
-            "--out",
-            out.to_str().unwrap(),
-        ];
+        let mut a = vec!["--backend", "graph"];
         a.extend_from_slice(extra);
-        slam(&a)
+        slam_on(&log, &dir.path().join(name), &a)
     };
     let (ok, _, stderr) = run("first", &[]);
     assert!(ok, "{stderr}");
@@ -337,12 +324,7 @@ fn a_file_without_scans_is_an_error_that_says_what_was_read() {
         [0x28, 0xb5, 0x2f, 0xfd, 0xff, 0xfe, 0x00, b'\n', 0x80, 0x81],
     )
     .unwrap();
-    let (ok, stdout, stderr) = slam(&[
-        "--carmen",
-        log.to_str().unwrap(),
-        "--out",
-        dir.path().join("run").to_str().unwrap(),
-    ]);
+    let (ok, stdout, stderr) = slam_on(&log, &dir.path().join("run"), &[]);
     assert!(!ok, "{stdout}");
     assert!(stderr.contains("no laser scan could be read"), "{stderr}");
     assert!(stderr.contains("not UTF-8"), "{stderr}");
@@ -356,12 +338,7 @@ fn a_file_without_scans_is_an_error_that_says_what_was_read() {
          RAWLASER1 0 -1.57 3.14 0.0175 80 0.01 0 3 1 1 1 0 1.2 h 1.2\n",
     )
     .unwrap();
-    let (ok, _, stderr) = slam(&[
-        "--carmen",
-        raw.to_str().unwrap(),
-        "--out",
-        dir.path().join("raw-run").to_str().unwrap(),
-    ]);
+    let (ok, _, stderr) = slam_on(&raw, &dir.path().join("raw-run"), &[]);
     assert!(!ok);
     assert!(stderr.contains("2 RAWLASER/RLASER"), "{stderr}");
 }
