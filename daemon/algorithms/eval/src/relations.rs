@@ -19,8 +19,8 @@
 //! errors, each as mean ± standard deviation. No alignment is involved.
 
 use crate::trajectory::{
-    MeanStd, ReadFailure, StampedPose, finite_numbers, read_bounded, relative, relative_error,
-    truth_at,
+    MeanStd, ReadFailure, StampedPose, data_lines, finite_numbers, read_bounded, relative,
+    relative_error, truth_at,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -62,17 +62,12 @@ pub fn parse_relations(text: &str, path: &Path) -> Result<Vec<Relation>, Relatio
     const FULL: [&str; 8] = ["t1", "t2", "x", "y", "z", "roll", "pitch", "yaw"];
     const PLANAR: [&str; 5] = ["t1", "t2", "x", "y", "theta"];
     let mut out = Vec::new();
-    for (i, raw) in text.lines().enumerate() {
-        let line = raw.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
+    for (line, fields) in data_lines(text) {
         let err = |reason: String| RelationsError::Parse {
             path: path.to_owned(),
-            line: i + 1,
+            line,
             reason,
         };
-        let fields: Vec<&str> = line.split_whitespace().collect();
         let names: &[&str] = match fields.len() {
             8 => &FULL,
             5 => &PLANAR,

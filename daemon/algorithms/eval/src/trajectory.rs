@@ -97,17 +97,12 @@ pub enum TrajectoryError {
 /// Parses trajectory text; `path` is only used in messages.
 pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, TrajectoryError> {
     let mut out: Vec<StampedPose> = Vec::new();
-    for (i, raw) in text.lines().enumerate() {
-        let line = raw.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
+    for (line, fields) in data_lines(text) {
         let err = |reason: String| TrajectoryError::Parse {
             path: path.to_owned(),
-            line: i + 1,
+            line,
             reason,
         };
-        let fields: Vec<&str> = line.split_whitespace().collect();
         const PLAIN: [&str; 4] = ["timestamp", "x", "y", "theta"];
         const TUM: [&str; 8] = ["timestamp", "x", "y", "z", "qx", "qy", "qz", "qw"];
         let names: &[&str] = match fields.len() {
@@ -150,6 +145,16 @@ pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, Tra
         });
     }
     Ok(out)
+}
+
+/// The lines of a text file of numbers that carry data, as (1-based line
+/// number, whitespace-separated fields): blank lines and `#` comments skipped.
+pub(crate) fn data_lines(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
+    text.lines().enumerate().filter_map(|(i, raw)| {
+        let line = raw.trim();
+        (!line.is_empty() && !line.starts_with('#'))
+            .then(|| (i + 1, line.split_whitespace().collect()))
+    })
 }
 
 /// The (up to 8) numbers of a line's fields, each named for the message when it is not a finite number.
