@@ -77,7 +77,7 @@ enum Command {
     /// Pose-graph tools: `graph optimize IN.g2o [--out OUT.g2o]`.
     #[command(subcommand)]
     Graph(graph::GraphCommand),
-    /// Score an estimated map (and trajectory) against ground truth: k-NN error, pixel error, ATE, RPE.
+    /// Score an estimated map (and trajectory) against ground truth: k-NN error, pixel error, ATE, RPE; or a trajectory against a benchmark relations file.
     Eval(eval::EvalArgs),
     /// Print a shell completion script (`smokenav completions bash >
     /// /usr/local/share/bash-completion/completions/smokenav`; systemd/install does it).
