@@ -225,9 +225,8 @@ pub struct LogScans<R> {
 }
 
 /// Farthest a record's laser pose may sit from its odometry pose plus the
-/// first record's mount, m and rad. A raw log's two poses are one
-/// odometry pose apart by a fixed offset (to the log's 1 mm / 1 µrad print
-/// precision); a corrected log (GMapping's `.gfs.log`: the laser pose
+/// first record's mount, m and rad. A raw log's two poses differ by one
+/// fixed offset, to the precision the log prints them with; a corrected log (GMapping's `.gfs.log`: the laser pose
 /// corrected, the odometry raw) drifts apart by metres.
 pub const MOUNT_TOLERANCE: (f64, f64) = (0.05, 0.05);
 
