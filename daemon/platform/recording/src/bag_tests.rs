@@ -100,9 +100,18 @@ fn messages(laser_topics: &[&str]) -> Vec<(String, &'static str, u64, Vec<u8>)> 
 }
 
 fn write_mcap(path: &Path, msgs: &[(String, &'static str, u64, Vec<u8>)]) {
+    write_mcap_compressed(path, msgs, Some(mcap::Compression::Zstd));
+}
+
+fn write_mcap_compressed(
+    path: &Path,
+    msgs: &[(String, &'static str, u64, Vec<u8>)],
+    compression: Option<mcap::Compression>,
+) {
     let f = std::fs::File::create(path).unwrap();
     let mut w = mcap::WriteOptions::new()
         .profile("ros2")
+        .compression(compression)
         .chunk_size(Some(4096))
         .create(std::io::BufWriter::new(f))
         .unwrap();
@@ -229,6 +238,21 @@ fn rosbag2_mcap_file_and_folder_read_with_roles_guessed_by_type() {
     check_standard_bag(&bag);
     write_folder(dir.path(), "mcap", "run_0.mcap");
     check_standard_bag(&Bag::open(dir.path()).unwrap());
+}
+
+/// MCAP writers other than rosbag2's presets (zstd or none) compress chunks
+/// with lz4: such a bag was refused with "Unsupported compression format".
+#[test]
+fn mcap_chunks_compressed_with_lz4_or_not_at_all_are_read() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, compression) in [
+        ("lz4.mcap", Some(mcap::Compression::Lz4)),
+        ("plain.mcap", None),
+    ] {
+        let path = dir.path().join(name);
+        write_mcap_compressed(&path, &messages(&["/scan"]), compression);
+        check_standard_bag(&Bag::open(&path).unwrap());
+    }
 }
 
 #[test]
