@@ -20,7 +20,7 @@ pub use relations::{
     load_relations, parse_relations,
 };
 pub use trajectory::{
-    ErrorStats, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryFormat,
+    ErrorStats, FileReadError, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryFormat,
     TrajectoryMetricError, TrajectoryOptions, TrajectoryReport, evaluate_trajectories,
     format_trajectory, format_trajectory_as, load_trajectory, parse_trajectory, truth_at,
 };

@@ -19,7 +19,7 @@
 //! errors, each as mean ± standard deviation. No alignment is involved.
 
 use crate::trajectory::{
-    MeanStd, ReadFailure, StampedPose, data_lines, finite_numbers, read_bounded, relative,
+    FileReadError, MeanStd, StampedPose, data_lines, finite_numbers, read_bounded, relative,
     relative_error, truth_at,
 };
 use serde::Serialize;
@@ -40,13 +40,8 @@ pub struct Relation {
 
 #[derive(Debug, thiserror::Error)]
 pub enum RelationsError {
-    #[error("cannot read {}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}: {len} bytes is over the {MAX_FILE_BYTES}-byte limit for a relations file", path.display())]
-    TooLarge { path: PathBuf, len: u64 },
+    #[error(transparent)]
+    Read(#[from] FileReadError),
     #[error("{}:{line}: {reason}", path.display())]
     Parse {
         path: PathBuf,
@@ -97,17 +92,7 @@ pub fn parse_relations(text: &str, path: &Path) -> Result<Vec<Relation>, Relatio
 
 /// Reads a relations file.
 pub fn load_relations(path: &Path) -> Result<Vec<Relation>, RelationsError> {
-    let text = read_bounded(path, MAX_FILE_BYTES).map_err(|e| match e {
-        ReadFailure::Io(source) => RelationsError::Io {
-            path: path.to_owned(),
-            source,
-        },
-        ReadFailure::TooLarge(len) => RelationsError::TooLarge {
-            path: path.to_owned(),
-            len,
-        },
-    })?;
-    parse_relations(&text, path)
+    parse_relations(&read_bounded(path, MAX_FILE_BYTES)?, path)
 }
 
 /// An estimate scored against a relations file.

@@ -77,13 +77,8 @@ pub fn format_trajectory_as(poses: &[StampedPose], format: TrajectoryFormat) -> 
 
 #[derive(Debug, thiserror::Error)]
 pub enum TrajectoryError {
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}: {len} bytes exceed the limit of {MAX_FILE_BYTES}", path.display())]
-    TooLarge { path: PathBuf, len: u64 },
+    #[error(transparent)]
+    Read(#[from] FileReadError),
     #[error("{}:{line}: {reason}", path.display())]
     Parse {
         path: PathBuf,
@@ -170,35 +165,38 @@ pub(crate) fn finite_numbers(fields: &[&str], names: &[&str]) -> Result<[f64; 8]
     Ok(v)
 }
 
-/// Why a text file could not be read whole.
-pub(crate) enum ReadFailure {
-    Io(std::io::Error),
-    /// Its length, over the limit.
-    TooLarge(u64),
+/// Why a text file (a trajectory, a relations file) could not be read whole.
+#[derive(Debug, thiserror::Error)]
+pub enum FileReadError {
+    #[error("cannot read {}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {len} bytes exceed the limit of {max}", path.display())]
+    TooLarge { path: PathBuf, len: u64, max: u64 },
 }
 
 /// Reads a text file of at most `max_bytes` (crafted files must not exhaust memory).
-pub(crate) fn read_bounded(path: &Path, max_bytes: u64) -> Result<String, ReadFailure> {
-    let len = std::fs::metadata(path).map_err(ReadFailure::Io)?.len();
+pub(crate) fn read_bounded(path: &Path, max_bytes: u64) -> Result<String, FileReadError> {
+    let io = |source| FileReadError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
     if len > max_bytes {
-        return Err(ReadFailure::TooLarge(len));
+        return Err(FileReadError::TooLarge {
+            path: path.to_owned(),
+            len,
+            max: max_bytes,
+        });
     }
-    std::fs::read_to_string(path).map_err(ReadFailure::Io)
+    std::fs::read_to_string(path).map_err(io)
 }
 
 /// Reads a trajectory file.
 pub fn load_trajectory(path: &Path) -> Result<Vec<StampedPose>, TrajectoryError> {
-    let text = read_bounded(path, MAX_FILE_BYTES).map_err(|e| match e {
-        ReadFailure::Io(source) => TrajectoryError::Io {
-            path: path.to_owned(),
-            source,
-        },
-        ReadFailure::TooLarge(len) => TrajectoryError::TooLarge {
-            path: path.to_owned(),
-            len,
-        },
-    })?;
-    parse_trajectory(&text, path)
+    parse_trajectory(&read_bounded(path, MAX_FILE_BYTES)?, path)
 }
 
 /// How estimated poses find their ground truth.
