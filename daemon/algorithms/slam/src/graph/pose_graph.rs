@@ -4,11 +4,10 @@
 //! information matrix (g2o's `EDGE_SE2`: the error of edge i→j with
 //! measurement z is `t2v(z⁻¹ · (xᵢ⁻¹ · xⱼ))`, its cost `eᵀ Ω e`). The
 //! optimiser is Levenberg–Marquardt over the poses' (x, y, θ) with a sparse
-//! Cholesky factorisation of the normal equations (`faer`: fill-reducing AMD
-//! ordering, then simplicial or supernodal as faer's flop-per-entry rule
-//! picks — simplicial for pose graphs the size of MIT CSAIL's, `perf` on a
-//! 3737-node run; the symbolic factorisation is computed once per graph
-//! structure and reused every iteration).
+//! Cholesky factorisation of the normal equations ([`super::block_cholesky`]:
+//! `faer`'s supernodal factorisation in a vertex-wise AMD order; the
+//! symbolic factorisation is computed once per graph structure and reused,
+//! with its buffers, every iteration).
 //!
 //! A robust kernel (Cauchy or Huber, by iteratively reweighted least squares)
 //! can be applied to the edges marked `robust` (loop closures), so a single
@@ -18,10 +17,8 @@
 //! (its pose is undetermined: the error names it), a non-finite value. On any
 //! failure the poses keep their last good values.
 
-use faer::linalg::solvers::SolveCore;
-use faer::reborrow::Reborrow;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::{Pair, SparseColMat, SymbolicSparseColMat};
+use super::block_cholesky::{BlockCholesky, CholeskyError};
+use faer::sparse::Pair;
 use smokenav_shared_types::Pose2;
 use smokenav_shared_types::odom::normalize_angle;
 
@@ -154,11 +151,13 @@ struct Structure {
     /// Block column of each vertex, `None` for fixed vertices.
     block: Vec<Option<usize>>,
     dim: usize,
-    symbolic: SymbolicSparseColMat<usize>,
-    argsort: faer::sparse::Argsort<usize>,
-    llt: SymbolicLlt<usize>,
+    llt: BlockCholesky,
     /// Number of (row, col) entries: 6 per free vertex, 9 per edge between two free vertices.
     entries: usize,
+}
+
+fn indeterminate(e: CholeskyError) -> GraphError {
+    GraphError::Indeterminate(e.to_string())
 }
 
 /// Symmetric positive definite (by Cholesky): the test every information matrix must pass.
@@ -205,8 +204,8 @@ fn linearise(xi: &Pose2, xj: &Pose2, z: &Pose2) -> ([f64; 3], [[f64; 3]; 3], [[f
     ];
     // d(Rᵢᵀ d)/dθᵢ = (ly, −lx); then through Rzᵀ.
     let (gx, gy) = (ly, -lx);
-    // Rzᵀ Rᵢᵀ = R(θᵢ + θz)ᵀ.
-    let (s, c) = (xi.theta + z.theta).sin_cos();
+    // Rzᵀ Rᵢᵀ = R(θᵢ + θz)ᵀ, by the angle-sum rule (no third sin_cos).
+    let (s, c) = (si * cz + ci * sz, ci * cz - si * sz);
     let ji = [
         [-c, -s, cz * gx + sz * gy],
         [s, -c, -sz * gx + cz * gy],
@@ -473,15 +472,10 @@ impl PoseGraph {
                 }
             }
         }
-        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(dim, dim, &pairs)
-            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
-        let llt = SymbolicLlt::try_new(symbolic.rb(), faer::Side::Lower)
-            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
+        let llt = BlockCholesky::new(next, &pairs).map_err(indeterminate)?;
         Ok(Structure {
             block,
             dim,
-            symbolic,
-            argsort,
             llt,
             entries: pairs.len(),
         })
@@ -613,21 +607,21 @@ impl PoseGraph {
     /// once per graph structure and kept for the next call).
     fn with_structure<R>(
         &mut self,
-        f: impl FnOnce(&Self, &Structure) -> Result<R, GraphError>,
+        f: impl FnOnce(&Self, &mut Structure) -> Result<R, GraphError>,
     ) -> Result<R, GraphError> {
         self.validate()?;
         if self.structure.is_none() {
             self.structure = Some(self.build_structure()?);
         }
-        let s = self.structure.take().expect("built above");
-        let result = f(self, &s);
+        let mut s = self.structure.take().expect("built above");
+        let result = f(self, &mut s);
         self.structure = Some(s);
         result
     }
 
     fn marginal_with(
         &self,
-        s: &Structure,
+        s: &mut Structure,
         index: usize,
         kernel: &RobustKernel,
     ) -> Result<Information, GraphError> {
@@ -637,20 +631,14 @@ impl PoseGraph {
         let mut values = Vec::new();
         let mut b = vec![0.0; s.dim];
         self.normal_equations(s, &self.poses, kernel, &mut values, &mut b);
-        let h = SparseColMat::new_from_argsort(s.symbolic.clone(), &s.argsort, &values)
-            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
-        let llt = Llt::try_new_with_symbolic(s.llt.clone(), h.rb(), faer::Side::Lower)
-            .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
+        s.llt.factorize(&values).map_err(indeterminate)?;
         // Three columns of the identity at the vertex's block: H X = E gives
         // the block's columns of H⁻¹.
         let mut cols = vec![0.0; 3 * s.dim];
         for c in 0..3 {
             cols[c * s.dim + 3 * k + c] = 1.0;
         }
-        llt.solve_in_place_with_conj(
-            faer::Conj::No,
-            faer::MatMut::from_column_major_slice_mut(&mut cols, s.dim, 3),
-        );
+        s.llt.solve_in_place(&mut cols, 3).map_err(indeterminate)?;
         let mut out = [[0.0; 3]; 3];
         for (r, row) in out.iter_mut().enumerate() {
             for (c, v) in row.iter_mut().enumerate() {
@@ -666,7 +654,7 @@ impl PoseGraph {
 
     fn optimize_with(
         &self,
-        s: &Structure,
+        s: &mut Structure,
         p: &OptimizeParams,
     ) -> Result<(Vec<Pose2>, OptimizeReport), GraphError> {
         let mut poses = self.poses.clone();
@@ -705,28 +693,23 @@ impl PoseGraph {
                     damped[i] += lambda * values[i].max(1e-9);
                 }
             }
-            let h = SparseColMat::new_from_argsort(s.symbolic.clone(), &s.argsort, &damped)
-                .map_err(|e| GraphError::Indeterminate(format!("{e:?}")))?;
             report.iterations += 1;
-            let llt = match Llt::try_new_with_symbolic(s.llt.clone(), h.rb(), faer::Side::Lower) {
-                Ok(l) => l,
+            match s.llt.factorize(&damped) {
+                Ok(()) => {}
                 Err(e) => {
                     // A damped system that is still not positive definite.
                     if lambda > 1e12 {
-                        return Err(GraphError::Indeterminate(format!("{e:?}")));
+                        return Err(indeterminate(e));
                     }
                     lambda = (lambda * nu).max(1e-6);
                     nu *= 2.0;
                     continue;
                 }
-            };
+            }
             for (d, g) in step.iter_mut().zip(&b) {
                 *d = -g;
             }
-            llt.solve_in_place_with_conj(
-                faer::Conj::No,
-                faer::MatMut::from_column_major_slice_mut(&mut step, s.dim, 1),
-            );
+            s.llt.solve_in_place(&mut step, 1).map_err(indeterminate)?;
             if step.iter().any(|v| !v.is_finite()) {
                 return Err(GraphError::Indeterminate("non-finite step".into()));
             }
