@@ -389,6 +389,13 @@ mod tests {
     }
 
     #[test]
+    fn an_empty_system_factorises_and_solves_nothing() {
+        let mut llt = BlockCholesky::new(0, &[]).unwrap();
+        llt.factorize(&[]).unwrap();
+        llt.solve_in_place(&mut [], 1).unwrap();
+    }
+
+    #[test]
     fn an_entry_outside_the_lower_triangle_is_refused() {
         for bad in [Pair::new(0, 1), Pair::new(6, 0)] {
             let err = BlockCholesky::new(2, &[Pair::new(0, 0), bad]).unwrap_err();

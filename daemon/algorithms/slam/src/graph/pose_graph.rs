@@ -894,6 +894,19 @@ mod tests {
     }
 
     #[test]
+    fn a_graph_of_fixed_vertices_optimises_to_itself() {
+        let mut g = PoseGraph::new();
+        g.add_vertex(7, Pose2::new(1.0, 2.0, 0.5));
+        let r = g.optimize(&OptimizeParams::default()).unwrap();
+        assert!(r.converged);
+        assert_eq!(g.poses()[0], Pose2::new(1.0, 2.0, 0.5));
+        assert_eq!(
+            g.marginal_covariance(0, &RobustKernel::None).unwrap(),
+            [[0.0; 3]; 3]
+        );
+    }
+
+    #[test]
     fn vertex_without_edges_is_named() {
         let mut g = square();
         g.add_vertex(77, Pose2::new(5.0, 5.0, 0.0));
@@ -995,5 +1008,47 @@ mod tests {
             closed.marginal_covariance(3, &RobustKernel::None),
             Err(GraphError::UnderConstrained { vertex: 9, .. })
         ));
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+        /// Any graph, however its edges repeat, cross or leave vertices
+        /// apart: the optimiser answers (an error or a solution no worse than
+        /// its start) and never panics; the marginal of every vertex too.
+        #[test]
+        fn arbitrary_graphs_never_panic_the_solver(
+            n in 1usize..12,
+            raw in proptest::collection::vec(
+                (0usize..12, 0usize..12, -5.0f64..5.0, -5.0f64..5.0, -3.2f64..3.2, 0.01f64..100.0, 0.0f64..1.0, proptest::bool::ANY),
+                0..30,
+            ),
+            fixed in proptest::option::of(0usize..12),
+        ) {
+            let mut g = PoseGraph::new();
+            for i in 0..n {
+                g.add_vertex(i as u64, Pose2::new(i as f64 * 0.3, (i % 3) as f64, 0.1 * i as f64));
+            }
+            if let Some(f) = fixed {
+                g.set_fixed(f, true);
+            }
+            for &(a, b, x, y, t, w, skew, robust) in &raw {
+                let (from, to) = (a % n, b % n);
+                let mut information = info(w, w * 0.5);
+                information[0][1] = skew * w;
+                information[1][0] = skew * w;
+                g.add_edge(Edge { from, to, measurement: Pose2::new(x, y, t), information, robust });
+            }
+            let before = g.chi2();
+            let p = OptimizeParams { kernel: RobustKernel::Cauchy(1.0), ..OptimizeParams::default() };
+            if let Ok(r) = g.optimize(&p) {
+                proptest::prop_assert!(r.cost_after <= r.cost_before * (1.0 + 1e-9) + 1e-9);
+                proptest::prop_assert!(g.poses().iter().all(|q| q.x.is_finite() && q.y.is_finite() && q.theta.is_finite()));
+            } else {
+                proptest::prop_assert!((g.chi2() - before).abs() <= 1e-9 * before.max(1.0));
+            }
+            for i in 0..n {
+                let _ = g.marginal_covariance(i, &RobustKernel::None);
+            }
+        }
     }
 }
