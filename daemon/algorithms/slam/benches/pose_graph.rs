@@ -57,9 +57,13 @@ fn faer_solve(dim: usize, triplets: &[(usize, usize, f64)], b: &[f64]) -> Vec<f6
 }
 
 fn block_structure(dim: usize, triplets: &[(usize, usize, f64)]) -> BlockCholesky {
-    let pairs: Vec<Pair<usize, usize>> =
-        triplets.iter().map(|&(r, c, _)| Pair::new(r, c)).collect();
-    BlockCholesky::new(dim / 3, &pairs).unwrap()
+    // `linear_system` lists 6 entries per vertex, then 9 per edge, the
+    // order BlockCholesky takes its values in.
+    let links: Vec<(usize, usize)> = triplets[2 * dim..]
+        .chunks(9)
+        .map(|b| (b[0].0 / 3, b[0].1 / 3))
+        .collect();
+    BlockCholesky::new(dim / 3, &links).unwrap()
 }
 
 fn block_solve(llt: &mut BlockCholesky, triplets: &[(usize, usize, f64)], b: &[f64]) -> Vec<f64> {

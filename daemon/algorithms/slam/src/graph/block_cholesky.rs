@@ -26,7 +26,7 @@ use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
     factorize_symbolic_cholesky,
 };
-use faer::sparse::{Pair, SparseColMatRef, SymbolicSparseColMat};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par};
 
 /// Why a factorisation or solve could not be done.
@@ -90,27 +90,26 @@ impl Clone for BlockCholesky {
 }
 
 impl BlockCholesky {
-    /// The pattern of a symmetric matrix of `blocks` 3 × 3 block columns whose
-    /// lower-triangle entries (row, column) are `entries`, in the order the
-    /// values will be given (repeats are summed). Every block's diagonal must
-    /// be among them.
-    pub fn new(blocks: usize, entries: &[Pair<usize, usize>]) -> Result<Self, CholeskyError> {
+    /// The pattern of a symmetric matrix of `blocks` 3 × 3 block rows and
+    /// columns: every diagonal block, and an off-diagonal block (i, j) for
+    /// each link (i, j) with i > j (a link may repeat: the blocks are summed).
+    ///
+    /// The values (see [`Self::values_len`]) come in this order: for each
+    /// diagonal block its lower triangle, (0,0) (1,0) (1,1) (2,0) (2,1) (2,2);
+    /// then for each link its block (i, j), row-major.
+    pub fn new(blocks: usize, links: &[(usize, usize)]) -> Result<Self, CholeskyError> {
         let dim = 3 * blocks;
         let other = |e: &dyn std::fmt::Debug| CholeskyError::Structure(format!("{e:?}"));
-        if let Some(p) = entries.iter().find(|p| p.row >= dim || p.col > p.row) {
+        if let Some((i, j)) = links.iter().find(|&&(i, j)| i >= blocks || j >= i) {
             return Err(CholeskyError::Structure(format!(
-                "entry ({}, {}) is not in the lower triangle of {dim} × {dim}",
-                p.row, p.col
+                "block ({i}, {j}) is not below the diagonal of {blocks} × {blocks} blocks"
             )));
         }
         // The vertex graph, lower triangle, each column's rows sorted: the
         // diagonal block first, then the vertices it shares an edge with.
         let mut below: Vec<Vec<usize>> = (0..blocks).map(|j| vec![j]).collect();
-        for p in entries {
-            let (i, j) = (p.row / 3, p.col / 3);
-            if i != j {
-                below[j].push(i);
-            }
+        for &(i, j) in links {
+            below[j].push(i);
         }
         for rows in &mut below {
             rows.sort_unstable();
@@ -164,30 +163,39 @@ impl BlockCholesky {
             params,
         )
         .map_err(|e| other(&e))?;
-        // Each input entry's place among the lower pattern's values: in
-        // scalar column 3J + c the diagonal block gives rows 3J + c..3J + 3,
-        // then every block below it three rows.
+        // Each value's place among the lower pattern's values: in scalar
+        // column 3J + c the diagonal block gives rows 3J + c..3J + 3, then
+        // every block below it three rows.
         let col_ptr = pattern.col_ptr();
-        let slot = entries
-            .iter()
-            .map(|p| {
-                let (r, c) = (
-                    3 * position[p.row / 3] + p.row % 3,
-                    3 * position[p.col / 3] + p.col % 3,
-                );
-                let (r, c) = if r >= c { (r, c) } else { (c, r) };
-                let (bi, bj, rr, cc) = (r / 3, c / 3, r % 3, c % 3);
-                let start = col_ptr[c];
-                if bi == bj {
-                    start + (rr - cc)
-                } else {
-                    let k = lower[bj]
-                        .binary_search(&bi)
-                        .expect("every block is in its column");
-                    start + (3 - cc) + 3 * (k - 1) + rr
+        let at = |r: usize, c: usize| -> usize {
+            let (r, c) = if r >= c { (r, c) } else { (c, r) };
+            let (bi, bj) = (r / 3, c / 3);
+            let start = col_ptr[c];
+            if bi == bj {
+                start + (r % 3 - c % 3)
+            } else {
+                let k = lower[bj]
+                    .binary_search(&bi)
+                    .expect("every link's block was put in its column above");
+                start + (3 - c % 3) + 3 * (k - 1) + r % 3
+            }
+        };
+        let mut slot = Vec::with_capacity(6 * blocks + 9 * links.len());
+        for &p in &position {
+            for r in 0..3 {
+                for c in 0..=r {
+                    slot.push(at(3 * p + r, 3 * p + c));
                 }
-            })
-            .collect();
+            }
+        }
+        for &(i, j) in links {
+            let (pi, pj) = (position[i], position[j]);
+            for r in 0..3 {
+                for c in 0..3 {
+                    slot.push(at(3 * pi + r, 3 * pj + c));
+                }
+            }
+        }
         let to_vertex = |v: usize| 3 * position[v / 3] + v % 3;
         let unknown_at = (0..dim).map(to_vertex).collect();
         let req = symbolic
@@ -209,10 +217,19 @@ impl BlockCholesky {
         })
     }
 
-    /// Factorises the matrix whose entries, in the order given to [`Self::new`],
+    /// How many values [`Self::factorize`] takes: 6 per block, 9 per link.
+    pub fn values_len(&self) -> usize {
+        self.slot.len()
+    }
+
+    /// Factorises the matrix whose values, in the order [`Self::new`] states,
     /// are `values`.
     pub fn factorize(&mut self, values: &[f64]) -> Result<(), CholeskyError> {
-        assert_eq!(values.len(), self.slot.len(), "one value per entry");
+        assert_eq!(
+            values.len(),
+            self.slot.len(),
+            "6 values per block, 9 per link"
+        );
         self.factorised = false;
         self.summed.iter_mut().for_each(|v| *v = 0.0);
         for (&s, &v) in self.slot.iter().zip(values) {
@@ -306,11 +323,12 @@ fn scalar_pattern(columns: &[Vec<usize>], lower: bool) -> SymbolicSparseColMat<u
 mod tests {
     use super::*;
 
-    /// A random symmetric positive definite block matrix as lower-triangle
-    /// entries with some repeated, and its dense form.
     type Dense = Vec<Vec<f64>>;
 
-    fn spd(blocks: usize, seed: u64) -> (Vec<Pair<usize, usize>>, Vec<f64>, Dense) {
+    /// A random symmetric positive definite block matrix as links (a chain,
+    /// a few long links, each twice: repeats are summed) and values in
+    /// `new`'s order, and its dense form.
+    fn spd(blocks: usize, seed: u64) -> (Vec<(usize, usize)>, Vec<f64>, Dense) {
         let n = 3 * blocks;
         let mut state = seed;
         let mut rnd = move || {
@@ -320,45 +338,42 @@ mod tests {
             ((state >> 33) as f64 / (1u64 << 31) as f64) - 0.5
         };
         let mut dense = vec![vec![0.0; n]; n];
-        let (mut entries, mut values) = (Vec::new(), Vec::new());
-        let mut put = |r: usize, c: usize, v: f64, dense: &mut Vec<Vec<f64>>| {
-            entries.push(Pair::new(r, c));
-            values.push(v);
-            dense[r][c] += v;
-            if r != c {
-                dense[c][r] += v;
-            }
-        };
-        // A chain plus a few long links, each block twice (repeats summed).
-        let mut links: Vec<(usize, usize)> = (1..blocks).map(|i| (i, i - 1)).collect();
-        links.extend([(blocks - 1, 0), (blocks / 2, 1)]);
-        links.retain(|&(i, j)| i > j);
-        links.dedup();
-        for &(i, j) in &links {
-            for _ in 0..2 {
-                for r in 0..3 {
-                    for c in 0..3 {
-                        put(3 * i + r, 3 * j + c, 0.1 * rnd(), &mut dense);
-                    }
-                }
-            }
-        }
+        let mut values = Vec::new();
         for k in 0..blocks {
             for r in 0..3 {
                 for c in 0..=r {
                     let v = if r == c { 10.0 + rnd() } else { 0.2 * rnd() };
-                    put(3 * k + r, 3 * k + c, v, &mut dense);
+                    values.push(v);
+                    dense[3 * k + r][3 * k + c] += v;
+                    if r != c {
+                        dense[3 * k + c][3 * k + r] += v;
+                    }
                 }
             }
         }
-        (entries, values, dense)
+        let mut links: Vec<(usize, usize)> = (1..blocks).map(|i| (i, i - 1)).collect();
+        links.extend([(blocks.saturating_sub(1), 0), (blocks / 2, 1)]);
+        links.retain(|&(i, j)| i > j && i < blocks);
+        let links: Vec<(usize, usize)> = links.iter().flat_map(|&l| [l, l]).collect();
+        for &(i, j) in &links {
+            for r in 0..3 {
+                for c in 0..3 {
+                    let v = 0.1 * rnd();
+                    values.push(v);
+                    dense[3 * i + r][3 * j + c] += v;
+                    dense[3 * j + c][3 * i + r] += v;
+                }
+            }
+        }
+        (links, values, dense)
     }
 
     #[test]
     fn solves_a_block_system_as_the_dense_matrix_says() {
         for blocks in [1, 2, 7, 40] {
-            let (entries, values, dense) = spd(blocks, blocks as u64);
-            let mut llt = BlockCholesky::new(blocks, &entries).unwrap();
+            let (links, values, dense) = spd(blocks, blocks as u64);
+            let mut llt = BlockCholesky::new(blocks, &links).unwrap();
+            assert_eq!(llt.values_len(), values.len());
             llt.factorize(&values).unwrap();
             let n = 3 * blocks;
             let x: Vec<f64> = (0..3 * n).map(|i| (i as f64 * 0.37).sin()).collect();
@@ -396,20 +411,19 @@ mod tests {
     }
 
     #[test]
-    fn an_entry_outside_the_lower_triangle_is_refused() {
-        for bad in [Pair::new(0, 1), Pair::new(6, 0)] {
-            let err = BlockCholesky::new(2, &[Pair::new(0, 0), bad]).unwrap_err();
-            assert!(err.to_string().contains("lower triangle"), "{err}");
+    fn a_link_not_below_the_diagonal_is_refused() {
+        for bad in [(0, 1), (1, 1), (2, 0)] {
+            let err = BlockCholesky::new(2, &[bad]).unwrap_err();
+            assert!(err.to_string().contains("below the diagonal"), "{err}");
         }
     }
 
     #[test]
     fn an_indefinite_matrix_is_refused_and_nothing_is_solved() {
-        let (entries, mut values, _) = spd(5, 3);
-        let mut llt = BlockCholesky::new(5, &entries).unwrap();
-        // The last entries are the diagonal blocks: make one pivot negative.
-        let last_diag = values.len() - 1;
-        values[last_diag] = -100.0;
+        let (links, mut values, _) = spd(5, 3);
+        let mut llt = BlockCholesky::new(5, &links).unwrap();
+        // The first six values are the first diagonal block: a negative pivot.
+        values[0] = -100.0;
         assert!(matches!(
             llt.factorize(&values),
             Err(CholeskyError::NotPositiveDefinite(_))

@@ -18,7 +18,6 @@
 //! failure the poses keep their last good values.
 
 use super::block_cholesky::{BlockCholesky, CholeskyError};
-use faer::sparse::Pair;
 use smokenav_shared_types::Pose2;
 use smokenav_shared_types::odom::normalize_angle;
 
@@ -454,30 +453,20 @@ impl PoseGraph {
             }
         }
         let dim = 3 * next;
-        let mut pairs = Vec::with_capacity(6 * next + 9 * self.edges.len());
-        for k in 0..next {
-            for r in 0..3 {
-                for c in 0..=r {
-                    pairs.push(Pair::new(3 * k + r, 3 * k + c));
-                }
-            }
-        }
-        for e in &self.edges {
-            if let (Some(a), Some(b)) = (block[e.from], block[e.to]) {
-                let (hi, lo) = if a > b { (a, b) } else { (b, a) };
-                for r in 0..3 {
-                    for c in 0..3 {
-                        pairs.push(Pair::new(3 * hi + r, 3 * lo + c));
-                    }
-                }
-            }
-        }
-        let llt = BlockCholesky::new(next, &pairs).map_err(indeterminate)?;
+        let links: Vec<(usize, usize)> = self
+            .edges
+            .iter()
+            .filter_map(|e| match (block[e.from], block[e.to]) {
+                (Some(a), Some(b)) => Some(if a > b { (a, b) } else { (b, a) }),
+                _ => None,
+            })
+            .collect();
+        let llt = BlockCholesky::new(next, &links).map_err(indeterminate)?;
         Ok(Structure {
             block,
             dim,
+            entries: llt.values_len(),
             llt,
-            entries: pairs.len(),
         })
     }
 
