@@ -999,6 +999,119 @@ mod tests {
         ));
     }
 
+    /// A Manhattan-style world (the M3500 / city10k kind): a walk on a 1 m
+    /// grid, odometry with noise, loop closures wherever the walk comes back
+    /// to a cell, started from the composed odometry.
+    fn grid_world(n: usize, seed: u64) -> (PoseGraph, Vec<Pose2>) {
+        let mut state = seed;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let mut gauss = move || {
+            let (u, v) = (uniform(), uniform());
+            (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+        };
+        let mut truth = vec![Pose2::new(0.0, 0.0, 0.0)];
+        let mut turns = seed;
+        for _ in 1..n {
+            turns = turns
+                .wrapping_mul(2862933555777941757)
+                .wrapping_add(3037000493);
+            let p = *truth.last().unwrap();
+            let theta = normalize_angle(
+                p.theta
+                    + match (turns >> 33) % 5 {
+                        0 => std::f64::consts::FRAC_PI_2,
+                        1 => -std::f64::consts::FRAC_PI_2,
+                        _ => 0.0,
+                    },
+            );
+            truth.push(Pose2::new(
+                (p.x + theta.cos()).round(),
+                (p.y + theta.sin()).round(),
+                theta,
+            ));
+        }
+        let sigma = [0.05, 0.05, 0.02];
+        let information = info(1.0 / (sigma[0] * sigma[0]), 1.0 / (sigma[2] * sigma[2]));
+        let mut noisy = |a: &Pose2, b: &Pose2| {
+            let z = a.inverse().compose(b);
+            Pose2::new(
+                z.x + sigma[0] * gauss(),
+                z.y + sigma[1] * gauss(),
+                normalize_angle(z.theta + sigma[2] * gauss()),
+            )
+        };
+        let mut g = PoseGraph::new();
+        let mut guess = truth[0];
+        g.add_vertex(0, guess);
+        let mut visits: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+        visits.entry((0, 0)).or_default().push(0);
+        for i in 1..n {
+            let z = noisy(&truth[i - 1], &truth[i]);
+            guess = guess.compose(&z);
+            g.add_vertex(i as u64, guess);
+            g.add_edge(Edge {
+                from: i - 1,
+                to: i,
+                measurement: z,
+                information,
+                robust: false,
+            });
+            let cell = (truth[i].x as i64, truth[i].y as i64);
+            let earlier = visits.entry(cell).or_default();
+            for &j in earlier.iter().rev().filter(|&&j| i - j > 10).take(2) {
+                let z = noisy(&truth[j], &truth[i]);
+                g.add_edge(Edge {
+                    from: j,
+                    to: i,
+                    measurement: z,
+                    information,
+                    robust: false,
+                });
+            }
+            earlier.push(i);
+        }
+        (g, truth)
+    }
+
+    #[test]
+    fn a_grid_world_converges_from_its_odometry_to_the_chi2_of_an_optimum() {
+        let (mut g, truth) = grid_world(1500, 7);
+        let (n, e) = (g.len(), g.edges().len());
+        let at_truth = {
+            let mut t = g.clone();
+            for (i, p) in truth.iter().enumerate() {
+                t.set_pose(i, *p);
+            }
+            t.chi2()
+        };
+        let start = g.chi2();
+        let r = g.optimize(&OptimizeParams::default()).unwrap();
+        let expected = 3.0 * (e - n) as f64;
+        // A local minimum (a loop folded the wrong way) would stay far above
+        // 3(E − n), the χ² expected at the optimum of this noise; the truth
+        // itself sits near 3E.
+        eprintln!(
+            "grid world: {n} poses, {e} edges; χ² {start:.0} → {:.1} in {} iterations (truth {at_truth:.1}, 3(E−n) = {expected})",
+            r.chi2_after, r.iterations
+        );
+        assert!(r.converged);
+        assert!(
+            r.chi2_after < at_truth,
+            "{} against the truth's {at_truth}",
+            r.chi2_after
+        );
+        assert!(
+            (r.chi2_after - expected).abs() < 0.2 * expected,
+            "{} against {expected}",
+            r.chi2_after
+        );
+    }
+
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
         /// Any graph, however its edges repeat, cross or leave vertices
