@@ -20,9 +20,10 @@ pub use relations::{
     load_relations, parse_relations,
 };
 pub use trajectory::{
-    ErrorStats, FileReadError, MeanStd, Pairing, StampedPose, TrajectoryError, TrajectoryFormat,
-    TrajectoryMetricError, TrajectoryOptions, TrajectoryReport, evaluate_trajectories,
-    format_trajectory, format_trajectory_as, load_trajectory, parse_trajectory, truth_at,
+    ErrorStats, FileReadError, LineError, MeanStd, Pairing, StampedPose, TrajectoryError,
+    TrajectoryFormat, TrajectoryMetricError, TrajectoryOptions, TrajectoryReport,
+    evaluate_trajectories, format_trajectory, format_trajectory_as, load_trajectory,
+    parse_trajectory, truth_at,
 };
 
 use std::path::{Path, PathBuf};

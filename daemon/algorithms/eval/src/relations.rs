@@ -19,8 +19,8 @@
 //! errors, each as mean ± standard deviation. No alignment is involved.
 
 use crate::trajectory::{
-    FileReadError, MeanStd, StampedPose, data_lines, finite_numbers, read_bounded, relative,
-    relative_error, truth_at,
+    FileReadError, LineError, MeanStd, StampedPose, data_lines, finite_numbers, read_bounded,
+    relative, relative_error, truth_at,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -42,12 +42,8 @@ pub struct Relation {
 pub enum RelationsError {
     #[error(transparent)]
     Read(#[from] FileReadError),
-    #[error("{}:{line}: {reason}", path.display())]
-    Parse {
-        path: PathBuf,
-        line: usize,
-        reason: String,
-    },
+    #[error(transparent)]
+    Parse(#[from] LineError),
     #[error("{}: no relations (expected lines `t1 t2 x y z roll pitch yaw`)", path.display())]
     Empty { path: PathBuf },
 }
@@ -58,10 +54,12 @@ pub fn parse_relations(text: &str, path: &Path) -> Result<Vec<Relation>, Relatio
     const PLANAR: [&str; 5] = ["t1", "t2", "x", "y", "theta"];
     let mut out = Vec::new();
     for (line, fields) in data_lines(text) {
-        let err = |reason: String| RelationsError::Parse {
-            path: path.to_owned(),
-            line,
-            reason,
+        let err = |reason: String| {
+            RelationsError::from(LineError {
+                path: path.to_owned(),
+                line,
+                reason,
+            })
         };
         let names: &[&str] = match fields.len() {
             8 => &FULL,

@@ -79,12 +79,8 @@ pub fn format_trajectory_as(poses: &[StampedPose], format: TrajectoryFormat) -> 
 pub enum TrajectoryError {
     #[error(transparent)]
     Read(#[from] FileReadError),
-    #[error("{}:{line}: {reason}", path.display())]
-    Parse {
-        path: PathBuf,
-        line: usize,
-        reason: String,
-    },
+    #[error(transparent)]
+    Parse(#[from] LineError),
     #[error("{}: no poses (expected lines `timestamp x y theta`)", path.display())]
     Empty { path: PathBuf },
 }
@@ -93,10 +89,12 @@ pub enum TrajectoryError {
 pub fn parse_trajectory(text: &str, path: &Path) -> Result<Vec<StampedPose>, TrajectoryError> {
     let mut out: Vec<StampedPose> = Vec::new();
     for (line, fields) in data_lines(text) {
-        let err = |reason: String| TrajectoryError::Parse {
-            path: path.to_owned(),
-            line,
-            reason,
+        let err = |reason: String| {
+            TrajectoryError::from(LineError {
+                path: path.to_owned(),
+                line,
+                reason,
+            })
         };
         const PLAIN: [&str; 4] = ["timestamp", "x", "y", "theta"];
         const TUM: [&str; 8] = ["timestamp", "x", "y", "z", "qx", "qy", "qz", "qw"];
@@ -175,6 +173,15 @@ pub enum FileReadError {
     },
     #[error("{}: {len} bytes exceed the limit of {max}", path.display())]
     TooLarge { path: PathBuf, len: u64, max: u64 },
+}
+
+/// A line of a text file (a trajectory, a relations file) that could not be read.
+#[derive(Debug, thiserror::Error)]
+#[error("{}:{line}: {reason}", path.display())]
+pub struct LineError {
+    pub path: PathBuf,
+    pub line: usize,
+    pub reason: String,
 }
 
 /// Reads a text file of at most `max_bytes` (crafted files must not exhaust memory).
