@@ -150,9 +150,9 @@ struct Structure {
     /// Block column of each vertex, `None` for fixed vertices.
     block: Vec<Option<usize>>,
     dim: usize,
+    /// The factorisation; its `values_len` is the number of (row, col)
+    /// entries: 6 per free vertex, 9 per edge between two free vertices.
     llt: BlockCholesky,
-    /// Number of (row, col) entries: 6 per free vertex, 9 per edge between two free vertices.
-    entries: usize,
 }
 
 fn indeterminate(e: CholeskyError) -> GraphError {
@@ -462,12 +462,7 @@ impl PoseGraph {
             })
             .collect();
         let llt = BlockCholesky::new(next, &links).map_err(indeterminate)?;
-        Ok(Structure {
-            block,
-            dim,
-            entries: llt.values_len(),
-            llt,
-        })
+        Ok(Structure { block, dim, llt })
     }
 
     /// Fills the lower triangle of H (in the order of the structure's pairs)
@@ -481,7 +476,7 @@ impl PoseGraph {
         b: &mut [f64],
     ) {
         values.clear();
-        values.resize(s.entries, 0.0);
+        values.resize(s.llt.values_len(), 0.0);
         b.iter_mut().for_each(|v| *v = 0.0);
         let free = s.dim / 3;
         let mut offdiag = 6 * free;
