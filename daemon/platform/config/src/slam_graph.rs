@@ -54,6 +54,13 @@ pub struct GraphSection {
     pub closure_wide_max_rad: f64,
     /// Score (0–1) a wide match must reach.
     pub closure_wide_min_score: f64,
+    /// A closure that moves its node further than this from its estimate,
+    /// m, … stays under review for the next ten nodes: a later far match
+    /// that contradicts it takes it out again (one such match can be a
+    /// look-alike place, or a wall matched from its far side) …
+    pub closure_review_m: f64,
+    /// … or turns it further than this, rad.
+    pub closure_review_rad: f64,
 }
 
 impl Default for GraphSection {
@@ -72,6 +79,8 @@ impl Default for GraphSection {
             closure_wide_max_m: 4.0,
             closure_wide_max_rad: 0.7,
             closure_wide_min_score: 0.5,
+            closure_review_m: 0.3,
+            closure_review_rad: 0.1,
         }
     }
 }
@@ -118,6 +127,9 @@ impl Validate for GraphSection {
             0.0,
             1.0,
         );
+        // 100 m and 3.2 rad: no closure is ever reviewed (before 2026-12-06).
+        v.within(&k("closure_review_m"), self.closure_review_m, 0.0, 100.0);
+        v.within(&k("closure_review_rad"), self.closure_review_rad, 0.0, 3.2);
         v.within(
             &k("closure_max_withheld"),
             self.closure_max_withheld,

@@ -847,6 +847,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             "wide search        {} nodes uncertain and unclosed searched wider: {} matches held for a second, {} confirmed by one",
             s.closures_wide, s.closures_wide_held, s.closures_wide_confirmed
         );
+        let _ = writeln!(
+            report,
+            "far closures       {} closures moved their node far and were reviewed: {} taken out again by a later match",
+            s.closures_far, s.closures_retracted
+        );
         if cfg.mode == SlamMode::Localization {
             let mut m = (0.0, 0.0);
             slam.backend().metrics(&mut |k, v| match k {

@@ -268,6 +268,17 @@ impl PoseGraph {
         self.edges.pop()
     }
 
+    /// Removes the first edge equal to `edge` (a loop closure later matches
+    /// contradicted); false if the graph has none.
+    pub fn remove_edge(&mut self, edge: &Edge) -> bool {
+        let Some(i) = self.edges.iter().position(|e| e == edge) else {
+            return false;
+        };
+        self.edges.remove(i);
+        self.structure = None;
+        true
+    }
+
     /// Holds a vertex where it is (the gauge). Without any fixed vertex the
     /// optimiser holds the first one.
     pub fn set_fixed(&mut self, index: usize, fixed: bool) {

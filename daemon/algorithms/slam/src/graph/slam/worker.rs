@@ -34,6 +34,8 @@ pub(super) struct Job {
 pub(super) struct Outcome {
     /// The closure edges kept (empty when none was).
     pub edges: Vec<Edge>,
+    /// Earlier closures the search took out again (contradicted by a new far match).
+    pub removed: Vec<Edge>,
     /// The optimised poses of the snapshot's nodes, when edges were kept.
     pub poses: Option<Vec<Pose2>>,
     /// The search's counters (closures tried, refused by reason, accepted, optimisations).
@@ -73,10 +75,10 @@ impl ClosureWorker {
                     search.nodes = job.nodes;
                     search.stats = GraphStats::default();
                     search.closure_marginal = None;
-                    let before = search.graph.edges().len();
                     let kept = search.close_loops(job.node, job.uncertainty);
                     let outcome = Outcome {
-                        edges: search.graph.edges()[before..].to_vec(),
+                        edges: std::mem::take(&mut search.closures_added),
+                        removed: std::mem::take(&mut search.closures_removed),
                         poses: (kept > 0).then(|| search.graph.poses().to_vec()),
                         stats: search.stats,
                         marginal: search.closure_marginal.take(),
