@@ -326,8 +326,8 @@ fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
     // And it shows in the published pose: where the drift at the first
     // closure is large enough to tell from the closure's own tolerance, a
     // quarter of it is gone within the second. (The drift there varies
-    // from run to run with the processes' timing: 0.46–0.64 m RMS over the
-    // last 2 s in eight runs; the largest of that and the window's first
+    // from run to run with the processes' timing: 0.40–0.64 m RMS over the
+    // last 2 s in 20 runs; the largest of that and the window's first
     // pose counts, as the drift still grows until the closing scan. Before
     // the front end took the heading of its first full match from the
     // warm-up's scans, the lap started 3–10° off and the drift there was
