@@ -140,8 +140,9 @@ fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
     }
 
     // With `SLAM_LOOP_RECORD=FILE.mcap` every topic goes to a bag as well:
-    // `smokenav slam --bag FILE.mcap --laser /fusion/scan` replays the fused
-    // scans the SLAM process saw, deterministically.
+    // `smokenav slam --bag FILE.mcap --laser /laser/scan --odom /base/odom
+    // --fuse v2 --profile config/pioneer-3dx.toml --backend graph` maps the
+    // same sensor data offline, repeatably (not with the live run's timing).
     let mut recorder = std::env::var("SLAM_LOOP_RECORD").ok().map(|out| {
         let r = Child::spawn(
             &bin("smokenav"),

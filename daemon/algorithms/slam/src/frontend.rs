@@ -294,7 +294,7 @@ impl FrontEnd {
         // dropped. Placed on an empty map it kept the odometry's heading,
         // and that became the frame every later scan was matched in: a
         // Pioneer turning on the spot while its smoke sensor warmed up
-        // slipped 7–10° at that one scan (`slam_loop_e2e`), and its aisle
+        // slipped 3–10° at that one scan (`slam_loop_e2e`), and its aisle
         // was mapped turned by as much.
         let handover = !heading_only && self.bootstrap_map;
         let found = self
