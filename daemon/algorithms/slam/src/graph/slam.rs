@@ -1323,7 +1323,13 @@ impl SlamBackend for GraphSlam {
         emit("loop_closures_tried", s.closures_tried as f64);
         emit("loop_closures_accepted", s.closures_accepted as f64);
         emit("loop_closures_low_score", s.closures_low_score as f64);
-        emit("loop_closures_inconsistent", s.closures_inconsistent as f64);
+        // Contradicted by the graph when added, or by a later far match
+        // after it went in (a report holds 32 metrics, all in use: the
+        // retractions alone are on `smokenav slam`'s `far closures` line).
+        emit(
+            "loop_closures_inconsistent",
+            (s.closures_inconsistent + s.closures_retracted) as f64,
+        );
         emit("loop_closures_ambiguous", s.closures_ambiguous as f64);
         emit("loop_closures_low_overlap", s.closures_low_overlap as f64);
         // Wide matches a second node confirmed (each adds two closures).
@@ -2196,6 +2202,14 @@ mod tests {
         assert!(!slam.graph.edges().contains(&edge));
         assert!(slam.graph.edges().contains(&replaced));
         assert_eq!(slam.stats().closures_retracted, 1);
+        // Health counts it with the closures the graph contradicted.
+        let mut inconsistent = None;
+        slam.metrics(&mut |name, v| {
+            if name == "loop_closures_inconsistent" {
+                inconsistent = Some(v);
+            }
+        });
+        assert_eq!(inconsistent, Some(1.0));
     }
 
     /// A corridor between racks whose uprights repeat every 1.2 m, driven
