@@ -331,8 +331,8 @@ fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
     // last 2 s in 20 runs; the largest of that and the window's first
     // pose counts, as the drift still grows until the closing scan. Before
     // the front end took the heading of its first full match from the
-    // warm-up's scans, the lap started 3–10° off and the drift there was
-    // 0.17–1.3 m.)
+    // warm-up's scans, the lap started 3.5–10.5° off and the drift there
+    // was 0.17–1.3 m.)
     let pre = rms(&before).max(window[0]);
     if pre > 0.2 {
         assert!(
