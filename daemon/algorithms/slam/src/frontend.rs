@@ -297,15 +297,16 @@ impl FrontEnd {
         // slipped 3–10° at that one scan (`slam_loop_e2e`), and its aisle
         // was mapped turned by as much.
         let handover = !heading_only && self.bootstrap_map;
+        let heading_match = heading_only || handover;
         let found = self
             .search(&prediction)
-            .filter(|&(_, score)| !(heading_only || handover) || score >= HEADING_MIN_SCORE);
+            .filter(|&(_, score)| !heading_match || score >= HEADING_MIN_SCORE);
         if handover {
             self.history.clear();
             self.bootstrap_map = false;
         }
         let (pose, score, degenerate, covariance) = match found {
-            Some((matched, score)) if heading_only || handover => {
+            Some((matched, score)) if heading_match => {
                 let c = ScanConstraint::from_points(&self.points);
                 let sigma = POINT_SIGMA_CELLS * self.p.resolution;
                 let share = PREDICTION_SIGMA_SHARE * PREDICTION_SIGMA_SHARE;

@@ -405,10 +405,15 @@ pub struct GraphSlam {
     wide_held: std::collections::VecDeque<(usize, Edge)>,
     /// Far closures still under review: (node, edge).
     provisional: std::collections::VecDeque<(usize, Edge)>,
-    /// What the last [`Self::close_loops`] added and took out (the worker
-    /// hands both to the scan path).
-    closures_added: Vec<Edge>,
-    closures_removed: Vec<Edge>,
+}
+
+/// What one closure search changed in the graph (the worker hands it to the scan path).
+#[derive(Debug, Default)]
+struct Closed {
+    /// Closure edges it kept (empty when none was).
+    added: Vec<Edge>,
+    /// Earlier closures it took out again (contradicted by a new far match).
+    removed: Vec<Edge>,
 }
 
 /// A closure match of node `n` (`held`) and one of node `k` (`edge`)
@@ -598,8 +603,6 @@ impl GraphSlam {
             pending_closure: None,
             wide_held: std::collections::VecDeque::new(),
             provisional: std::collections::VecDeque::new(),
-            closures_added: Vec::new(),
-            closures_removed: Vec::new(),
         }
     }
 
@@ -767,14 +770,12 @@ impl GraphSlam {
     /// verified edges are added together and the graph optimised once. An
     /// edge the optimised graph contradicts is taken out again (the others
     /// are kept and re-optimised). Returns the number of closures kept.
-    fn close_loops(&mut self, k: usize, uncertainty: Matrix3<f64>) -> usize {
-        self.closures_added.clear();
-        self.closures_removed.clear();
+    fn close_loops(&mut self, k: usize, uncertainty: Matrix3<f64>) -> Closed {
         if k < self.p.closure_min_separation
             || self.nodes[k].points.len() < self.min_laser_points
             || self.nodes[k].withheld_share > self.p.closure_max_withheld
         {
-            return 0;
+            return Closed::default();
         }
         let last = k - self.p.closure_min_separation;
         let own = self.own_window();
@@ -788,7 +789,7 @@ impl GraphSlam {
             edges = self.wide_closure(k, last, &uncertainty);
         }
         if edges.is_empty() {
-            return 0;
+            return Closed::default();
         }
         let before = self.graph.poses().to_vec();
         let far: Vec<bool> = edges.iter().map(|e| self.moves_far(k, e)).collect();
@@ -815,10 +816,11 @@ impl GraphSlam {
                         self.provisional.push_back((k, *e));
                     }
                 }
-                self.closures_added.extend_from_slice(&kept);
-                self.closures_removed = retracted.iter().map(|(_, e)| *e).collect();
                 self.closure_marginal = self.exact_marginal(k).map(|c| (k, c));
-                return kept.len();
+                return Closed {
+                    added: kept,
+                    removed: retracted.into_iter().map(|(_, e)| e).collect(),
+                };
             }
             for _ in &kept {
                 self.graph.pop_edge();
@@ -846,7 +848,7 @@ impl GraphSlam {
             self.graph.add_edge(*e);
             self.provisional.push_front((*n, *e));
         }
-        0
+        Closed::default()
     }
 
     /// The closure `edge` of node `k` would move it further than `closure_review`.
@@ -872,24 +874,20 @@ impl GraphSlam {
         }
         let mut out = Vec::new();
         let poses = self.graph.poses();
-        let mut i = 0;
-        while i < self.provisional.len() {
-            let held = self.provisional[i];
-            let agreed = edges.iter().any(|e| pair_agrees(poses, &held, k, e));
+        self.provisional.retain(|held| {
+            if edges.iter().any(|e| pair_agrees(poses, held, k, e)) {
+                return false;
+            }
             let contradicted = held.0 + WIDE_GROUP_MIN_NODES <= k
                 && edges
                     .iter()
                     .zip(far)
-                    .any(|(e, &f)| f && !pair_agrees(poses, &held, k, e));
-            if agreed {
-                self.provisional.remove(i);
-            } else if contradicted {
-                self.provisional.remove(i);
-                out.push(held);
-            } else {
-                i += 1;
+                    .any(|(e, &f)| f && !pair_agrees(poses, held, k, e));
+            if contradicted {
+                out.push(*held);
             }
-        }
+            !contradicted
+        });
         out.retain(|(_, e)| self.graph.remove_edge(e));
         out
     }

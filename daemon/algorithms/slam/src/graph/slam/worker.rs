@@ -75,11 +75,11 @@ impl ClosureWorker {
                     search.nodes = job.nodes;
                     search.stats = GraphStats::default();
                     search.closure_marginal = None;
-                    let kept = search.close_loops(job.node, job.uncertainty);
+                    let closed = search.close_loops(job.node, job.uncertainty);
                     let outcome = Outcome {
-                        edges: std::mem::take(&mut search.closures_added),
-                        removed: std::mem::take(&mut search.closures_removed),
-                        poses: (kept > 0).then(|| search.graph.poses().to_vec()),
+                        poses: (!closed.added.is_empty()).then(|| search.graph.poses().to_vec()),
+                        edges: closed.added,
+                        removed: closed.removed,
                         stats: search.stats,
                         marginal: search.closure_marginal.take(),
                     };
