@@ -6,7 +6,7 @@ use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
 /// Metrics one health report can hold.
-pub const MAX_METRICS: usize = 32;
+pub const MAX_METRICS: usize = 40;
 /// Longest metric name, bytes.
 pub const METRIC_NAME_LEN: usize = 28;
 /// Longest role name, bytes.
@@ -67,7 +67,7 @@ pub struct Metric {
     pub expected: f64,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
 #[type_name("smokenav::Health")]
 /// A process's health report, published periodically on `health/<role>`.
@@ -102,6 +102,29 @@ pub struct Health {
     pub metrics: [Metric; MAX_METRICS],
     /// The most recent error, empty when none.
     pub last_error: FixedStr<LAST_ERROR_LEN>,
+}
+
+// By hand: the standard library derives `Default` for arrays of up to 32.
+impl Default for Health {
+    fn default() -> Self {
+        Self {
+            header: Header::default(),
+            role: FixedStr::default(),
+            pid: 0,
+            state: 0,
+            _reserved: [0; 3],
+            uptime_s: 0.0,
+            latency_p50_us: 0.0,
+            latency_p99_us: 0.0,
+            latency_max_us: 0.0,
+            _reserved2: 0,
+            deadline_misses: 0,
+            metric_count: 0,
+            _reserved3: 0,
+            metrics: [Metric::default(); MAX_METRICS],
+            last_error: FixedStr::default(),
+        }
+    }
 }
 
 impl Health {

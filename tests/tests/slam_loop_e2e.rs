@@ -264,13 +264,15 @@ fn graph_slam_closes_the_loop_online_and_the_pose_error_drops() {
     let metric = |h: &Health, name: &str| h.metric(name).unwrap_or(f64::NAN);
     let last = &health.last().expect("slam health").1;
     eprintln!(
-        "closures tried {} accepted {} low score {} ambiguous {} low overlap {} inconsistent {}, optimisations {}, nodes {} (closure search skipped {}, job to applied max {} ms), scans {} skipped {}",
+        "closures tried {} accepted {} low score {} ambiguous {} low overlap {} inconsistent {} far {} retracted {}, optimisations {}, nodes {} (closure search skipped {}, job to applied max {} ms), scans {} skipped {}",
         metric(last, "loop_closures_tried"),
         metric(last, "loop_closures_accepted"),
         metric(last, "loop_closures_low_score"),
         metric(last, "loop_closures_ambiguous"),
         metric(last, "loop_closures_low_overlap"),
         metric(last, "loop_closures_inconsistent"),
+        metric(last, "loop_closures_far"),
+        metric(last, "loop_closures_retracted"),
         metric(last, "graph_optimizations"),
         metric(last, "graph_nodes"),
         metric(last, "loop_closure_nodes_skipped"),

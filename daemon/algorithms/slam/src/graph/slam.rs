@@ -1321,13 +1321,11 @@ impl SlamBackend for GraphSlam {
         emit("loop_closures_tried", s.closures_tried as f64);
         emit("loop_closures_accepted", s.closures_accepted as f64);
         emit("loop_closures_low_score", s.closures_low_score as f64);
-        // Contradicted by the graph when added, or by a later far match
-        // after it went in (a report holds 32 metrics, all in use: the
-        // retractions alone are on `smokenav slam`'s `far closures` line).
-        emit(
-            "loop_closures_inconsistent",
-            (s.closures_inconsistent + s.closures_retracted) as f64,
-        );
+        emit("loop_closures_inconsistent", s.closures_inconsistent as f64);
+        // Far closures went in under review; a later far match that
+        // contradicted one took it out again.
+        emit("loop_closures_far", s.closures_far as f64);
+        emit("loop_closures_retracted", s.closures_retracted as f64);
         emit("loop_closures_ambiguous", s.closures_ambiguous as f64);
         emit("loop_closures_low_overlap", s.closures_low_overlap as f64);
         // Wide matches a second node confirmed (each adds two closures).
@@ -1340,7 +1338,7 @@ impl SlamBackend for GraphSlam {
             "graph_optimization_failures",
             s.optimization_failures as f64,
         );
-        // Online only (a health report holds 32 metrics: the p99 is in the stats of benches).
+        // Online only (the p99 is in the stats of benches).
         if self.worker.is_some() {
             emit("loop_closure_nodes_skipped", s.closure_nodes_skipped as f64);
             emit("loop_closure_latency_max_ms", self.closure_latency_ms().0);
@@ -2200,14 +2198,22 @@ mod tests {
         assert!(!slam.graph.edges().contains(&edge));
         assert!(slam.graph.edges().contains(&replaced));
         assert_eq!(slam.stats().closures_retracted, 1);
-        // Health counts it with the closures the graph contradicted.
-        let mut inconsistent = None;
+        // Health counts it on its own, not with the closures the graph
+        // contradicted when they were added.
+        let mut reported = Vec::new();
         slam.metrics(&mut |name, v| {
-            if name == "loop_closures_inconsistent" {
-                inconsistent = Some(v);
+            if name.starts_with("loop_closures_") {
+                reported.push((name, v));
             }
         });
-        assert_eq!(inconsistent, Some(1.0));
+        assert!(
+            reported.contains(&("loop_closures_retracted", 1.0)),
+            "{reported:?}"
+        );
+        assert!(
+            reported.contains(&("loop_closures_inconsistent", 0.0)),
+            "{reported:?}"
+        );
     }
 
     /// A corridor between racks whose uprights repeat every 1.2 m, driven
