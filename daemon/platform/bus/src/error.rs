@@ -31,6 +31,18 @@ pub enum BusError {
         /// iceoryx2's reason.
         reason: String,
     },
+    /// The topic's service exists with another layout of its message type:
+    /// the processes on it were built from another smokenav release (an
+    /// upgrade installed while they ran).
+    #[error(
+        "service `{service}`: the processes on it exchange another version of its message type \
+         (built from another smokenav release): restart every smokenav process after an upgrade \
+         (`systemctl restart smokenav.target`), or use the tools of the release they run"
+    )]
+    IncompatibleType {
+        /// The full service name, `<instance>/<topic>`.
+        service: String,
+    },
     /// Waiting failed.
     #[error("waitset: {op}: {reason}")]
     WaitSet {

@@ -24,7 +24,7 @@ fn open_map_service(service: &TopicService<'_>) -> Result<MapService, BusError> 
     service
         .with_qos(builder)
         .open_or_create()
-        .map_err(|e| service.error("open map service", e))
+        .map_err(|e| service.open_or_create_error(e))
 }
 
 /// Publishes maps on one topic and wakes its subscribers.

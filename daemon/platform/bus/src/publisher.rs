@@ -23,7 +23,7 @@ impl<T: Message> Publisher<T> {
         let pubsub = service
             .publish_subscribe::<T>()
             .open_or_create()
-            .map_err(|e| service.error("open publish-subscribe service", e))?;
+            .map_err(|e| service.open_or_create_error(e))?;
         let outbox = Outbox::create(&service, &service.event()?)?;
         let publisher = pubsub
             .publisher_builder()

@@ -11,7 +11,9 @@ use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::node::{NodeState, NodeView};
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::publish_subscribe::Builder as PubSubBuilder;
-use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
 use iceoryx2::service::dynamic_config::publish_subscribe::DynamicConfig;
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 
@@ -133,7 +135,7 @@ impl TopicService<'_> {
                 self.alive_names(&f, &ids)
             }
             Err(PublishSubscribeOpenError::DoesNotExist) => Ok(Vec::new()),
-            Err(e) => Err(self.error("open publish-subscribe service", e)),
+            Err(e) => Err(self.open_error(e)),
         }
     }
 
@@ -152,7 +154,7 @@ impl TopicService<'_> {
                 self.alive_names(&f, &ids)
             }
             Err(PublishSubscribeOpenError::DoesNotExist) => Ok(Vec::new()),
-            Err(e) => Err(self.error("open publish-subscribe service", e)),
+            Err(e) => Err(self.open_error(e)),
         }
     }
 
@@ -173,7 +175,7 @@ impl TopicService<'_> {
         let factory = match opened {
             Ok(f) => f,
             Err(PublishSubscribeOpenError::DoesNotExist) => return Ok(None),
-            Err(e) => return Err(self.error("open publish-subscribe service", e)),
+            Err(e) => return Err(self.open_error(e)),
         };
         let own = *self.node.id();
         let mut nodes: Vec<(UniqueNodeId, String, bool)> = Vec::new();
@@ -270,6 +272,25 @@ impl TopicService<'_> {
     /// An error of `op` on this service.
     pub(crate) fn error(&self, op: &'static str, e: impl core::fmt::Debug) -> BusError {
         BusError::service(&self.full, op, e)
+    }
+
+    /// The error of opening the publish–subscribe service: another layout
+    /// of its type (another release's processes) said so, by name.
+    pub(crate) fn open_error(&self, e: PublishSubscribeOpenError) -> BusError {
+        match e {
+            PublishSubscribeOpenError::IncompatibleTypes => BusError::IncompatibleType {
+                service: self.full.clone(),
+            },
+            e => self.error("open publish-subscribe service", e),
+        }
+    }
+
+    /// [`Self::open_error`] of opening or creating it.
+    pub(crate) fn open_or_create_error(&self, e: PublishSubscribeOpenOrCreateError) -> BusError {
+        match e {
+            PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(e) => self.open_error(e),
+            e => self.error("open publish-subscribe service", e),
+        }
     }
 }
 

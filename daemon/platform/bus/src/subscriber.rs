@@ -24,7 +24,7 @@ impl<T: Message> Subscriber<T> {
         let pubsub = service
             .publish_subscribe::<T>()
             .open_or_create()
-            .map_err(|e| service.error("open publish-subscribe service", e))?;
+            .map_err(|e| service.open_or_create_error(e))?;
         let inbox = Inbox::create(&service, &service.event()?)?;
         let subscriber = pubsub
             .subscriber_builder()
