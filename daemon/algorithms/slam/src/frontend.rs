@@ -77,6 +77,18 @@ const MIN_POINTS: usize = 20;
 /// scores of 0.26–0.52, half a degree a scan and always the same way
 /// (`slam_smoke_heading_e2e`). Odometry turns less wrong than that.
 const HEADING_MIN_SCORE: f64 = 0.5;
+/// How clearly square both point sets must be: the length-weighted mean
+/// of `(cos 4α, sin 4α)` over their wall directions α (1: all walls
+/// parallel or square; 0: no preferred direction).
+const SQUARE_MIN_PEAK: f64 = 0.6;
+/// Laser points a scan needs to have its heading squared.
+const SQUARE_MIN_POINTS: usize = 40;
+/// Turns below this are left to the match, rad.
+const SQUARE_MIN_TURN: f64 = 0.01;
+/// Consecutive points further apart than this lie on different surfaces, m.
+const SQUARE_MAX_GAP_M: f64 = 0.15;
+/// A wall direction is taken over this many consecutive point gaps.
+const SQUARE_SPAN: usize = 4;
 
 #[derive(Debug, Clone)]
 pub struct FrontEndParams {
@@ -87,6 +99,11 @@ pub struct FrontEndParams {
     /// How much further than the matched points the local map reaches, m
     /// (see `MAP_RANGE_MARGIN`).
     pub map_range_margin_m: f64,
+    /// `[slam] square_after_blind_m`: after this much odometry travel
+    /// without a heading from a match, a scan with `SQUARE_MIN_POINTS`
+    /// laser points that matches nothing turns its heading onto the local
+    /// map's square walls ([`FrontEnd::square_heading`]); 0 never.
+    pub square_after_blind_m: f64,
 }
 
 /// What the front end made of one scan.
@@ -104,6 +121,9 @@ pub struct Tracked {
     /// frame (m², m·rad, rad²): the match's where the scan constrains the
     /// pose, the prediction's elsewhere (all of it when the match failed).
     pub covariance: Matrix3<f64>,
+    /// The turn (rad) this scan's heading got from the walls' directions
+    /// after a blind stretch ([`FrontEnd::square_heading`]), 0 if none.
+    pub squared_turn: f64,
 }
 
 /// σ of an endpoint's distance to its surface the matcher reaches, in cells
@@ -156,6 +176,11 @@ pub struct FrontEnd {
     degenerate_matches: u64,
     /// The local map holds only a scan tracked by heading (see [`Self::track_heading`]).
     bootstrap_map: bool,
+    /// Odometry travel since a match last gave the heading, m.
+    blind_m: f64,
+    /// Scans whose heading was turned onto the walls' directions after a
+    /// blind stretch ([`Self::square_heading`]).
+    squared_headings: u64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -204,7 +229,14 @@ impl FrontEnd {
             degeneracy: DegeneracyParams::default(),
             degenerate_matches: 0,
             bootstrap_map: false,
+            blind_m: 0.0,
+            squared_headings: 0,
         }
+    }
+
+    /// Scans whose heading was turned onto the walls' directions after a blind stretch.
+    pub fn squared_headings(&self) -> u64 {
+        self.squared_headings
     }
 
     /// The odometry frame jumped (the base was reset or reconnected): forget the
@@ -268,9 +300,10 @@ impl FrontEnd {
                 stale_odometry: false,
                 degenerate_directions: 3,
                 covariance: Matrix3::zeros(),
+                squared_turn: 0.0,
             };
         };
-        let prediction = self.predict(&last_pose, odom, stamp_ns, stale);
+        let mut prediction = self.predict(&last_pose, odom, stamp_ns, stale);
         // The prior follows the predicted motion: wider for larger steps and
         // while the odometry repeats (the prediction is then extrapolated).
         let step = last_pose.between(&prediction);
@@ -305,6 +338,22 @@ impl FrontEnd {
             self.history.clear();
             self.bootstrap_map = false;
         }
+        // Nothing matched after a blind stretch: the heading from the walls'
+        // directions rather than the odometry's alone.
+        let mut squared_turn = 0.0;
+        if found.is_none()
+            && self.p.square_after_blind_m > 0.0
+            && self.blind_m >= self.p.square_after_blind_m
+            && self.points.len() >= SQUARE_MIN_POINTS
+        {
+            // Once per stretch: the next scans' views are no better.
+            self.blind_m = 0.0;
+            if let Some(turn) = self.square_heading(&prediction) {
+                prediction.theta += turn;
+                self.squared_headings += 1;
+                squared_turn = turn;
+            }
+        }
         let (pose, score, degenerate, covariance) = match found {
             Some((matched, score)) if heading_match => {
                 let c = ScanConstraint::from_points(&self.points);
@@ -333,6 +382,11 @@ impl FrontEnd {
                 pred_cov * PREDICTION_SIGMA_SHARE * PREDICTION_SIGMA_SHARE,
             ),
         };
+        if score.is_some() {
+            self.blind_m = 0.0;
+        } else {
+            self.blind_m += last_pose.between(&prediction).translation_norm();
+        }
         // A map of heading-tracked scans only (no scan matched in full yet)
         // takes each of them: turning on the spot while the smoke sensor
         // warms up, the laser's few kept sections move from scan to scan and
@@ -350,6 +404,7 @@ impl FrontEnd {
             stale_odometry: stale,
             degenerate_directions: degenerate,
             covariance,
+            squared_turn,
         }
     }
 
@@ -408,6 +463,38 @@ impl FrontEnd {
             self.prior_r,
         ) = saved;
         found
+    }
+
+    /// After a blind stretch the heading is the odometry's, several degrees
+    /// off (16° after 14.7 m on one seed of the dense-smoke trial), and the
+    /// local map is the view from before it, metres back: the match finds
+    /// nothing to hold the heading against, or a wrong turn. Buildings are
+    /// mostly built square, so the turn (within ± 45°) that lays the
+    /// scan's walls parallel or square to the local map's is the heading
+    /// error, if both are clearly square; a round or diagonal hall is left
+    /// to the match.
+    fn square_heading(&self, prediction: &Pose2) -> Option<f64> {
+        let mut sum = (0.0, 0.0, 0.0);
+        for scan in &self.history {
+            let d = square_directions(scan, |(x, y)| (f64::from(x), f64::from(y)));
+            sum = (sum.0 + d.0, sum.1 + d.1, sum.2 + d.2);
+        }
+        let (mc, ms, mw) = sum;
+        let (sc, ss, sw) = square_directions(&self.points, |p| p);
+        if mw <= 0.0 || sw <= 0.0 {
+            return None;
+        }
+        let (map_peak, scan_peak) = (mc.hypot(ms) / mw, sc.hypot(ss) / sw);
+        if map_peak < SQUARE_MIN_PEAK || scan_peak < SQUARE_MIN_PEAK {
+            return None;
+        }
+        // Directions in the robot frame, turned by the predicted heading.
+        let map_dir = ms.atan2(mc) / 4.0;
+        let scan_dir = ss.atan2(sc) / 4.0 + prediction.theta;
+        let mut turn = map_dir - scan_dir;
+        let quarter = std::f64::consts::FRAC_PI_2;
+        turn -= quarter * (turn / quarter).round();
+        (turn.abs() >= SQUARE_MIN_TURN).then_some(turn)
     }
 
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
@@ -893,6 +980,31 @@ impl FrontEnd {
     }
 }
 
+/// The wall directions of consecutive points modulo 90°, as the sum of
+/// `(cos 4α, sin 4α)` weighted by segment length, and the total length:
+/// square walls all add up, a round or diagonal room cancels out.
+fn square_directions<P: Copy>(points: &[P], xy: impl Fn(P) -> (f64, f64)) -> (f64, f64, f64) {
+    let mut sum = (0.0, 0.0, 0.0);
+    // Over SQUARE_SPAN points: a direction between neighbours 7 cm apart
+    // is mostly the range noise.
+    for w in points.windows(SQUARE_SPAN + 1) {
+        // Along one surface only (no jump to the next wall on the way).
+        if w.windows(2).any(|p| {
+            let (a, b) = (xy(p[0]), xy(p[1]));
+            let gap = (b.0 - a.0).hypot(b.1 - a.1);
+            !(gap > 1e-6 && gap <= SQUARE_MAX_GAP_M)
+        }) {
+            continue;
+        }
+        let (a, b) = (xy(w[0]), xy(w[SQUARE_SPAN]));
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let len = dx.hypot(dy);
+        let a4 = 4.0 * dy.atan2(dx);
+        sum = (sum.0 + len * a4.cos(), sum.1 + len * a4.sin(), sum.2 + len);
+    }
+    sum
+}
+
 /// Sorts by bound, highest first; equal bounds keep their order (stable), so the result is deterministic.
 fn sort_desc(c: &mut [Candidate]) {
     c.sort_by(|a, b| {
@@ -913,6 +1025,7 @@ mod tests {
             window_rad: 0.4,
             max_scans: 10,
             map_range_margin_m: MAP_RANGE_MARGIN,
+            square_after_blind_m: 3.0,
         }
     }
 
@@ -1113,6 +1226,98 @@ mod tests {
             600_000_000,
         );
         assert!((t.pose.x - 0.5).abs() < 0.03, "{:?}", t.pose);
+    }
+
+    /// Endpoints, in the robot frame at `pose`, of `walls` (segments in
+    /// the world) every 3 cm within 5.6 m.
+    fn walls_from(pose: &Pose2, walls: &[(f64, f64, f64, f64)]) -> Vec<(f64, f64)> {
+        let mut out = Vec::new();
+        for &(x0, y0, x1, y1) in walls {
+            let n = ((x1 - x0).hypot(y1 - y0) / 0.03).ceil() as usize;
+            for i in 0..=n {
+                let t = i as f64 / n as f64;
+                let p = pose.between(&Pose2::new(x0 + t * (x1 - x0), y0 + t * (y1 - y0), 0.0));
+                if p.x.hypot(p.y) < 5.6 {
+                    out.push((p.x, p.y));
+                }
+            }
+        }
+        out
+    }
+
+    /// Maps a corner at the start, then drives 4 m blind (no laser
+    /// point) along x while the odometry turns `drift_deg` that the robot
+    /// did not, and tracks the first scan of `seen` there, at the truth.
+    fn after_a_blind_stretch(drift_deg: f64, seen: &[(f64, f64, f64, f64)]) -> Tracked {
+        let mut fe = FrontEnd::new(params());
+        let start = Pose2::default();
+        // The corner of `scene_from`, its points in scan order.
+        let corner = [(4.0, -3.0, 4.0, 3.0), (4.0, 3.0, -2.0, 3.0)];
+        for i in 0..3 {
+            fe.track(
+                walls_from(&start, &corner).into_iter(),
+                &start,
+                i * 100_000_000,
+            );
+        }
+        let steps = 40;
+        let mut odom = start;
+        for i in 0..steps {
+            let turn = drift_deg.to_radians() / steps as f64;
+            odom = odom.compose(&Pose2::new(0.1, 0.0, turn));
+            let t = fe.track_heading(std::iter::empty(), &odom, (3 + i) * 100_000_000);
+            assert_eq!(t.squared_turn, 0.0, "blind: nothing to square");
+        }
+        let truth = Pose2::new(4.0, 0.0, 0.0);
+        fe.track(
+            walls_from(&truth, seen).into_iter(),
+            &odom,
+            (3 + steps) * 100_000_000,
+        )
+    }
+
+    /// A room 7 m on from the corner the local map holds: three square walls.
+    const ROOM: [(f64, f64, f64, f64); 3] = [
+        (9.0, -3.0, 9.0, 3.0),
+        (5.0, -2.5, 9.0, -2.5),
+        (5.0, 2.5, 9.0, 2.5),
+    ];
+
+    #[test]
+    fn after_a_blind_stretch_the_heading_is_turned_onto_the_square_walls() {
+        for drift in [-12.0, 7.0, 20.0] {
+            let t = after_a_blind_stretch(drift, &ROOM);
+            assert!(
+                (t.squared_turn.to_degrees() + drift).abs() < 1.0,
+                "odometry turned {drift}°, squared by {:.2}°",
+                t.squared_turn.to_degrees()
+            );
+            assert!(
+                t.pose.theta.to_degrees().abs() < 1.0,
+                "odometry turned {drift}°: heading {:.2}°",
+                t.pose.theta.to_degrees()
+            );
+        }
+    }
+
+    #[test]
+    fn a_round_hall_after_a_blind_stretch_is_left_to_the_match() {
+        let round: Vec<(f64, f64, f64, f64)> = (0..72)
+            .map(|i| {
+                let (a, b) = (
+                    i as f64 * 5f64.to_radians(),
+                    (i + 1) as f64 * 5f64.to_radians(),
+                );
+                (
+                    4.0 + 2.5 * a.cos(),
+                    2.5 * a.sin(),
+                    4.0 + 2.5 * b.cos(),
+                    2.5 * b.sin(),
+                )
+            })
+            .collect();
+        let t = after_a_blind_stretch(10.0, &round);
+        assert_eq!(t.squared_turn, 0.0);
     }
 
     #[test]

@@ -112,6 +112,10 @@ pub struct PipelineStats {
     pub blind_rad: f64,
     /// The longest blind stretch so far, m.
     pub longest_blind_m: f64,
+    /// Scans whose heading the front end turned onto the local map's
+    /// square walls after a blind stretch, and the last such turn, rad.
+    pub headings_squared: u64,
+    pub last_squared_turn: f64,
     /// Scans whose sweep was deskewed ([`RangeScan::deskew`]): the laser
     /// gave its time between beams and odometry reached 100 ms before.
     pub deskewed: u64,
@@ -170,6 +174,7 @@ impl SlamPipeline {
                     } else {
                         MAP_RANGE_MARGIN
                     },
+                    square_after_blind_m: cfg.square_after_blind_m,
                 })
             }),
             motion_filter: MotionFilter::new(MotionFilterParams::from_config(cfg)),
@@ -343,6 +348,10 @@ impl SlamPipeline {
                 } else {
                     fe.track_heading(laser, &odom, scan.stamp_ns)
                 };
+                if tracked.squared_turn != 0.0 {
+                    self.stats.headings_squared += 1;
+                    self.stats.last_squared_turn = tracked.squared_turn;
+                }
                 if tracked.score.is_none() && self.last_corrected.is_some() {
                     self.stats.frontend_fallbacks += 1;
                 }

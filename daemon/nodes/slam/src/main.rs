@@ -632,6 +632,7 @@ fn metrics(
     emit("heading_blind_m", stats.blind_m);
     emit("heading_blind_deg", stats.blind_rad.to_degrees());
     emit("heading_blind_longest_m", stats.longest_blind_m);
+    emit("heading_squared", stats.headings_squared as f64);
     // Zero on a laser without a time between beams: its sweeps stay bent.
     emit("scans_deskewed", stats.deskewed as f64);
     emit("maps_published", c.maps_published as f64);

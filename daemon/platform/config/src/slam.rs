@@ -306,6 +306,12 @@ slam_section! {
     frontend_window_m: f64 = (1.0, 1.0),
     /// Rotational search window of the front end around its prediction, ± rad.
     frontend_window_rad: f64 = (0.4, 0.4),
+    /// After this much travel on odometry's heading alone (m; the laser
+    /// blind in smoke, or unmatched), a scan the front end cannot match
+    /// turns its heading onto the local map's walls where both are clearly
+    /// square (within ± 45°); 0 never. For buildings built square; a round
+    /// or diagonal hall is left alone by itself.
+    square_after_blind_m: f64 = (3.0, 3.0),
     /// Health goes degraded while the heading has been odometry's alone
     /// (the laser blind or unmatched in the front end) for more than this
     /// travel, m; 0 never. Dead reckoning turns a map: the Scout's odometry
@@ -459,6 +465,12 @@ impl Validate for SlamSection {
             );
         }
         v.within(&k("frontend_window_m"), self.frontend_window_m, 0.0, 5.0);
+        v.within(
+            &k("square_after_blind_m"),
+            self.square_after_blind_m,
+            0.0,
+            1000.0,
+        );
         v.within(
             &k("frontend_window_rad"),
             self.frontend_window_rad,

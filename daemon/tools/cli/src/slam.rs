@@ -823,8 +823,10 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     );
     let _ = writeln!(
         report,
-        "heading            longest stretch on odometry alone (no laser match) {:.1} m",
-        stats.longest_blind_m
+        "heading            longest stretch on odometry alone (no laser match) {:.1} m; turned onto the square walls after a stretch: {} (last {:+.1}°)",
+        stats.longest_blind_m,
+        stats.headings_squared,
+        stats.last_squared_turn.to_degrees()
     );
     if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
         let s = g.stats();
