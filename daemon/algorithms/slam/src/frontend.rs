@@ -468,7 +468,7 @@ impl FrontEnd {
     /// After a blind stretch the heading is the odometry's, several degrees
     /// off (16° after 14.7 m on one seed of the dense-smoke trial), and the
     /// local map is the view from before it, metres back: the match finds
-    /// nothing to hold the heading against, or a wrong turn. Buildings are
+    /// nothing to hold the heading against. Buildings are
     /// mostly built square, so the turn (within ± 45°) that lays the
     /// scan's walls parallel or square to the local map's is the heading
     /// error, if both are clearly square; a round or diagonal hall is left
