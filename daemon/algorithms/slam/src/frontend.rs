@@ -178,9 +178,6 @@ pub struct FrontEnd {
     bootstrap_map: bool,
     /// Odometry travel since a match last gave the heading, m.
     blind_m: f64,
-    /// Scans whose heading was turned onto the walls' directions after a
-    /// blind stretch ([`Self::square_heading`]).
-    squared_headings: u64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -230,13 +227,7 @@ impl FrontEnd {
             degenerate_matches: 0,
             bootstrap_map: false,
             blind_m: 0.0,
-            squared_headings: 0,
         }
-    }
-
-    /// Scans whose heading was turned onto the walls' directions after a blind stretch.
-    pub fn squared_headings(&self) -> u64 {
-        self.squared_headings
     }
 
     /// The odometry frame jumped (the base was reset or reconnected): forget the
@@ -350,7 +341,6 @@ impl FrontEnd {
             self.blind_m = 0.0;
             if let Some(turn) = self.square_heading(&prediction) {
                 prediction.theta += turn;
-                self.squared_headings += 1;
                 squared_turn = turn;
             }
         }

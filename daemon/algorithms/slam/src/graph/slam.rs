@@ -1553,8 +1553,6 @@ mod tests {
         drive_legs(p, &[10.0, 6.0, 10.0, 6.0, 8.0], &[1, 2, 3])
     }
 
-    /// [`drive`] over the given legs, blind on the legs in `blind`; the
-    /// worst error is that of the last leg.
     /// The defaults, but a blind leg's heading drift stays: the test hall
     /// is square, and turning the heading onto its walls after a blind leg
     /// (`[slam] square_after_blind_m`) would take away the drift these
@@ -1566,6 +1564,8 @@ mod tests {
         }
     }
 
+    /// [`drive`] over the given legs, blind on the legs in `blind`; the
+    /// worst error is that of the last leg.
     fn drive_legs(p: GraphParams, legs: &[f64], blind: &[usize]) -> (GraphSlam, f64) {
         let (slam, worst, _) = drive_legs_with(
             GraphSlam::new(&drifting(), p),
