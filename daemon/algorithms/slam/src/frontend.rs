@@ -29,6 +29,7 @@
 //! Deterministic: no randomness, ties go to the first candidate in a fixed order.
 
 use crate::degeneracy::{DegeneracyParams, ScanConstraint};
+use crate::side_wall::{SideOf, SideWalls};
 use nalgebra::{Matrix3, Vector3};
 use smokenav_shared_types::Pose2;
 use std::collections::VecDeque;
@@ -89,6 +90,14 @@ const SQUARE_MIN_TURN: f64 = 0.01;
 const SQUARE_MAX_GAP_M: f64 = 0.15;
 /// A wall direction is taken over this many consecutive point gaps.
 const SQUARE_SPAN: usize = 4;
+/// Largest angle between a side wall (from the sonar) and the nearest of
+/// the local map's square directions for the wall to be taken as one of
+/// them, rad.
+const SIDE_WALL_MAX_SNAP: f64 = 0.14;
+/// Share of the difference between the side wall's heading and the
+/// prediction a scan takes: the readings are noisy, the odometry's turn
+/// between two scans is not.
+const SIDE_WALL_GAIN: f64 = 0.1;
 
 #[derive(Debug, Clone)]
 pub struct FrontEndParams {
@@ -104,6 +113,10 @@ pub struct FrontEndParams {
     /// laser points that matches nothing turns its heading onto the local
     /// map's square walls ([`FrontEnd::square_heading`]); 0 never.
     pub square_after_blind_m: f64,
+    /// `[slam] side_wall_window_m`: while nothing matches, a side sonar's
+    /// readings over this much travel along a straight wall give the
+    /// heading ([`FrontEnd::side_wall_heading`]); 0 never.
+    pub side_wall_window_m: f64,
 }
 
 /// What the front end made of one scan.
@@ -124,6 +137,9 @@ pub struct Tracked {
     /// The turn (rad) this scan's heading got from the walls' directions
     /// after a blind stretch ([`FrontEnd::square_heading`]), 0 if none.
     pub squared_turn: f64,
+    /// The turn (rad) this scan's heading got from a side sonar running
+    /// along a wall ([`FrontEnd::side_wall_heading`]), 0 if none.
+    pub side_turn: f64,
 }
 
 /// σ of an endpoint's distance to its surface the matcher reaches, in cells
@@ -178,6 +194,9 @@ pub struct FrontEnd {
     bootstrap_map: bool,
     /// Odometry travel since a match last gave the heading, m.
     blind_m: f64,
+    /// The side transducers' readings along the way ([`Self::set_side_ranges`]).
+    side_walls: SideWalls,
+    side_ranges: [Option<f64>; 2],
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -190,6 +209,7 @@ struct Candidate {
 
 impl FrontEnd {
     pub fn new(p: FrontEndParams) -> Self {
+        let side_walls = SideWalls::new(p.side_wall_window_m);
         let mut blur = Vec::new();
         for dy in -BLUR_RADIUS..=BLUR_RADIUS {
             for dx in -BLUR_RADIUS..=BLUR_RADIUS {
@@ -227,6 +247,8 @@ impl FrontEnd {
             degenerate_matches: 0,
             bootstrap_map: false,
             blind_m: 0.0,
+            side_walls,
+            side_ranges: [None; 2],
         }
     }
 
@@ -237,6 +259,13 @@ impl FrontEnd {
         self.last_odom = None;
         self.fresh = None;
         self.fresh_before = None;
+        self.side_walls.reset();
+    }
+
+    /// The next scan's side transducers' ranges, m (left, right: the
+    /// transducers at ±90°; `None` for no echo or no such transducer).
+    pub fn set_side_ranges(&mut self, ranges: [Option<f64>; 2]) {
+        self.side_ranges = ranges;
     }
 
     /// Tracks one scan. `endpoints` are the scan's obstacle endpoints in the
@@ -281,6 +310,8 @@ impl FrontEnd {
     ) -> Tracked {
         self.decimate(endpoints);
         let stale = self.last_odom.is_some_and(|o| o == *odom);
+        let side_ranges = std::mem::take(&mut self.side_ranges);
+        self.side_walls.observe(odom, side_ranges);
         let Some(last_pose) = self.last_pose else {
             let pose = *odom;
             self.bootstrap_map = heading_only;
@@ -292,6 +323,7 @@ impl FrontEnd {
                 degenerate_directions: 3,
                 covariance: Matrix3::zeros(),
                 squared_turn: 0.0,
+                side_turn: 0.0,
             };
         };
         let mut prediction = self.predict(&last_pose, odom, stamp_ns, stale);
@@ -344,6 +376,17 @@ impl FrontEnd {
                 squared_turn = turn;
             }
         }
+        // Nothing matched and a side sonar runs along a straight wall: the
+        // heading from the angle to it.
+        let mut side_turn = 0.0;
+        if found.is_none()
+            && squared_turn == 0.0
+            && let Some(h) = self.side_wall_heading(&prediction)
+        {
+            side_turn =
+                SIDE_WALL_GAIN * smokenav_shared_types::normalize_angle(h - prediction.theta);
+            prediction.theta += side_turn;
+        }
         let (pose, score, degenerate, covariance) = match found {
             Some((matched, score)) if heading_match => {
                 let c = ScanConstraint::from_points(&self.points);
@@ -395,6 +438,7 @@ impl FrontEnd {
             degenerate_directions: degenerate,
             covariance,
             squared_turn,
+            side_turn,
         }
     }
 
@@ -464,27 +508,52 @@ impl FrontEnd {
     /// error, if both are clearly square; a round or diagonal hall is left
     /// to the match.
     fn square_heading(&self, prediction: &Pose2) -> Option<f64> {
+        let map_dir = self.map_square_direction()?;
+        let (sc, ss, sw) = square_directions(&self.points, |p| p);
+        if sw <= 0.0 || sc.hypot(ss) / sw < SQUARE_MIN_PEAK {
+            return None;
+        }
+        // Directions in the robot frame, turned by the predicted heading.
+        let scan_dir = ss.atan2(sc) / 4.0 + prediction.theta;
+        let mut turn = map_dir - scan_dir;
+        let quarter = std::f64::consts::FRAC_PI_2;
+        turn -= quarter * (turn / quarter).round();
+        (turn.abs() >= SQUARE_MIN_TURN).then_some(turn)
+    }
+
+    /// The local map's wall direction modulo 90°, rad, if it is clearly square.
+    fn map_square_direction(&self) -> Option<f64> {
         let mut sum = (0.0, 0.0, 0.0);
         for scan in &self.history {
             let d = square_directions(scan, |(x, y)| (f64::from(x), f64::from(y)));
             sum = (sum.0 + d.0, sum.1 + d.1, sum.2 + d.2);
         }
         let (mc, ms, mw) = sum;
-        let (sc, ss, sw) = square_directions(&self.points, |p| p);
-        if mw <= 0.0 || sw <= 0.0 {
-            return None;
-        }
-        let (map_peak, scan_peak) = (mc.hypot(ms) / mw, sc.hypot(ss) / sw);
-        if map_peak < SQUARE_MIN_PEAK || scan_peak < SQUARE_MIN_PEAK {
-            return None;
-        }
-        // Directions in the robot frame, turned by the predicted heading.
-        let map_dir = ms.atan2(mc) / 4.0;
-        let scan_dir = ss.atan2(sc) / 4.0 + prediction.theta;
-        let mut turn = map_dir - scan_dir;
+        (mw > 0.0 && mc.hypot(ms) / mw >= SQUARE_MIN_PEAK).then(|| ms.atan2(mc) / 4.0)
+    }
+
+    /// The heading a side sonar gives: the robot's angle to the straight
+    /// wall beside it ([`SideWalls`]) plus the wall's direction, the one of
+    /// the local map's square directions nearest to where the prediction
+    /// puts it (averaged over both sides when both run along a wall).
+    fn side_wall_heading(&self, prediction: &Pose2) -> Option<f64> {
+        let map_dir = self.map_square_direction()?;
         let quarter = std::f64::consts::FRAC_PI_2;
-        turn -= quarter * (turn / quarter).round();
-        (turn.abs() >= SQUARE_MIN_TURN).then_some(turn)
+        let (mut sum, mut n) = (0.0, 0.0);
+        for side in [SideOf::Left, SideOf::Right] {
+            let Some(psi) = self.side_walls.relative_heading(side) else {
+                continue;
+            };
+            let wall = prediction.theta - psi;
+            let mut off = wall - map_dir;
+            off -= quarter * (off / quarter).round();
+            if off.abs() <= SIDE_WALL_MAX_SNAP {
+                // The heading the wall says, as a turn from the prediction.
+                sum += -off;
+                n += 1.0;
+            }
+        }
+        (n > 0.0).then(|| prediction.theta + sum / n)
     }
 
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
@@ -1016,6 +1085,7 @@ mod tests {
             max_scans: 10,
             map_range_margin_m: MAP_RANGE_MARGIN,
             square_after_blind_m: 3.0,
+            side_wall_window_m: 1.5,
         }
     }
 
@@ -1286,6 +1356,50 @@ mod tests {
                 t.pose.theta.to_degrees().abs() < 1.0,
                 "odometry turned {drift}°: heading {:.2}°",
                 t.pose.theta.to_degrees()
+            );
+        }
+    }
+
+    /// Maps a corner, then drives 4 m blind along x with a wall 1.2 m to
+    /// the left that the left sonar reads (in whole inches, as the Scout's
+    /// ring does), the odometry turning `drift_deg` the robot did not: the
+    /// heading at the end.
+    fn blind_beside_a_wall(drift_deg: f64, window_m: f64) -> f64 {
+        let mut fe = FrontEnd::new(FrontEndParams {
+            side_wall_window_m: window_m,
+            ..params()
+        });
+        let start = Pose2::default();
+        let corner = [(4.0, -3.0, 4.0, 3.0), (4.0, 3.0, -2.0, 3.0)];
+        for i in 0..3 {
+            fe.track(
+                walls_from(&start, &corner).into_iter(),
+                &start,
+                i * 100_000_000,
+            );
+        }
+        let inch: f64 = 0.0254;
+        let steps = 40;
+        let mut odom = start;
+        let mut heading = 0.0;
+        for i in 0..steps {
+            odom = odom.compose(&Pose2::new(0.1, 0.0, drift_deg.to_radians() / steps as f64));
+            fe.set_side_ranges([Some((1.2 / inch).round() * inch), None]);
+            let t = fe.track_heading(std::iter::empty(), &odom, (3 + i) * 100_000_000);
+            heading = t.pose.theta;
+        }
+        heading.to_degrees()
+    }
+
+    #[test]
+    fn a_side_sonar_along_a_wall_holds_the_heading_while_blind() {
+        for drift in [-6.0, 6.0] {
+            let off = blind_beside_a_wall(drift, 0.0);
+            assert!((off - drift).abs() < 0.1, "without: {off:.2}°");
+            let held = blind_beside_a_wall(drift, 1.5);
+            assert!(
+                held.abs() < drift.abs() / 3.0,
+                "odometry turned {drift}°: heading {held:.2}°"
             );
         }
     }

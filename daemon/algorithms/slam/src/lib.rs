@@ -40,6 +40,7 @@ pub mod pipeline;
 pub mod projected;
 pub mod rbpf;
 pub mod scan;
+pub mod side_wall;
 #[cfg(test)]
 mod testkit;
 pub mod vote;

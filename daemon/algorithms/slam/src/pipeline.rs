@@ -35,6 +35,7 @@ use crate::motion_filter::{MotionFilter, MotionFilterParams};
 use crate::noise::LaserNoiseModel;
 use crate::odom_buffer::{OdomAt, OdomBuffer};
 use crate::scan::{BeamKind, Endpoint, EndpointLimits, RangeScan};
+use crate::side_wall::SideSonars;
 use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::{FusedScan, LaserScan, Odometry, OdometryFlags};
@@ -116,6 +117,9 @@ pub struct PipelineStats {
     /// square walls after a blind stretch, and the last such turn, rad.
     pub headings_squared: u64,
     pub last_squared_turn: f64,
+    /// Scans whose heading a side sonar running along a wall corrected
+    /// while nothing matched ([`crate::side_wall`]).
+    pub side_wall_headings: u64,
     /// Scans whose sweep was deskewed ([`RangeScan::deskew`]): the laser
     /// gave its time between beams and odometry reached 100 ms before.
     pub deskewed: u64,
@@ -146,6 +150,8 @@ pub struct SlamPipeline {
     last_update: Option<SlamUpdate>,
     /// [`Self::with_footprint`].
     footprint_m: f64,
+    /// [`Self::with_side_sonars`].
+    side_sonars: SideSonars,
 }
 
 impl SlamPipeline {
@@ -175,6 +181,7 @@ impl SlamPipeline {
                         MAP_RANGE_MARGIN
                     },
                     square_after_blind_m: cfg.square_after_blind_m,
+                    side_wall_window_m: cfg.side_wall_window_m,
                 })
             }),
             motion_filter: MotionFilter::new(MotionFilterParams::from_config(cfg)),
@@ -188,6 +195,7 @@ impl SlamPipeline {
             stats: PipelineStats::default(),
             last_update: None,
             footprint_m: 0.0,
+            side_sonars: SideSonars::default(),
         }
     }
 
@@ -343,11 +351,13 @@ impl SlamPipeline {
                     .iter()
                     .filter(|e| e.kind == BeamKind::Laser)
                     .map(|e| (e.x, e.y));
+                fe.set_side_ranges(self.side_sonars.ranges(&scan.sonar));
                 let tracked = if trusted {
                     fe.track(laser, &odom, scan.stamp_ns)
                 } else {
                     fe.track_heading(laser, &odom, scan.stamp_ns)
                 };
+                self.stats.side_wall_headings += u64::from(tracked.side_turn != 0.0);
                 if tracked.squared_turn != 0.0 {
                     self.stats.headings_squared += 1;
                     self.stats.last_squared_turn = tracked.squared_turn;
@@ -446,6 +456,13 @@ impl SlamPipeline {
     /// see [`vote_aware_footprint`]).
     pub fn with_footprint(mut self, radius_m: f64) -> Self {
         self.footprint_m = radius_m.max(0.0);
+        self
+    }
+
+    /// The ring's side transducers, whose readings hold the front end's
+    /// heading along a wall while the laser is blind ([`crate::side_wall`]).
+    pub fn with_side_sonars(mut self, sonars: SideSonars) -> Self {
+        self.side_sonars = sonars;
         self
     }
 

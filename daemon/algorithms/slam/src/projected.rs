@@ -59,6 +59,14 @@ impl SensorRig {
         }
     }
 
+    /// The ring's side transducers ([`crate::side_wall`]).
+    pub fn side_sonars(&self) -> crate::side_wall::SideSonars {
+        crate::side_wall::SideSonars::from_axes(
+            self.rig.sonars.iter().map(|(i, m)| (*i, m.pose.theta)),
+            self.rig.sonar_range_m[1],
+        )
+    }
+
     /// A laser at `mount` (0.40 m up) and no sonar: what is left without a profile.
     fn laser_only(mount: Pose2) -> Self {
         let heights = Heights::default();

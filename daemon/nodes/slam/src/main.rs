@@ -354,7 +354,8 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         )
     }
     .with_sensor_pose(mount)
-    .with_footprint(vote_aware_footprint(&cfg, footprint_m));
+    .with_footprint(vote_aware_footprint(&cfg, footprint_m))
+    .with_side_sonars(SensorRig::from_config(&p.config).side_sonars());
     let mut member_maps = Vec::new();
     if cfg.backend == SlamBackendKind::Vote {
         for m in &cfg.vote.members {
@@ -633,6 +634,7 @@ fn metrics(
     emit("heading_blind_deg", stats.blind_rad.to_degrees());
     emit("heading_blind_longest_m", stats.longest_blind_m);
     emit("heading_squared", stats.headings_squared as f64);
+    emit("heading_side_wall", stats.side_wall_headings as f64);
     // Zero on a laser without a time between beams: its sweeps stay bent.
     emit("scans_deskewed", stats.deskewed as f64);
     emit("maps_published", c.maps_published as f64);

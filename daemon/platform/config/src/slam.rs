@@ -312,6 +312,11 @@ slam_section! {
     /// square (within ± 45°); 0 never. For buildings built square; a round
     /// or diagonal hall is left alone by itself.
     square_after_blind_m: f64 = (3.0, 3.0),
+    /// While no laser match gives the heading (smoke), a sonar at ±90°
+    /// whose readings over this much travel lie on a straight wall gives
+    /// it: the robot's angle to the wall from how the range changes, the
+    /// wall's direction the local map's nearest square one; m, 0 never.
+    side_wall_window_m: f64 = (1.5, 1.5),
     /// Health goes degraded while the heading has been odometry's alone
     /// (the laser blind or unmatched in the front end) for more than this
     /// travel, m; 0 never. Dead reckoning turns a map: the Scout's odometry
@@ -471,6 +476,7 @@ impl Validate for SlamSection {
             0.0,
             1000.0,
         );
+        v.within(&k("side_wall_window_m"), self.side_wall_window_m, 0.0, 10.0);
         v.within(
             &k("frontend_window_rad"),
             self.frontend_window_rad,

@@ -637,7 +637,13 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             )
         }
     }
-    .with_footprint(own_footprint_m);
+    .with_footprint(own_footprint_m)
+    .with_side_sonars(
+        robot
+            .as_ref()
+            .map(|r| SensorRig::from_config(r).side_sonars())
+            .unwrap_or_default(),
+    );
     let truth_map = match &args.truth_map {
         Some(p) => Some(
             smokenav_platform_map::load_map_server(p)
@@ -823,10 +829,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     );
     let _ = writeln!(
         report,
-        "heading            longest stretch on odometry alone (no laser match) {:.1} m; turned onto the square walls after a stretch: {} (last {:+.1}°)",
+        "heading            longest stretch on odometry alone (no laser match) {:.1} m; turned onto the square walls after a stretch: {} (last {:+.1}°); held by a side sonar along a wall: {} scans",
         stats.longest_blind_m,
         stats.headings_squared,
-        stats.last_squared_turn.to_degrees()
+        stats.last_squared_turn.to_degrees(),
+        stats.side_wall_headings
     );
     if let Some(g) = slam.backend().as_any().downcast_ref::<GraphSlam>() {
         let s = g.stats();

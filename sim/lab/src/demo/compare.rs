@@ -461,7 +461,8 @@ pub(crate) fn replay_slam(
             ..BackendOptions::default()
         },
     )
-    .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()));
+    .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()))
+    .with_side_sonars(SensorRig::from_config(profile).side_sonars());
     // Odometry ahead of a scan received at the same time, as the process drains it first.
     let mut received: Vec<(u64, Received<'_>)> = log
         .order

@@ -553,6 +553,8 @@ impl GraphSlam {
                 max_scans: cfg.frontend_scans as usize,
                 map_range_margin_m: MAP_RANGE_MARGIN,
                 square_after_blind_m: cfg.square_after_blind_m,
+                // Its scans come without the ring's readings.
+                side_wall_window_m: 0.0,
             })
         };
         // Behind the pipeline's front end the odometry is corrected already:

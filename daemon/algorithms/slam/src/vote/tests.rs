@@ -217,6 +217,7 @@ fn the_front_end_match_is_forwarded_to_the_graph_member() {
                     degenerate_directions: 0,
                     covariance: Matrix3::from_diagonal_element(1e-4),
                     squared_turn: 0.0,
+                    side_turn: 0.0,
                 });
             }
             v.process(

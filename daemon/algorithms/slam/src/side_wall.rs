@@ -1,0 +1,290 @@
+//! The robot's heading relative to a wall beside it, from the sonar that
+//! faces it.
+//!
+//! While smoke blinds the laser, the heading is the odometry's, and wheel
+//! slip turns it by a degree or more per metre, randomly (the dense-smoke
+//! trial's base: ±5° within 4 m). A transducer at ±90° facing a straight
+//! wall reads its perpendicular distance (the wall's normal lies in its
+//! cone), and that distance changes with the distance driven as the sine
+//! of the angle between the robot and the wall, whatever the odometry
+//! turned meanwhile. On the dense-smoke trial's Scout ring (one reading per
+//! transducer a second, in whole inches) the angle fitted over 1.5 m is
+//! 1.1° RMS from the truth. The wall's own direction is the square
+//! building's (see [`crate::frontend`]).
+
+use smokenav_shared_types::Pose2;
+use std::collections::VecDeque;
+
+/// Shortest travel the readings must span, as a share of the window.
+const MIN_SPAN_SHARE: f64 = 2.0 / 3.0;
+/// Fewest distinct readings in the window.
+const MIN_SAMPLES: usize = 5;
+/// Largest RMS distance of the readings from the fitted line: more is a
+/// door, a corner or a box passing, not one straight wall, m.
+const MAX_RMS_M: f64 = 0.012;
+/// Largest angle between robot and wall taken as driving along it, rad.
+const MAX_RELATIVE_RAD: f64 = 0.14;
+/// Largest turn of the odometry's heading within the window, rad: the
+/// robot drives along the wall, it does not turn off it.
+const MAX_TURN_RAD: f64 = 0.12;
+/// Readings kept per side (a scan's each; 1.5 m at 10 Hz and 0.3 m/s is 50).
+const CAPACITY: usize = 128;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Sample {
+    travel_m: f64,
+    range_m: f64,
+    heading: f64,
+}
+
+#[derive(Debug, Clone, Default)]
+struct Side {
+    samples: VecDeque<Sample>,
+}
+
+/// Tracks the two side transducers' readings against the distance driven.
+#[derive(Debug, Clone, Default)]
+pub struct SideWalls {
+    /// Travel over which a side's readings are fitted, m.
+    window_m: f64,
+    sides: [Side; 2],
+    travel_m: f64,
+    last_odom: Option<Pose2>,
+}
+
+/// Which side of the robot a transducer faces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SideOf {
+    Left = 0,
+    Right = 1,
+}
+
+impl SideWalls {
+    /// Fits the readings of the last `window_m` of travel (`[slam]
+    /// side_wall_window_m`).
+    pub fn new(window_m: f64) -> Self {
+        Self {
+            window_m,
+            ..Self::default()
+        }
+    }
+
+    /// Forgets everything (an odometry reset).
+    pub fn reset(&mut self) {
+        *self = Self::new(self.window_m);
+    }
+
+    /// One scan's odometry and its side transducers' ranges (left, right;
+    /// `None` where the transducer heard nothing or there is none). A
+    /// reading the ring repeats is taken again: a ring that reports whole
+    /// inches (the Scout) repeats a value it measured anew, and the fit
+    /// needs those.
+    pub fn observe(&mut self, odom: &Pose2, ranges: [Option<f64>; 2]) {
+        if let Some(last) = self.last_odom.replace(*odom) {
+            self.travel_m += last.between(odom).translation_norm();
+        }
+        for (side, range) in self.sides.iter_mut().zip(ranges) {
+            let Some(r) = range.filter(|r| r.is_finite() && *r > 0.0) else {
+                side.samples.clear();
+                continue;
+            };
+            if side.samples.len() >= CAPACITY {
+                side.samples.pop_front();
+            }
+            side.samples.push_back(Sample {
+                travel_m: self.travel_m,
+                range_m: r,
+                heading: odom.theta,
+            });
+            while side
+                .samples
+                .front()
+                .is_some_and(|s| self.travel_m - s.travel_m > self.window_m)
+            {
+                side.samples.pop_front();
+            }
+        }
+    }
+
+    /// The robot's heading minus the wall's direction (the wall taken along
+    /// the way the robot drives), rad, from `side`'s readings, if they lie
+    /// on one straight wall the robot drives along.
+    pub fn relative_heading(&self, side: SideOf) -> Option<f64> {
+        let s = &self.sides[side as usize].samples;
+        let (first, last) = (s.front()?, s.back()?);
+        if self.window_m <= 0.0
+            || s.len() < MIN_SAMPLES
+            || last.travel_m - first.travel_m < MIN_SPAN_SHARE * self.window_m
+        {
+            return None;
+        }
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for x in s {
+            let d = smokenav_shared_types::normalize_angle(x.heading - last.heading);
+            lo = lo.min(d);
+            hi = hi.max(d);
+        }
+        if hi - lo > MAX_TURN_RAD {
+            return None;
+        }
+        // Least squares range = a + k · travel.
+        let n = s.len() as f64;
+        let mt = s.iter().map(|x| x.travel_m).sum::<f64>() / n;
+        let mr = s.iter().map(|x| x.range_m).sum::<f64>() / n;
+        let (mut stt, mut str) = (0.0, 0.0);
+        for x in s {
+            stt += (x.travel_m - mt).powi(2);
+            str += (x.travel_m - mt) * (x.range_m - mr);
+        }
+        let k = str / stt;
+        let rss: f64 = s
+            .iter()
+            .map(|x| (x.range_m - mr - k * (x.travel_m - mt)).powi(2))
+            .sum();
+        if (rss / n).sqrt() > MAX_RMS_M || k.abs() >= 1.0 {
+            return None;
+        }
+        // Turned towards a wall on the left, the robot closes on it.
+        let psi = match side {
+            SideOf::Left => -k.asin(),
+            SideOf::Right => k.asin(),
+        };
+        (psi.abs() <= MAX_RELATIVE_RAD).then_some(psi)
+    }
+}
+
+/// Which of the ring's transducers face the sides (their axes within
+/// [`SIDE_AXIS_TOLERANCE_RAD`] of ±90°), and the range beyond which a
+/// reading is no echo.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SideSonars {
+    pub left: Option<u8>,
+    pub right: Option<u8>,
+    pub max_range_m: f64,
+}
+
+/// How far from ±90° a side transducer's axis may point, rad.
+pub const SIDE_AXIS_TOLERANCE_RAD: f64 = 0.09;
+
+/// Echoes further than this say little about a wall's angle (±1 % range
+/// noise, and the cone's footprint spans more than a door), m.
+pub const SIDE_MAX_RANGE_M: f64 = 3.0;
+
+impl SideSonars {
+    /// From the ring's `(index, axis direction in the robot frame, rad)`.
+    pub fn from_axes(axes: impl IntoIterator<Item = (u8, f64)>, max_range_m: f64) -> Self {
+        let mut out = Self {
+            max_range_m: max_range_m.min(SIDE_MAX_RANGE_M),
+            ..Self::default()
+        };
+        let half = std::f64::consts::FRAC_PI_2;
+        for (index, yaw) in axes {
+            let yaw = smokenav_shared_types::normalize_angle(yaw);
+            if (yaw - half).abs() <= SIDE_AXIS_TOLERANCE_RAD && out.left.is_none() {
+                out.left = Some(index);
+            } else if (yaw + half).abs() <= SIDE_AXIS_TOLERANCE_RAD && out.right.is_none() {
+                out.right = Some(index);
+            }
+        }
+        out
+    }
+
+    /// The side transducers' ranges among a scan's `(index, range)` readings.
+    pub fn ranges(&self, readings: &[(u8, f64)]) -> [Option<f64>; 2] {
+        let pick = |index: Option<u8>| {
+            let index = index?;
+            readings
+                .iter()
+                .find(|&&(i, _)| i == index)
+                .map(|&(_, r)| r)
+                .filter(|r| r.is_finite() && *r > 0.0 && *r < self.max_range_m)
+        };
+        [pick(self.left), pick(self.right)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Drives `metres` in 3 cm steps at true heading `psi` to a wall along
+    /// x on the left at y = 1.2 (and one on the right at y = −0.8), the
+    /// odometry's heading wandering by `jitter` rad.
+    fn drive(psi: f64, metres: f64, jitter: f64) -> SideWalls {
+        let mut w = SideWalls::new(0.8);
+        let (mut x, mut y) = (0.0, 0.0);
+        let steps = (metres / 0.03) as usize;
+        for i in 0..steps {
+            x += 0.03 * psi.cos();
+            y += 0.03 * psi.sin();
+            let wobble = jitter * (i as f64 * 0.7).sin();
+            let odom = Pose2::new(x, y, psi + wobble);
+            // The perpendicular distances (the normal is in the cones).
+            w.observe(&odom, [Some(1.2 - y), Some(y + 0.8)]);
+        }
+        w
+    }
+
+    #[test]
+    fn the_angle_to_a_wall_alongside_comes_from_the_range_change() {
+        for psi in [-0.08_f64, -0.02, 0.0, 0.05, 0.1] {
+            let w = drive(psi, 1.0, 0.03);
+            for side in [SideOf::Left, SideOf::Right] {
+                let got = w.relative_heading(side).expect("a straight wall");
+                assert!((got - psi).abs() < 1e-6, "{side:?} {psi}: {got}");
+            }
+        }
+    }
+
+    #[test]
+    fn too_short_a_stretch_or_a_broken_wall_says_nothing() {
+        assert_eq!(drive(0.05, 0.3, 0.0).relative_heading(SideOf::Left), None);
+        let mut w = SideWalls::new(0.8);
+        for i in 0..40 {
+            let x = 0.03 * f64::from(i);
+            // A door: 0.4 m deeper between 0.4 and 0.8 m.
+            let r = if (0.4..0.8).contains(&x) { 1.6 } else { 1.2 };
+            w.observe(&Pose2::new(x, 0.0, 0.0), [Some(r), None]);
+        }
+        assert_eq!(w.relative_heading(SideOf::Left), None);
+        assert_eq!(w.relative_heading(SideOf::Right), None);
+    }
+
+    #[test]
+    fn turning_off_the_wall_says_nothing() {
+        let mut w = SideWalls::new(0.8);
+        let mut th: f64 = 0.0;
+        let (mut x, mut y) = (0.0, 0.0);
+        for _ in 0..30 {
+            th += 0.02;
+            x += 0.03 * th.cos();
+            y += 0.03 * th.sin();
+            w.observe(&Pose2::new(x, y, th), [Some(1.2 - y), None]);
+        }
+        assert_eq!(w.relative_heading(SideOf::Left), None);
+    }
+
+    #[test]
+    fn the_side_transducers_are_those_facing_left_and_right() {
+        // The Pioneer's front ring, then its rear ring (both have ±90°).
+        let pioneer = [
+            90.0, 50.0, 30.0, 10.0, -10.0, -30.0, -50.0, -90.0, -90.0, -130.0, 90.0_f64,
+        ];
+        let s = SideSonars::from_axes(
+            pioneer
+                .iter()
+                .enumerate()
+                .map(|(i, d)| (i as u8, d.to_radians())),
+            5.0,
+        );
+        assert_eq!(
+            (s.left, s.right, s.max_range_m),
+            (Some(0), Some(7), SIDE_MAX_RANGE_M)
+        );
+        // A saturated or far reading is no echo; a missing transducer none.
+        assert_eq!(s.ranges(&[(0, 1.2), (7, 4.9)]), [Some(1.2), None]);
+        assert_eq!(s.ranges(&[(3, 1.2)]), [None, None]);
+        let none = SideSonars::from_axes([(0, 0.0), (1, 0.6)], 5.0);
+        assert_eq!((none.left, none.right), (None, None));
+    }
+}
