@@ -98,6 +98,9 @@ const SIDE_WALL_MAX_SNAP: f64 = 0.14;
 /// prediction a scan takes: the readings are noisy, the odometry's turn
 /// between two scans is not.
 const SIDE_WALL_GAIN: f64 = 0.1;
+/// Largest shift towards or away from a side wall one scan's correction
+/// is computed from, m (more is not drift along 1.5 m).
+const SIDE_WALL_MAX_SHIFT_M: f64 = 0.3;
 
 #[derive(Debug, Clone)]
 pub struct FrontEndParams {
@@ -115,7 +118,7 @@ pub struct FrontEndParams {
     pub square_after_blind_m: f64,
     /// `[slam] side_wall_window_m`: while nothing matches, a side sonar's
     /// readings over this much travel along a straight wall give the
-    /// heading ([`FrontEnd::side_wall_heading`]); 0 never.
+    /// heading ([`FrontEnd::side_wall_correction`]); 0 never.
     pub side_wall_window_m: f64,
 }
 
@@ -138,7 +141,7 @@ pub struct Tracked {
     /// after a blind stretch ([`FrontEnd::square_heading`]), 0 if none.
     pub squared_turn: f64,
     /// The turn (rad) this scan's heading got from a side sonar running
-    /// along a wall ([`FrontEnd::side_wall_heading`]), 0 if none.
+    /// along a wall ([`FrontEnd::side_wall_correction`]), 0 if none.
     pub side_turn: f64,
 }
 
@@ -381,8 +384,10 @@ impl FrontEnd {
         let mut side_turn = 0.0;
         if found.is_none()
             && squared_turn == 0.0
-            && let Some(h) = self.side_wall_heading(&prediction)
+            && let Some((h, shift)) = self.side_wall_correction(&prediction)
         {
+            prediction.x += SIDE_WALL_GAIN * shift.0;
+            prediction.y += SIDE_WALL_GAIN * shift.1;
             side_turn =
                 SIDE_WALL_GAIN * smokenav_shared_types::normalize_angle(h - prediction.theta);
             prediction.theta += side_turn;
@@ -532,28 +537,46 @@ impl FrontEnd {
         (mw > 0.0 && mc.hypot(ms) / mw >= SQUARE_MIN_PEAK).then(|| ms.atan2(mc) / 4.0)
     }
 
-    /// The heading a side sonar gives: the robot's angle to the straight
-    /// wall beside it ([`SideWalls`]) plus the wall's direction, the one of
-    /// the local map's square directions nearest to where the prediction
-    /// puts it (averaged over both sides when both run along a wall).
-    fn side_wall_heading(&self, prediction: &Pose2) -> Option<f64> {
+    /// What a side sonar gives ([`SideWalls`]): the heading, the robot's
+    /// angle to the straight wall beside it plus the wall's direction (the
+    /// one of the local map's square directions nearest to where the
+    /// prediction puts it), and a shift towards or away from the wall (m,
+    /// map frame): the odometry's heading error made the predicted path
+    /// close on the wall more or less than the readings did since the
+    /// window's first one, and the fit knows that much of the drift only
+    /// once it spans the window. Averaged over both sides when both run
+    /// along a wall.
+    fn side_wall_correction(&self, prediction: &Pose2) -> Option<(f64, (f64, f64))> {
         let map_dir = self.map_square_direction()?;
         let quarter = std::f64::consts::FRAC_PI_2;
-        let (mut sum, mut n) = (0.0, 0.0);
+        let (mut turn, mut shift, mut n) = (0.0, (0.0, 0.0), 0.0);
         for side in [SideOf::Left, SideOf::Right] {
-            let Some(psi) = self.side_walls.relative_heading(side) else {
+            let Some(fit) = self.side_walls.fit(side) else {
                 continue;
             };
-            let wall = prediction.theta - psi;
+            let wall = prediction.theta - fit.relative_heading;
             let mut off = wall - map_dir;
             off -= quarter * (off / quarter).round();
-            if off.abs() <= SIDE_WALL_MAX_SNAP {
-                // The heading the wall says, as a turn from the prediction.
-                sum += -off;
-                n += 1.0;
+            if off.abs() > SIDE_WALL_MAX_SNAP {
+                continue;
+            }
+            turn -= off;
+            n += 1.0;
+            // Unit normal from the robot towards this side's wall.
+            let (s, c) = (wall - off).sin_cos();
+            let normal = match side {
+                SideOf::Left => (-s, c),
+                SideOf::Right => (s, -c),
+            };
+            if let Some(p0) = fit.first_pose {
+                let closed = normal.0 * (prediction.x - p0.x) + normal.1 * (prediction.y - p0.y);
+                let e =
+                    (fit.closed_m - closed).clamp(-SIDE_WALL_MAX_SHIFT_M, SIDE_WALL_MAX_SHIFT_M);
+                shift.0 += normal.0 * e;
+                shift.1 += normal.1 * e;
             }
         }
-        (n > 0.0).then(|| prediction.theta + sum / n)
+        (n > 0.0).then(|| (prediction.theta + turn / n, (shift.0 / n, shift.1 / n)))
     }
 
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
@@ -580,6 +603,7 @@ impl FrontEnd {
 
     /// Takes `pose` as the scan's; `into_map`: its points join the local map.
     fn accept(&mut self, pose: Pose2, odom: &Pose2, stamp_ns: u64, stale: bool, into_map: bool) {
+        self.side_walls.annotate(pose);
         if !stale {
             self.fresh_before = self.fresh;
             self.fresh = Some(Fresh {
@@ -1363,8 +1387,8 @@ mod tests {
     /// Maps a corner, then drives 4 m blind along x with a wall 1.2 m to
     /// the left that the left sonar reads (in whole inches, as the Scout's
     /// ring does), the odometry turning `drift_deg` the robot did not: the
-    /// heading at the end.
-    fn blind_beside_a_wall(drift_deg: f64, window_m: f64) -> f64 {
+    /// pose at the end (the truth: (4, 0, 0)).
+    fn blind_beside_a_wall(drift_deg: f64, window_m: f64) -> Pose2 {
         let mut fe = FrontEnd::new(FrontEndParams {
             side_wall_window_m: window_m,
             ..params()
@@ -1381,25 +1405,32 @@ mod tests {
         let inch: f64 = 0.0254;
         let steps = 40;
         let mut odom = start;
-        let mut heading = 0.0;
+        let mut pose = start;
         for i in 0..steps {
             odom = odom.compose(&Pose2::new(0.1, 0.0, drift_deg.to_radians() / steps as f64));
             fe.set_side_ranges([Some((1.2 / inch).round() * inch), None]);
-            let t = fe.track_heading(std::iter::empty(), &odom, (3 + i) * 100_000_000);
-            heading = t.pose.theta;
+            pose = fe
+                .track_heading(std::iter::empty(), &odom, (3 + i) * 100_000_000)
+                .pose;
         }
-        heading.to_degrees()
+        pose
     }
 
     #[test]
     fn a_side_sonar_along_a_wall_holds_the_heading_while_blind() {
-        for drift in [-6.0, 6.0] {
+        for drift in [-6.0_f64, 6.0] {
             let off = blind_beside_a_wall(drift, 0.0);
-            assert!((off - drift).abs() < 0.1, "without: {off:.2}°");
+            assert!(
+                (off.theta.to_degrees() - drift).abs() < 0.1,
+                "without: {off:?}"
+            );
+            // The odometry's path bent 0.2 m towards or away from the wall.
+            assert!(off.y.abs() > 0.15, "without: {off:?}");
             let held = blind_beside_a_wall(drift, 1.5);
             assert!(
-                held.abs() < drift.abs() / 3.0,
-                "odometry turned {drift}°: heading {held:.2}°"
+                held.theta.to_degrees().abs() < drift.abs() / 3.0
+                    && held.y.abs() < off.y.abs() / 3.0,
+                "odometry turned {drift}°: {held:?} ({off:?} without)"
             );
         }
     }

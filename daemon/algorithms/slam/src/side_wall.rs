@@ -35,11 +35,25 @@ struct Sample {
     travel_m: f64,
     range_m: f64,
     heading: f64,
+    /// The front end's pose for the scan ([`SideWalls::annotate`]).
+    pose: Option<Pose2>,
 }
 
 #[derive(Debug, Clone, Default)]
 struct Side {
     samples: VecDeque<Sample>,
+}
+
+/// A side's readings fitted as one straight wall.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SideFit {
+    /// The robot's heading minus the wall's direction, rad.
+    pub relative_heading: f64,
+    /// How far the robot closed on the wall since the window's first
+    /// reading, by the fitted line, m (negative: it moved away).
+    pub closed_m: f64,
+    /// The front end's pose at the window's first reading.
+    pub first_pose: Option<Pose2>,
 }
 
 /// Tracks the two side transducers' readings against the distance driven.
@@ -95,6 +109,7 @@ impl SideWalls {
                 travel_m: self.travel_m,
                 range_m: r,
                 heading: odom.theta,
+                pose: None,
             });
             while side
                 .samples
@@ -106,10 +121,25 @@ impl SideWalls {
         }
     }
 
+    /// The front end's pose for the scan last observed.
+    pub fn annotate(&mut self, pose: Pose2) {
+        let travel = self.travel_m;
+        for side in &mut self.sides {
+            if let Some(last) = side.samples.back_mut().filter(|s| s.travel_m == travel) {
+                last.pose = Some(pose);
+            }
+        }
+    }
+
     /// The robot's heading minus the wall's direction (the wall taken along
     /// the way the robot drives), rad, from `side`'s readings, if they lie
     /// on one straight wall the robot drives along.
     pub fn relative_heading(&self, side: SideOf) -> Option<f64> {
+        self.fit(side).map(|f| f.relative_heading)
+    }
+
+    /// `side`'s readings as one straight wall the robot drives along, if they are.
+    pub fn fit(&self, side: SideOf) -> Option<SideFit> {
         let s = &self.sides[side as usize].samples;
         let (first, last) = (s.front()?, s.back()?);
         if self.window_m <= 0.0
@@ -149,7 +179,11 @@ impl SideWalls {
             SideOf::Left => -k.asin(),
             SideOf::Right => k.asin(),
         };
-        (psi.abs() <= MAX_RELATIVE_RAD).then_some(psi)
+        (psi.abs() <= MAX_RELATIVE_RAD).then_some(SideFit {
+            relative_heading: psi,
+            closed_m: -k * (self.travel_m - first.travel_m),
+            first_pose: first.pose,
+        })
     }
 }
 
