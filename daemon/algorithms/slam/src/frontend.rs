@@ -380,7 +380,8 @@ impl FrontEnd {
             }
         }
         // Nothing matched and a side sonar runs along a straight wall: the
-        // heading from the angle to it.
+        // heading from the angle to it, the sideways drift from the
+        // distance to it.
         let mut side_turn = 0.0;
         if found.is_none()
             && squared_turn == 0.0
@@ -1329,13 +1330,11 @@ mod tests {
         out
     }
 
-    /// Maps a corner at the start, then drives 4 m blind (no laser
-    /// point) along x while the odometry turns `drift_deg` that the robot
-    /// did not, and tracks the first scan of `seen` there, at the truth.
-    fn after_a_blind_stretch(drift_deg: f64, seen: &[(f64, f64, f64, f64)]) -> Tracked {
-        let mut fe = FrontEnd::new(params());
+    /// A front end that tracked three scans of a corner (that of
+    /// `scene_from`, its points in scan order) at the origin, over 0.2 s.
+    fn with_a_corner_mapped(p: FrontEndParams) -> FrontEnd {
+        let mut fe = FrontEnd::new(p);
         let start = Pose2::default();
-        // The corner of `scene_from`, its points in scan order.
         let corner = [(4.0, -3.0, 4.0, 3.0), (4.0, 3.0, -2.0, 3.0)];
         for i in 0..3 {
             fe.track(
@@ -1344,6 +1343,15 @@ mod tests {
                 i * 100_000_000,
             );
         }
+        fe
+    }
+
+    /// Maps a corner at the start, then drives 4 m blind (no laser
+    /// point) along x while the odometry turns `drift_deg` that the robot
+    /// did not, and tracks the first scan of `seen` there, at the truth.
+    fn after_a_blind_stretch(drift_deg: f64, seen: &[(f64, f64, f64, f64)]) -> Tracked {
+        let mut fe = with_a_corner_mapped(params());
+        let start = Pose2::default();
         let steps = 40;
         let mut odom = start;
         for i in 0..steps {
@@ -1389,19 +1397,11 @@ mod tests {
     /// ring does), the odometry turning `drift_deg` the robot did not: the
     /// pose at the end (the truth: (4, 0, 0)).
     fn blind_beside_a_wall(drift_deg: f64, window_m: f64) -> Pose2 {
-        let mut fe = FrontEnd::new(FrontEndParams {
+        let mut fe = with_a_corner_mapped(FrontEndParams {
             side_wall_window_m: window_m,
             ..params()
         });
         let start = Pose2::default();
-        let corner = [(4.0, -3.0, 4.0, 3.0), (4.0, 3.0, -2.0, 3.0)];
-        for i in 0..3 {
-            fe.track(
-                walls_from(&start, &corner).into_iter(),
-                &start,
-                i * 100_000_000,
-            );
-        }
         let inch: f64 = 0.0254;
         let steps = 40;
         let mut odom = start;

@@ -314,8 +314,9 @@ slam_section! {
     square_after_blind_m: f64 = (3.0, 3.0),
     /// While no laser match gives the heading (smoke), a sonar at ±90°
     /// whose readings over this much travel lie on a straight wall gives
-    /// it: the robot's angle to the wall from how the range changes, the
-    /// wall's direction the local map's nearest square one; m, 0 never.
+    /// it (the robot's angle to the wall from how the range changes, the
+    /// wall's direction the local map's nearest square one) and the
+    /// sideways drift (how far the robot closed on the wall); m, 0 never.
     side_wall_window_m: f64 = (1.5, 1.5),
     /// Health goes degraded while the heading has been odometry's alone
     /// (the laser blind or unmatched in the front end) for more than this
