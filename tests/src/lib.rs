@@ -18,9 +18,13 @@
 
 use anyhow::{Context, bail};
 use smokenav_algorithms_slam::carmen::{CarmenReader, LaserRecord, Record};
-use smokenav_platform_bus::{Bus, BusOptions, Message, Subscriber, Topic, Waiter};
+use smokenav_platform_bus::{
+    Bus, BusOptions, Message, Publisher, Subscriber, Topic, Waiter, topics,
+};
 use smokenav_platform_config::RobotConfig;
-use smokenav_shared_types::{BeamReading, Header, LaserScan, Odometry, PoseEstimate};
+use smokenav_shared_types::{
+    BeamReading, FusedScan, Header, Health, LaserScan, Odometry, PoseEstimate,
+};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -468,5 +472,76 @@ pub fn pose_for_scan(
         let now = Instant::now();
         anyhow::ensure!(now < end, "no slam/pose for the scan stamped {stamp_ns}");
         waiter.wait(Some((end - now).min(Duration::from_millis(200))))?;
+    }
+}
+
+/// The next health report of `sub` that `done` accepts, within 15 s.
+pub fn health_until(
+    sub: &Subscriber<Health>,
+    waiter: &Waiter,
+    what: &str,
+    mut done: impl FnMut(&Health) -> bool,
+) -> Health {
+    let end = Instant::now() + Duration::from_secs(15);
+    let mut last = None;
+    loop {
+        while let Some(h) = sub.receive().unwrap() {
+            let h: Health = *h;
+            if done(&h) {
+                return h;
+            }
+            last = Some(h);
+        }
+        let now = Instant::now();
+        assert!(
+            now < end,
+            "no health report {what}; last: {:?} `{}`",
+            last.map(|h| h.state()),
+            last.map_or(String::new(), |h| h.last_error.as_str().to_owned())
+        );
+        waiter
+            .wait(Some((end - now).min(Duration::from_millis(200))))
+            .unwrap();
+    }
+}
+
+/// `smokenav-slam` with the graph back-end on fused scans (the profile at
+/// `config` with `[slam] input = "fused"`), and the bus ends a test drives
+/// it through.
+pub struct FusedSlam {
+    pub process: Child,
+    pub odom: Publisher<Odometry>,
+    pub scans: Publisher<FusedScan>,
+    pub poses: Subscriber<PoseEstimate>,
+    pub health: Subscriber<Health>,
+    _bus: Bus,
+}
+
+impl FusedSlam {
+    pub fn spawn(config: &Path, instance: &str) -> Self {
+        let process = Child::spawn(
+            &bin("smokenav-slam"),
+            &["--config", config.to_str().unwrap(), "--backend", "graph"],
+            instance,
+        )
+        .unwrap();
+        process
+            .wait_for_line("graph on fusion/scan", Duration::from_secs(30))
+            .unwrap_or_else(|e| panic!("{e}\n{}", process.output()));
+        let bus = open_bus(instance);
+        Self {
+            odom: bus.publisher(topics::BASE_ODOM).unwrap(),
+            scans: bus.publisher(topics::FUSION_SCAN).unwrap(),
+            poses: bus.subscriber(topics::SLAM_POSE).unwrap(),
+            health: bus.subscriber(topics::health("slam")).unwrap(),
+            process,
+            _bus: bus,
+        }
+    }
+
+    /// Stops the process; it must exit cleanly.
+    pub fn terminate(mut self) {
+        let status = self.process.terminate(Duration::from_secs(10)).unwrap();
+        assert!(status.success(), "{status:?}\n{}", self.process.output());
     }
 }

@@ -9,16 +9,13 @@
 //! middle ones blinded.
 
 use smokenav_algorithms_slam::carmen::LaserRecord;
-use smokenav_platform_bus::{Publisher, Subscriber, Waiter, topics};
+use smokenav_platform_bus::Waiter;
 use smokenav_platform_config::{MountPose, SlamInput};
-use smokenav_shared_types::{
-    Clock, FusedScan, Health, HealthState, MonotonicClock, Odometry, PoseEstimate, SectionSource,
-};
+use smokenav_shared_types::{Clock, FusedScan, Health, HealthState, MonotonicClock, SectionSource};
 use smokenav_tests::{
-    Child, bin, carmen_odometry, csail_prefix, fill_carmen_scan, open_bus, pose_for_scan, profile,
-    unique_instance,
+    FusedSlam, carmen_odometry, csail_prefix, fill_carmen_scan, health_until, pose_for_scan,
+    profile, unique_instance,
 };
-use std::time::{Duration, Instant};
 
 /// Records whose scans the fusion withheld entirely.
 const BLIND: std::ops::Range<usize> = 60..130;
@@ -34,36 +31,6 @@ fn fused(rec: &LaserRecord, stamp: u64, blind: bool) -> FusedScan {
     f
 }
 
-/// The next health report of `sub` that `done` accepts, within 15 s.
-fn health_until(
-    sub: &Subscriber<Health>,
-    waiter: &Waiter,
-    what: &str,
-    mut done: impl FnMut(&Health) -> bool,
-) -> Health {
-    let end = Instant::now() + Duration::from_secs(15);
-    let mut last = None;
-    loop {
-        while let Some(h) = sub.receive().unwrap() {
-            let h: Health = *h;
-            if done(&h) {
-                return h;
-            }
-            last = Some(h);
-        }
-        let now = Instant::now();
-        assert!(
-            now < end,
-            "no health report {what}; last: {:?} `{}`",
-            last.map(|h| h.state()),
-            last.map_or(String::new(), |h| h.last_error.as_str().to_owned())
-        );
-        waiter
-            .wait(Some((end - now).min(Duration::from_millis(200))))
-            .unwrap();
-    }
-}
-
 #[test]
 fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
     let instance = unique_instance("slam_blind_health_e2e");
@@ -74,24 +41,11 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
         // The CARMEN laser pose is the robot pose.
         c.laser.mount = MountPose::default();
     });
-    let mut slam = Child::spawn(
-        &bin("smokenav-slam"),
-        &["--config", cfg_path.to_str().unwrap(), "--backend", "graph"],
-        &instance,
-    )
-    .unwrap();
-    slam.wait_for_line("graph on fusion/scan", Duration::from_secs(30))
-        .unwrap_or_else(|e| panic!("{e}\n{}", slam.output()));
-
-    let bus = open_bus(&instance);
-    let mut odom_pub: Publisher<Odometry> = bus.publisher(topics::BASE_ODOM).unwrap();
-    let mut scan_pub: Publisher<FusedScan> = bus.publisher(topics::FUSION_SCAN).unwrap();
-    let poses = bus.subscriber::<PoseEstimate>(topics::SLAM_POSE).unwrap();
-    let health = bus.subscriber::<Health>(topics::health("slam")).unwrap();
+    let mut slam = FusedSlam::spawn(&cfg_path, &instance);
     let waiter = Waiter::new().unwrap();
     let _g = [
-        waiter.attach(&poses).unwrap(),
-        waiter.attach(&health).unwrap(),
+        waiter.attach(&slam.poses).unwrap(),
+        waiter.attach(&slam.health).unwrap(),
     ];
     let records = csail_prefix();
     // How far the odometry goes while blind: the limit must fall inside.
@@ -106,17 +60,17 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
     let mut send = |k: usize| {
         let rec = &records[k];
         let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
-        odom_pub.publish(&carmen_odometry(rec, stamp)).unwrap();
-        scan_pub
+        slam.odom.publish(&carmen_odometry(rec, stamp)).unwrap();
+        slam.scans
             .publish(&fused(rec, stamp, BLIND.contains(&k)))
             .unwrap();
         // Lock step: the pose of this scan before the next one goes out.
-        pose_for_scan(&poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
+        pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
     };
     for k in 0..BLIND.end {
         send(k);
     }
-    let blind = health_until(&health, &waiter, "naming the blind stretch", |h| {
+    let blind = health_until(&slam.health, &waiter, "naming the blind stretch", |h| {
         h.last_error
             .as_str()
             .contains("heading from odometry alone")
@@ -136,7 +90,7 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
     for k in BLIND.end..records.len() {
         send(k);
     }
-    let back = health_until(&health, &waiter, "without the blind stretch", |h| {
+    let back = health_until(&slam.health, &waiter, "without the blind stretch", |h| {
         metric(h, "heading_blind_m") == 0.0
     });
     assert!(
@@ -151,6 +105,6 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
         longest > travel - 0.05 && longest < travel + 0.5,
         "longest {longest} against {travel:.2} m"
     );
-    let status = slam.terminate(Duration::from_secs(10)).unwrap();
-    assert!(status.success(), "{status:?}\n{}", slam.output());
+    drop(_g);
+    slam.terminate();
 }
