@@ -17,7 +17,7 @@ use std::collections::VecDeque;
 
 /// Shortest travel the readings must span, as a share of the window.
 const MIN_SPAN_SHARE: f64 = 2.0 / 3.0;
-/// Fewest distinct readings in the window.
+/// Fewest readings in the window.
 const MIN_SAMPLES: usize = 5;
 /// Largest RMS distance of the readings from the fitted line: more is a
 /// door, a corner or a box passing, not one straight wall, m.
