@@ -8,7 +8,7 @@
 //! cone), and that distance changes with the distance driven as the sine
 //! of the angle between the robot and the wall, whatever the odometry
 //! turned meanwhile. On the dense-smoke trial's Scout ring (one reading per
-//! transducer a second, in whole inches) the angle fitted over 1.5 m is
+//! transducer a second, in whole inches) the angle fitted over 0.8 m was
 //! 1.1° RMS from the truth. The wall's own direction is the square
 //! building's (see [`crate::frontend`]).
 
