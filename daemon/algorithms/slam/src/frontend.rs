@@ -548,11 +548,16 @@ impl FrontEnd {
     /// once it spans the window. Averaged over both sides when both run
     /// along a wall.
     fn side_wall_correction(&self, prediction: &Pose2) -> Option<(f64, (f64, f64))> {
+        let fits = [SideOf::Left, SideOf::Right].map(|side| (side, self.side_walls.fit(side)));
+        if fits.iter().all(|(_, f)| f.is_none()) {
+            // The local map's directions cost a pass over its scans.
+            return None;
+        }
         let map_dir = self.map_square_direction()?;
         let quarter = std::f64::consts::FRAC_PI_2;
         let (mut turn, mut shift, mut n) = (0.0, (0.0, 0.0), 0.0);
-        for side in [SideOf::Left, SideOf::Right] {
-            let Some(fit) = self.side_walls.fit(side) else {
+        for (side, fit) in fits {
+            let Some(fit) = fit else {
                 continue;
             };
             let wall = prediction.theta - fit.relative_heading;

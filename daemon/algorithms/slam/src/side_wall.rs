@@ -131,13 +131,6 @@ impl SideWalls {
         }
     }
 
-    /// The robot's heading minus the wall's direction (the wall taken along
-    /// the way the robot drives), rad, from `side`'s readings, if they lie
-    /// on one straight wall the robot drives along.
-    pub fn relative_heading(&self, side: SideOf) -> Option<f64> {
-        self.fit(side).map(|f| f.relative_heading)
-    }
-
     /// `side`'s readings as one straight wall the robot drives along, if they are.
     pub fn fit(&self, side: SideOf) -> Option<SideFit> {
         let s = &self.sides[side as usize].samples;
@@ -264,7 +257,10 @@ mod tests {
         for psi in [-0.08_f64, -0.02, 0.0, 0.05, 0.1] {
             let w = drive(psi, 1.0, 0.03);
             for side in [SideOf::Left, SideOf::Right] {
-                let got = w.relative_heading(side).expect("a straight wall");
+                let got = w
+                    .fit(side)
+                    .map(|f| f.relative_heading)
+                    .expect("a straight wall");
                 assert!((got - psi).abs() < 1e-6, "{side:?} {psi}: {got}");
             }
         }
@@ -272,7 +268,12 @@ mod tests {
 
     #[test]
     fn too_short_a_stretch_or_a_broken_wall_says_nothing() {
-        assert_eq!(drive(0.05, 0.3, 0.0).relative_heading(SideOf::Left), None);
+        assert_eq!(
+            drive(0.05, 0.3, 0.0)
+                .fit(SideOf::Left)
+                .map(|f| f.relative_heading),
+            None
+        );
         let mut w = SideWalls::new(0.8);
         for i in 0..40 {
             let x = 0.03 * f64::from(i);
@@ -280,8 +281,8 @@ mod tests {
             let r = if (0.4..0.8).contains(&x) { 1.6 } else { 1.2 };
             w.observe(&Pose2::new(x, 0.0, 0.0), [Some(r), None]);
         }
-        assert_eq!(w.relative_heading(SideOf::Left), None);
-        assert_eq!(w.relative_heading(SideOf::Right), None);
+        assert_eq!(w.fit(SideOf::Left).map(|f| f.relative_heading), None);
+        assert_eq!(w.fit(SideOf::Right).map(|f| f.relative_heading), None);
     }
 
     #[test]
@@ -295,7 +296,7 @@ mod tests {
             y += 0.03 * th.sin();
             w.observe(&Pose2::new(x, y, th), [Some(1.2 - y), None]);
         }
-        assert_eq!(w.relative_heading(SideOf::Left), None);
+        assert_eq!(w.fit(SideOf::Left).map(|f| f.relative_heading), None);
     }
 
     #[test]
