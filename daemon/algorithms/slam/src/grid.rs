@@ -392,6 +392,49 @@ impl TiledGrid {
         }
     }
 
+    /// The first cell on the line from `from` to `to` (map frame) whose
+    /// log-odds (fixed point) is at least `wall`, if it lies more than
+    /// `margin_m` before `to`: `to` is then behind an obstacle already in
+    /// the grid. Returned as the distance from `from` to that cell's centre, m.
+    pub fn wall_before(
+        &self,
+        from: (f64, f64),
+        to: (f64, f64),
+        wall: i16,
+        margin_m: f64,
+    ) -> Option<f64> {
+        let (x0, y0) = self.world_to_cell(from.0, from.1);
+        let (x1, y1) = self.world_to_cell(to.0, to.1);
+        let margin = margin_m * self.inv_resolution;
+        let margin2 = (margin * margin) as i64;
+        let dx = (x1 - x0).abs();
+        let dy = -(y1 - y0).abs();
+        let sx = if x0 < x1 { 1 } else { -1 };
+        let sy = if y0 < y1 { 1 } else { -1 };
+        let (mut x, mut y, mut err) = (x0, y0, dx + dy);
+        while x != x1 || y != y1 {
+            let (ex, ey) = (i64::from(x1 - x), i64::from(y1 - y));
+            if ex * ex + ey * ey <= margin2 {
+                return None;
+            }
+            let c = self.get(x, y);
+            if c != UNKNOWN && c >= wall {
+                let (wx, wy) = self.cell_center(x, y);
+                return Some((wx - from.0).hypot(wy - from.1));
+            }
+            let e2 = 2 * err;
+            if e2 >= dy {
+                err += dy;
+                x += sx;
+            }
+            if e2 <= dx {
+                err += dx;
+                y += sy;
+            }
+        }
+        None
+    }
+
     /// Lowers the log-odds of the cells from `(x0, y0)` up to but excluding `(x1, y1)`
     /// (Bresenham's line).
     fn trace_free(&mut self, x0: i32, y0: i32, x1: i32, y1: i32, model: &LogOddsModel) {
@@ -573,6 +616,28 @@ mod tests {
         assert!(g.probability(20, 0).unwrap() > 0.5);
         assert_eq!(g.probability(21, 0), None);
         assert_eq!(g.probability(5, 1), None);
+    }
+
+    #[test]
+    fn wall_before_finds_a_wall_only_well_before_the_end() {
+        let mut g = TiledGrid::new(0.05);
+        let sensor = Pose2::new(0.01, 0.01, 0.0);
+        let wall = BeamEnd {
+            ex: 1.01,
+            ey: 0.01,
+            hit: true,
+        };
+        g.integrate(&sensor, &[wall], &model());
+        let one_hit = g.get(20, 0);
+        let from = (0.01, 0.01);
+        // 0.5 m behind the wall: the wall is 1 m away, at cell 20's centre.
+        let d = g.wall_before(from, (1.51, 0.01), one_hit, 0.15);
+        assert!(d.is_some_and(|d| (d - 1.015).abs() < 1e-3), "{d:?}");
+        // Within the margin of the end, or a weaker wall than asked: none.
+        assert_eq!(g.wall_before(from, (1.11, 0.01), one_hit, 0.15), None);
+        assert_eq!(g.wall_before(from, (1.51, 0.01), one_hit + 1, 0.15), None);
+        // Never observed cells are no wall.
+        assert_eq!(g.wall_before(from, (0.01, 2.0), one_hit, 0.15), None);
     }
 
     #[test]

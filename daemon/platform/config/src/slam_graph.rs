@@ -1,4 +1,4 @@
-//! `[slam.graph]`: the graph back-end's node spacing and loop-closure search.
+//! `[slam.graph]`: the graph back-end's node spacing, loop-closure search and map.
 //!
 //! ```toml
 //! [slam.graph]
@@ -6,6 +6,7 @@
 //! closure_window_m = 1.5     # the closure match searches ± this around the estimate …
 //! closure_window_rad = 0.35  # … and ± this in heading
 //! closure_min_score = 0.45   # below it a closure match is refused
+//! sonar_behind_wall_m = 0.15 # sonar echoes further behind a laser-confirmed wall are left out of the map
 //! ```
 //!
 //! The defaults are the ones measured on MIT CSAIL and the dense-smoke
@@ -61,6 +62,12 @@ pub struct GraphSection {
     pub closure_review_m: f64,
     /// … or turns it further than this, rad.
     pub closure_review_rad: f64,
+    /// The map leaves out a sonar echo that lies more than this behind a
+    /// wall the laser drew (in the map's direction from the sonar), m; 0
+    /// draws every echo. Such an echo was heard along another path (a sonar
+    /// meeting a wall obliquely hears nothing from it) or placed by a pose
+    /// the laser could not check.
+    pub sonar_behind_wall_m: f64,
 }
 
 impl Default for GraphSection {
@@ -81,6 +88,7 @@ impl Default for GraphSection {
             closure_wide_min_score: 0.5,
             closure_review_m: 0.3,
             closure_review_rad: 0.1,
+            sonar_behind_wall_m: 0.15,
         }
     }
 }
@@ -130,6 +138,12 @@ impl Validate for GraphSection {
         // 100 m and 3.2 rad: no closure is ever reviewed (before 2026-12-06).
         v.within(&k("closure_review_m"), self.closure_review_m, 0.0, 100.0);
         v.within(&k("closure_review_rad"), self.closure_review_rad, 0.0, 3.2);
+        v.within(
+            &k("sonar_behind_wall_m"),
+            self.sonar_behind_wall_m,
+            0.0,
+            10.0,
+        );
         v.within(
             &k("closure_max_withheld"),
             self.closure_max_withheld,
