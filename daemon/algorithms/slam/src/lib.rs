@@ -41,6 +41,7 @@ pub mod projected;
 pub mod rbpf;
 pub mod scan;
 pub mod side_wall;
+pub mod sonar_age;
 #[cfg(test)]
 mod testkit;
 pub mod vote;

@@ -34,8 +34,9 @@ use crate::frontend::{FrontEnd, FrontEndParams, MAP_RANGE_MARGIN};
 use crate::motion_filter::{MotionFilter, MotionFilterParams};
 use crate::noise::LaserNoiseModel;
 use crate::odom_buffer::{OdomAt, OdomBuffer};
-use crate::scan::{BeamKind, Endpoint, EndpointLimits, RangeScan};
+use crate::scan::{BeamKind, Endpoint, EndpointLimits, NO_SONAR, RangeScan};
 use crate::side_wall::SideSonars;
+use crate::sonar_age::SonarAges;
 use smokenav_platform_config::SlamSection;
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::{FusedScan, LaserScan, Odometry, OdometryFlags};
@@ -123,6 +124,9 @@ pub struct PipelineStats {
     /// Scans whose sweep was deskewed ([`RangeScan::deskew`]): the laser
     /// gave its time between beams and odometry reached 100 ms before.
     pub deskewed: u64,
+    /// Scans whose sonar-painted echoes were moved to where they were
+    /// heard ([`RangeScan::compensate_sonar`], `[slam] sonar_age_compensation`).
+    pub sonar_compensated: u64,
 }
 
 pub struct SlamPipeline {
@@ -134,6 +138,9 @@ pub struct SlamPipeline {
     frontend: Option<FrontEnd>,
     /// `[slam] deskew`.
     deskew: bool,
+    /// `[slam] sonar_age_compensation`, and the readings' ages.
+    sonar_age_compensation: bool,
+    sonar_ages: SonarAges,
     motion_filter: MotionFilter,
     backend: Box<dyn SlamBackend>,
     /// The newest scan, waiting for its odometry while `pending`.
@@ -165,6 +172,8 @@ impl SlamPipeline {
             policy,
             odom: OdomBuffer::new(policy.history),
             deskew: cfg.deskew,
+            sonar_age_compensation: cfg.sonar_age_compensation,
+            sonar_ages: SonarAges::default(),
             frontend: cfg.frontend.then(|| {
                 FrontEnd::new(FrontEndParams {
                     resolution: cfg.resolution_m,
@@ -252,6 +261,10 @@ impl SlamPipeline {
         self.supersede();
         let factor = self.noise.factor(f64::from(f.smoke_level));
         self.scan.fill_from_fused(f, self.sensor_pose, factor);
+        if self.scan.sonar_stamp_ns != 0 {
+            self.sonar_ages
+                .observe(self.scan.sonar_stamp_ns, &self.scan.sonar);
+        }
     }
 
     /// A laser scan arrived: it replaces a scan still waiting for odometry.
@@ -302,6 +315,17 @@ impl SlamPipeline {
         {
             scan.deskew(twist);
             self.stats.deskewed += 1;
+        }
+        if self.sonar_age_compensation && scan.sonar_of.iter().any(|&i| i != NO_SONAR) {
+            let (ages, history, stamp) = (&self.sonar_ages, &self.odom, scan.stamp_ns);
+            let mut moved = false;
+            scan.compensate_sonar(|index| {
+                let age = ages.age_s(index, stamp)?;
+                let then = history.interpolated(stamp.checked_sub((age * 1e9) as u64)?)?;
+                moved = true;
+                Some(odom.between(&then))
+            });
+            self.stats.sonar_compensated += u64::from(moved);
         }
         self.last_odom = Some(odom);
         let update = self.process(&scan, &odom);

@@ -47,7 +47,15 @@ pub struct RangeScan {
     /// Time between consecutive beams, s (0 where unknown, as in a CARMEN
     /// log): a laser that sweeps takes its beams while the robot moves.
     pub time_increment_s: f64,
+    /// Per beam (empty for a laser scan): the transducer whose echo the
+    /// fusion painted the beam from, or [`NO_SONAR`].
+    pub sonar_of: Vec<u8>,
+    /// Stamp of the sonar ring the fusion paired with the scan, ns (0 without).
+    pub sonar_stamp_ns: u64,
 }
+
+/// [`RangeScan::sonar_of`] of a beam not painted from a sonar.
+pub const NO_SONAR: u8 = u8::MAX;
 
 /// Which beams' endpoints the scan matchers use.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -130,6 +138,8 @@ impl RangeScan {
         self.withheld_share = 0.0;
         self.sonar.clear();
         self.arc_offset.clear();
+        self.sonar_of.clear();
+        self.sonar_stamp_ns = 0;
         self.time_increment_s = 0.0;
         self.sensor_pose = Pose2::default();
         self.stamp_ns = 0;
@@ -151,6 +161,41 @@ impl RangeScan {
             let (angle, range) = sweep.beam(i, f64::from(beam.angle), f64::from(r));
             beam.angle = angle as f32;
             beam.range = Some(range as f32);
+        }
+    }
+
+    /// Moves every beam painted from a sonar to where its echo was: the
+    /// transducer heard it from the robot's pose `shift(index)` (that pose
+    /// in the robot frame at the scan's stamp; `None` leaves its beams),
+    /// not from where the robot is now ([`crate::sonar_age`]).
+    pub fn compensate_sonar(&mut self, mut shift: impl FnMut(u8) -> Option<Pose2>) {
+        let s = self.sensor_pose;
+        let mut current: Option<(u8, Option<Pose2>)> = None;
+        for (beam, &index) in self.beams.iter_mut().zip(&self.sonar_of) {
+            if index == NO_SONAR {
+                continue;
+            }
+            let Some(r) = beam.range else { continue };
+            let t = match current {
+                Some((i, t)) if i == index => t,
+                _ => {
+                    let t = shift(index);
+                    current = Some((index, t));
+                    t
+                }
+            };
+            let Some(t) = t else { continue };
+            // The endpoint as painted (robot frame), then where it was heard.
+            let a = s.theta + f64::from(beam.angle);
+            let (px, py) = (s.x + f64::from(r) * a.cos(), s.y + f64::from(r) * a.sin());
+            let (st, ct) = t.theta.sin_cos();
+            let (qx, qy) = (t.x + ct * px - st * py, t.y + st * px + ct * py);
+            let (dx, dy) = (qx - s.x, qy - s.y);
+            let range = dx.hypot(dy);
+            if range > 1e-3 {
+                beam.range = Some(range as f32);
+                beam.angle = smokenav_shared_types::normalize_angle(dy.atan2(dx) - s.theta) as f32;
+            }
         }
     }
 
@@ -205,6 +250,9 @@ impl RangeScan {
             1.0
         };
         let mut withheld = 0usize;
+        self.sonar_stamp_ns = fused.sonar_stamp_ns;
+        self.sonar_of.clear();
+        self.sonar_of.resize(self.beams.len(), NO_SONAR);
         for (i, beam) in self.beams.iter_mut().enumerate() {
             match fused.beam_source(i) {
                 // Both: a laser range the sonar did not contradict in a
@@ -239,6 +287,7 @@ impl RangeScan {
             for i in first..=last {
                 if painted(&i) {
                     self.arc_offset[i] = ((i as f32 - mid).abs() / half).min(1.0);
+                    self.sonar_of[i] = d.sonar_index;
                 }
             }
         }
@@ -353,6 +402,66 @@ mod tests {
         for i in [0, 4, 10, 16, 25] {
             assert!(r.arc_offset[i].is_nan(), "beam {i}: not painted");
         }
+    }
+
+    #[test]
+    fn echoes_painted_from_a_sonar_move_by_the_motion_since_it_fired_and_nothing_else_does() {
+        // Beams every 10° from −90° to 90°; the sonar of section 0 (index 3)
+        // painted the beams at −10°..10° (one of them `Both`: the laser's
+        // range), the sonar of section 1 (index 4) the one at 90°.
+        let mut f = FusedScan::default();
+        f.scan.count = 19;
+        f.scan.range_max = 5.6;
+        f.scan.angle_min = -std::f32::consts::FRAC_PI_2;
+        f.scan.angle_increment = 10f32.to_radians();
+        for i in 0..19 {
+            f.scan.set_beam(i, BeamReading::Range(2.0));
+        }
+        f.section_count = 2;
+        f.sections[0].sonar_index = 3;
+        f.sections[0].first_beam = 0;
+        f.sections[0].end_beam = 15;
+        f.sections[1].sonar_index = 4;
+        f.sections[1].first_beam = 15;
+        f.sections[1].end_beam = 19;
+        for i in 8..=10 {
+            f.beam_source[i] = SectionSource::Sonar as u8;
+        }
+        f.beam_source[8] = SectionSource::Both as u8;
+        f.beam_source[18] = SectionSource::Sonar as u8;
+        let mount = Pose2::new(0.1, 0.0, 0.0);
+        let mut r = RangeScan::default();
+        r.fill_from_fused(&f, mount, 1.0);
+        assert_eq!(r.sonar_of[9], 3);
+        assert_eq!(r.sonar_of[8], NO_SONAR, "Both: the laser's range");
+        assert_eq!(r.sonar_of[18], 4);
+        let before = r.beams.clone();
+        // Both heard from 0.3 m further back (the robot drove on since).
+        r.compensate_sonar(|_| Some(Pose2::new(-0.3, 0.0, 0.0)));
+        // Straight ahead the wall is 0.3 m nearer, same bearing.
+        assert!((r.beams[9].range.unwrap() - 1.7).abs() < 1e-5);
+        assert!(r.beams[9].angle.abs() < 1e-6);
+        // Off to the side at 10°: the endpoint moved 0.3 m back, not the range.
+        let (x, y) = (
+            0.1 + 2.0 * 10f64.to_radians().cos() - 0.3,
+            2.0 * 10f64.to_radians().sin(),
+        );
+        let b = r.beams[10];
+        assert!((f64::from(b.range.unwrap()) - (x - 0.1).hypot(y)).abs() < 1e-5);
+        assert!((f64::from(b.angle) - y.atan2(x - 0.1)).abs() < 1e-5);
+        // Abeam (90°): the same range, the bearing turned back.
+        let b = r.beams[18];
+        assert!((f64::from(b.range.unwrap()) - 2.0f64.hypot(0.3)).abs() < 1e-5);
+        assert!(f64::from(b.angle) > std::f64::consts::FRAC_PI_2);
+        // Laser beams, the `Both` beam and beams whose sonar has no age stay.
+        for i in (0..8).chain([8, 11, 12, 17]) {
+            assert_eq!(r.beams[i], before[i], "beam {i}");
+        }
+        let mut again = RangeScan::default();
+        again.fill_from_fused(&f, mount, 1.0);
+        again.compensate_sonar(|index| (index == 4).then(|| Pose2::new(-0.3, 0.0, 0.0)));
+        assert_eq!(again.beams[9], before[9], "sonar 3 without an age");
+        assert_ne!(again.beams[18], before[18]);
     }
 
     /// Distance from `(x, y)` to the nearest wall of the test room.

@@ -637,6 +637,8 @@ fn metrics(
     emit("heading_side_wall", stats.side_wall_headings as f64);
     // Zero on a laser without a time between beams: its sweeps stay bent.
     emit("scans_deskewed", stats.deskewed as f64);
+    // Scans whose sonar echoes were moved to where the ring heard them ([slam] sonar_age_compensation).
+    emit("scans_sonar_compensated", stats.sonar_compensated as f64);
     emit("maps_published", c.maps_published as f64);
     emit("maps_saved", c.maps_saved as f64);
     // Smoke phantoms in the robot's own path, gone from the map ([slam] clear_footprint).

@@ -331,6 +331,12 @@ slam_section! {
     /// sweeps it would bend the wrong way. The mapping process reads it too:
     /// it deskews the scans it maps by `base/odom`'s velocities.
     deskew: bool = (true, true),
+    /// Move each echo the fusion painted from a sonar by the robot's motion
+    /// since the transducer fired: a ring reports every transducer's last
+    /// range each cycle, up to a cycle old (the Scout's: a second), and a
+    /// wall ahead heard then is nearer now. The firing is dated by when the
+    /// transducer's value last changed and the ring's cycle (learnt the same way).
+    sonar_age_compensation: bool = (true, true),
     /// Mark free, in every map SLAM exports, the cells the robot's body
     /// covered along its trajectory (`[robot] radius_m` less half a cell):
     /// nothing stands where the robot drove. Removes the phantom walls a

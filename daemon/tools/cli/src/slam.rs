@@ -820,12 +820,13 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     }
     let _ = writeln!(
         report,
-        "pipeline           {} held back by the motion filter, {} front-end fallbacks to odometry, {} scans mostly withheld from the laser (heading matched, position by odometry), {} scans without ranges, {} sweeps deskewed by odometry",
+        "pipeline           {} held back by the motion filter, {} front-end fallbacks to odometry, {} scans mostly withheld from the laser (heading matched, position by odometry), {} scans without ranges, {} sweeps deskewed by odometry, {} scans' sonar echoes moved to where the ring heard them",
         stats.held_back,
         stats.frontend_fallbacks,
         stats.frontend_withheld,
         stats.empty_scans,
-        stats.deskewed
+        stats.deskewed,
+        stats.sonar_compensated
     );
     let _ = writeln!(
         report,
