@@ -17,7 +17,9 @@
 //!    [`OdomPolicy::max_gap_ns`] old, and the last odometry used (counted)
 //!    beyond that; a laser that gives its time between beams has its sweep
 //!    deskewed by the odometry's velocity over the 100 ms before the stamp
-//!    ([`RangeScan::deskew`]);
+//!    ([`RangeScan::deskew`]), and each echo painted from a sonar is moved
+//!    by the odometry's motion since its transducer fired (dated by
+//!    [`SonarAges`] from when its value changed; [`RangeScan::compensate_sonar`]);
 //! 4. the front end corrects the odometry by correlative matching against the
 //!    last scans ([`FrontEnd`]); where the fusion withheld more than
 //!    [`MAX_WITHHELD_TO_MATCH`] of the scan from the laser, the match
