@@ -407,12 +407,7 @@ impl TiledGrid {
         let (x1, y1) = self.world_to_cell(to.0, to.1);
         let margin = margin_m * self.inv_resolution;
         let margin2 = (margin * margin) as i64;
-        let dx = (x1 - x0).abs();
-        let dy = -(y1 - y0).abs();
-        let sx = if x0 < x1 { 1 } else { -1 };
-        let sy = if y0 < y1 { 1 } else { -1 };
-        let (mut x, mut y, mut err) = (x0, y0, dx + dy);
-        while x != x1 || y != y1 {
+        for (x, y) in CellLine::new(x0, y0, x1, y1) {
             let (ex, ey) = (i64::from(x1 - x), i64::from(y1 - y));
             if ex * ex + ey * ey <= margin2 {
                 return None;
@@ -422,15 +417,6 @@ impl TiledGrid {
                 let (wx, wy) = self.cell_center(x, y);
                 return Some((wx - from.0).hypot(wy - from.1));
             }
-            let e2 = 2 * err;
-            if e2 >= dy {
-                err += dy;
-                x += sx;
-            }
-            if e2 <= dx {
-                err += dx;
-                y += sy;
-            }
         }
         None
     }
@@ -438,11 +424,6 @@ impl TiledGrid {
     /// Lowers the log-odds of the cells from `(x0, y0)` up to but excluding `(x1, y1)`
     /// (Bresenham's line).
     fn trace_free(&mut self, x0: i32, y0: i32, x1: i32, y1: i32, model: &LogOddsModel) {
-        let dx = (x1 - x0).abs();
-        let dy = -(y1 - y0).abs();
-        let sx = if x0 < x1 { 1 } else { -1 };
-        let sy = if y0 < y1 { 1 } else { -1 };
-        let (mut x, mut y, mut err) = (x0, y0, dx + dy);
         let miss = -model.miss;
         // The tile being written stays borrowed until the line leaves it:
         // one copy-on-write check per tile instead of per cell.
@@ -450,7 +431,7 @@ impl TiledGrid {
         let slots = &mut self.slots;
         let mut current = usize::MAX;
         let mut tile: Option<&mut Tile> = None;
-        while x != x1 || y != y1 {
+        for (x, y) in CellLine::new(x0, y0, x1, y1) {
             let (tx, ty) = ((x >> TILE_SHIFT) - tx0, (y >> TILE_SHIFT) - ty0);
             let slot =
                 (tx >= 0 && ty >= 0 && tx < ntx && ty < nty).then(|| (ty * ntx + tx) as usize);
@@ -469,15 +450,6 @@ impl TiledGrid {
             }
             if let Some(t) = tile.as_deref_mut() {
                 t.add(x & TILE_MASK, y & TILE_MASK, miss, model.max);
-            }
-            let e2 = 2 * err;
-            if e2 >= dy {
-                err += dy;
-                x += sx;
-            }
-            if e2 <= dx {
-                err += dx;
-                y += sy;
             }
         }
     }
@@ -556,6 +528,59 @@ impl TiledGrid {
             }
         }
         grid
+    }
+}
+
+/// The cells of Bresenham's line from `(x0, y0)` up to but excluding `(x1, y1)`.
+struct CellLine {
+    x: i32,
+    y: i32,
+    x1: i32,
+    y1: i32,
+    dx: i32,
+    dy: i32,
+    sx: i32,
+    sy: i32,
+    err: i32,
+}
+
+impl CellLine {
+    #[inline]
+    fn new(x0: i32, y0: i32, x1: i32, y1: i32) -> Self {
+        let (dx, dy) = ((x1 - x0).abs(), -(y1 - y0).abs());
+        Self {
+            x: x0,
+            y: y0,
+            x1,
+            y1,
+            dx,
+            dy,
+            sx: if x0 < x1 { 1 } else { -1 },
+            sy: if y0 < y1 { 1 } else { -1 },
+            err: dx + dy,
+        }
+    }
+}
+
+impl Iterator for CellLine {
+    type Item = (i32, i32);
+
+    #[inline]
+    fn next(&mut self) -> Option<(i32, i32)> {
+        if self.x == self.x1 && self.y == self.y1 {
+            return None;
+        }
+        let cell = (self.x, self.y);
+        let e2 = 2 * self.err;
+        if e2 >= self.dy {
+            self.err += self.dy;
+            self.x += self.sx;
+        }
+        if e2 <= self.dx {
+            self.err += self.dx;
+            self.y += self.sy;
+        }
+        Some(cell)
     }
 }
 
