@@ -505,6 +505,21 @@ pub fn health_until(
     }
 }
 
+/// A fused scan at `stamp` with the layout of a laser over ±90° in
+/// `beams` beams (0.02–5.6 m) and nothing in it yet: the tests fill its
+/// beams, sources and sections.
+pub fn half_circle_fused(stamp: u64, beams: usize) -> FusedScan {
+    let mut f = FusedScan::default();
+    let s = &mut f.scan;
+    s.header = Header::new(stamp, 0, "laser");
+    s.angle_min = -std::f32::consts::FRAC_PI_2;
+    s.angle_increment = std::f32::consts::PI / (beams - 1) as f32;
+    s.range_min = 0.02;
+    s.range_max = 5.6;
+    s.count = beams as u32;
+    f
+}
+
 /// `smokenav-slam` with the graph back-end on fused scans (the profile at
 /// `config` with `[slam] input = "fused"`), and the bus ends a test drives
 /// it through.

@@ -11,7 +11,9 @@ use smokenav_platform_config::{MountPose, SlamInput};
 use smokenav_shared_types::{
     BeamReading, Clock, FusedScan, Header, MonotonicClock, Odometry, SectionSource,
 };
-use smokenav_tests::{FusedSlam, health_until, pose_for_scan, profile, unique_instance};
+use smokenav_tests::{
+    FusedSlam, half_circle_fused, health_until, pose_for_scan, profile, unique_instance,
+};
 
 const LEFT_WALL_M: f64 = 1.2;
 const RIGHT_WALL_M: f64 = 1.0;
@@ -28,14 +30,8 @@ const BEAMS: usize = 361;
 /// withheld), and the ring, the side transducers on the walls, the others
 /// saturated.
 fn fused(stamp: u64, blind: bool) -> FusedScan {
-    let mut f = FusedScan::default();
+    let mut f = half_circle_fused(stamp, BEAMS);
     let s = &mut f.scan;
-    s.header = Header::new(stamp, 0, "laser");
-    s.angle_min = -std::f32::consts::FRAC_PI_2;
-    s.angle_increment = std::f32::consts::PI / (BEAMS - 1) as f32;
-    s.range_min = 0.02;
-    s.range_max = 5.6;
-    s.count = BEAMS as u32;
     for i in 0..BEAMS {
         let a = f64::from(s.angle_min) + i as f64 * f64::from(s.angle_increment);
         let r = if a > 0.0 {

@@ -13,7 +13,9 @@ use smokenav_platform_config::{MountPose, SlamInput};
 use smokenav_shared_types::{
     BeamReading, Clock, FusedScan, Header, MapInfo, MonotonicClock, Odometry, SectionSource,
 };
-use smokenav_tests::{FusedSlam, open_bus, pose_for_scan, profile, unique_instance};
+use smokenav_tests::{
+    FusedSlam, half_circle_fused, open_bus, pose_for_scan, profile, unique_instance,
+};
 use std::time::{Duration, Instant};
 
 const WALL_X_M: f64 = 4.5;
@@ -37,14 +39,8 @@ fn fused(k: u64, t0: u64) -> FusedScan {
     let x_fired = STEP_M * (fired as f64 / PERIOD_NS as f64);
     let inches = ((WALL_X_M - x_fired - RING_M) / 0.0254).round();
     let reading = inches * 0.0254;
-    let mut f = FusedScan::default();
+    let mut f = half_circle_fused(t0 + now, BEAMS);
     let s = &mut f.scan;
-    s.header = Header::new(t0 + now, 0, "laser");
-    s.angle_min = -std::f32::consts::FRAC_PI_2;
-    s.angle_increment = std::f32::consts::PI / (BEAMS - 1) as f32;
-    s.range_min = 0.02;
-    s.range_max = 5.6;
-    s.count = BEAMS as u32;
     f.beam_source[..BEAMS].fill(SectionSource::Neither as u8);
     // ±11.25°: the beams 158..=202 of 361 over 180°.
     let (first, last) = (158usize, 202usize);
