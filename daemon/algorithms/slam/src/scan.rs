@@ -373,14 +373,20 @@ mod tests {
         assert!(r.arc_offset.is_empty());
     }
 
-    #[test]
-    fn a_painted_arc_s_beams_know_how_far_they_lie_from_its_middle() {
+    /// A fused scan of `count` beams, every one at 2 m, no section yet.
+    fn every_beam_at_2m(count: usize) -> FusedScan {
         let mut f = FusedScan::default();
-        f.scan.count = 30;
+        f.scan.count = count as u32;
         f.scan.range_max = 5.6;
-        for i in 0..30 {
+        for i in 0..count {
             f.scan.set_beam(i, BeamReading::Range(2.0));
         }
+        f
+    }
+
+    #[test]
+    fn a_painted_arc_s_beams_know_how_far_they_lie_from_its_middle() {
+        let mut f = every_beam_at_2m(30);
         // Section 0 (beams 0..20) painted from its sonar over beams 5..=15,
         // one of them (10) kept from the laser (`Both`); section 1 the laser's.
         f.section_count = 2;
@@ -409,14 +415,9 @@ mod tests {
         // Beams every 10° from −90° to 90°; the sonar of section 0 (index 3)
         // painted the beams at −10°..10° (one of them `Both`: the laser's
         // range), the sonar of section 1 (index 4) the one at 90°.
-        let mut f = FusedScan::default();
-        f.scan.count = 19;
-        f.scan.range_max = 5.6;
+        let mut f = every_beam_at_2m(19);
         f.scan.angle_min = -std::f32::consts::FRAC_PI_2;
         f.scan.angle_increment = 10f32.to_radians();
-        for i in 0..19 {
-            f.scan.set_beam(i, BeamReading::Range(2.0));
-        }
         f.section_count = 2;
         f.sections[0].sonar_index = 3;
         f.sections[0].first_beam = 0;
