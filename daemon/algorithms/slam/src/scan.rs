@@ -3,7 +3,7 @@
 
 use smokenav_platform_config::SlamSection;
 use smokenav_shared_types::geometry::{Pose2, Sweep, Twist2};
-use smokenav_shared_types::{BeamReading, FusedScan, LaserScan, SectionSource};
+use smokenav_shared_types::{BeamReading, FusedScan, LaserScan, SectionDecision, SectionSource};
 
 /// Where a beam's range came from, which sets its noise.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,8 +41,11 @@ pub struct RangeScan {
     /// Only a back-end that maps out of the laser plane reads them.
     pub sonar: Vec<(u8, f64)>,
     /// Per beam (empty for a laser scan): for a beam painted from a sonar,
-    /// how far from the middle of its section's painted arc it lies, 0 (the
-    /// middle) to 1 (an end); for any other beam, `f32::NAN`.
+    /// how far it lies from where on its section's painted arc the echo
+    /// most likely came from, in half-widths of the arc, 0 (there) to 1 (an
+    /// end, or beyond); for any other beam, `f32::NAN`. That is the arc's
+    /// middle, or the centre of its third towards a neighbouring transducer
+    /// that reads shorter (see `reflector_side`).
     pub arc_offset: Vec<f32>,
     /// Time between consecutive beams, s (0 where unknown, as in a CARMEN
     /// log): a laser that sweeps takes its beams while the robot moves.
@@ -52,6 +55,39 @@ pub struct RangeScan {
     pub sonar_of: Vec<u8>,
     /// Stamp of the sonar ring the fusion paired with the scan, ns (0 without).
     pub sonar_stamp_ns: u64,
+}
+
+/// Which side of section `k`'s arc its echo most likely came from: a
+/// sonar hears the nearest surface anywhere in its cone, so a wall met
+/// obliquely echoes from the cone's edge nearest the wall's normal, not
+/// from its axis. That edge faces the neighbouring transducer that reads
+/// a shorter range (the normal lies in or towards its cone): `Less` for the
+/// neighbour at lower beam indices, `Greater` for the one above, `None`
+/// when neither or both read shorter (the axis is as good a guess as any).
+fn reflector_side(sections: &[SectionDecision], k: usize) -> Option<std::cmp::Ordering> {
+    let centre = |d: &SectionDecision| u32::from(d.first_beam) + u32::from(d.end_beam);
+    let me = sections.get(k)?;
+    let r = me.sonar_range;
+    if !(r.is_finite() && r > 0.0) {
+        return None;
+    }
+    let c = centre(me);
+    let below = sections
+        .iter()
+        .filter(|d| centre(d) < c)
+        .max_by_key(|d| centre(d));
+    let above = sections
+        .iter()
+        .filter(|d| centre(d) > c)
+        .min_by_key(|d| centre(d));
+    let shorter = |d: Option<&SectionDecision>| {
+        d.is_some_and(|d| d.sonar_range.is_finite() && d.sonar_range > 0.0 && d.sonar_range < r)
+    };
+    match (shorter(below), shorter(above)) {
+        (true, false) => Some(std::cmp::Ordering::Less),
+        (false, true) => Some(std::cmp::Ordering::Greater),
+        _ => None,
+    }
 }
 
 /// [`RangeScan::sonar_of`] of a beam not painted from a sonar.
@@ -273,20 +309,26 @@ impl RangeScan {
         let used = (fused.section_count as usize).min(fused.sections.len());
         let n = self.beams.len();
         self.arc_offset.resize(n, f32::NAN);
-        for d in &fused.sections[..used] {
+        let sections = &fused.sections[..used];
+        for (k, d) in sections.iter().enumerate() {
             let (a, b) = ((d.first_beam as usize).min(n), (d.end_beam as usize).min(n));
             let painted = |i: &usize| fused.beam_source(*i) == SectionSource::Sonar;
             let (Some(first), Some(last)) = ((a..b).find(painted), (a..b).rev().find(painted))
             else {
                 continue;
             };
-            let (mid, half) = (
-                (first + last) as f32 / 2.0,
-                ((last - first) as f32 / 2.0).max(0.5),
-            );
+            let half = ((last - first) as f32 / 2.0).max(0.5);
+            let middle = (first + last) as f32 / 2.0;
+            // Where on the arc the echo came from (see `reflector_side`):
+            // the middle, or the centre of the third towards the neighbour.
+            let reflector = match reflector_side(sections, k) {
+                Some(std::cmp::Ordering::Less) => first as f32 + half / 3.0,
+                Some(std::cmp::Ordering::Greater) => last as f32 - half / 3.0,
+                _ => middle,
+            };
             for i in first..=last {
                 if painted(&i) {
-                    self.arc_offset[i] = ((i as f32 - mid).abs() / half).min(1.0);
+                    self.arc_offset[i] = ((i as f32 - reflector).abs() / half).min(1.0);
                     self.sonar_of[i] = d.sonar_index;
                 }
             }
@@ -408,6 +450,39 @@ mod tests {
         for i in [0, 4, 10, 16, 25] {
             assert!(r.arc_offset[i].is_nan(), "beam {i}: not painted");
         }
+    }
+
+    /// Three adjacent sections of ten beams, all painted from their sonars,
+    /// which read `ranges`; the beams of the middle one drawn as its echo
+    /// (within a third of the arc's half-width of where the echo came from).
+    fn middle_section_s_echo(ranges: [f32; 3]) -> Vec<usize> {
+        let mut f = every_beam_at_2m(30);
+        f.section_count = 3;
+        for (k, r) in ranges.into_iter().enumerate() {
+            f.sections[k].first_beam = 10 * k as u16;
+            f.sections[k].end_beam = 10 * k as u16 + 10;
+            f.sections[k].sonar_index = k as u8;
+            f.sections[k].sonar_range = r;
+        }
+        f.beam_source[..30].fill(SectionSource::Sonar as u8);
+        let mut r = RangeScan::default();
+        r.fill_from_fused(&f, Pose2::default(), 1.0);
+        (10..20).filter(|&i| r.arc_offset[i] <= 1.0 / 3.0).collect()
+    }
+
+    #[test]
+    fn an_echo_is_drawn_on_the_third_of_its_arc_towards_a_neighbour_that_reads_shorter() {
+        // A wall whose normal lies in the lower neighbour's cone: the middle
+        // sonar heard it at its cone's lower edge.
+        assert_eq!(middle_section_s_echo([1.0, 1.05, 1.2]), vec![10, 11, 12, 13]);
+        assert_eq!(middle_section_s_echo([1.2, 1.05, 1.0]), vec![16, 17, 18, 19]);
+        // Both neighbours farther (the wall faces it) or nearer (no telling),
+        // or a neighbour without an echo: the middle third.
+        let middle = vec![13, 14, 15, 16];
+        assert_eq!(middle_section_s_echo([1.2, 1.05, 1.2]), middle);
+        assert_eq!(middle_section_s_echo([1.0, 1.05, 1.0]), middle);
+        assert_eq!(middle_section_s_echo([f32::INFINITY, 1.05, 1.2]), middle);
+        assert_eq!(middle_section_s_echo([f32::NAN, 1.05, 1.2]), middle);
     }
 
     #[test]

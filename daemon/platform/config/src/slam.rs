@@ -268,7 +268,10 @@ slam_section! {
     /// across the sonar's whole section, but the echo came from one place on
     /// it, most likely near the cone's axis, where a transducer is most
     /// sensitive (the angular term of Moravec and Elfes's sonar model): an
-    /// arc's ends stand in front of an oblique wall. Free space is still
+    /// arc's ends stand in front of an oblique wall. Where a neighbouring
+    /// transducer reads shorter, the wall's normal lies towards it and the
+    /// echo came from the cone's edge on that side: the share is then taken
+    /// about the centre of the arc's third on that side. Free space is still
     /// cleared across the whole cone. Only the graph's map: the particle
     /// filter matches its sonar beams against its own map and keeps them.
     sonar_arc_middle: f64 = (1.0 / 3.0, 1.0),
