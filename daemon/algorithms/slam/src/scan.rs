@@ -474,8 +474,14 @@ mod tests {
     fn an_echo_is_drawn_on_the_third_of_its_arc_towards_a_neighbour_that_reads_shorter() {
         // A wall whose normal lies in the lower neighbour's cone: the middle
         // sonar heard it at its cone's lower edge.
-        assert_eq!(middle_section_s_echo([1.0, 1.05, 1.2]), vec![10, 11, 12, 13]);
-        assert_eq!(middle_section_s_echo([1.2, 1.05, 1.0]), vec![16, 17, 18, 19]);
+        assert_eq!(
+            middle_section_s_echo([1.0, 1.05, 1.2]),
+            vec![10, 11, 12, 13]
+        );
+        assert_eq!(
+            middle_section_s_echo([1.2, 1.05, 1.0]),
+            vec![16, 17, 18, 19]
+        );
         // Both neighbours farther (the wall faces it) or nearer (no telling),
         // or a neighbour without an echo: the middle third.
         let middle = vec![13, 14, 15, 16];
