@@ -426,16 +426,22 @@ mod tests {
         f
     }
 
+    /// Lays out `f`'s sections as `(first beam, end beam, sonar index)`.
+    fn set_sections(f: &mut FusedScan, sections: &[(u16, u16, u8)]) {
+        f.section_count = sections.len() as u32;
+        for (d, &(first, end, sonar)) in f.sections.iter_mut().zip(sections) {
+            d.first_beam = first;
+            d.end_beam = end;
+            d.sonar_index = sonar;
+        }
+    }
+
     #[test]
     fn a_painted_arc_s_beams_know_how_far_they_lie_from_its_middle() {
         let mut f = every_beam_at_2m(30);
         // Section 0 (beams 0..20) painted from its sonar over beams 5..=15,
         // one of them (10) kept from the laser (`Both`); section 1 the laser's.
-        f.section_count = 2;
-        f.sections[0].first_beam = 0;
-        f.sections[0].end_beam = 20;
-        f.sections[1].first_beam = 20;
-        f.sections[1].end_beam = 30;
+        set_sections(&mut f, &[(0, 20, 0), (20, 30, 1)]);
         for i in 5..=15 {
             f.beam_source[i] = SectionSource::Sonar as u8;
         }
@@ -457,12 +463,9 @@ mod tests {
     /// (within a third of the arc's half-width of where the echo came from).
     fn middle_section_s_echo(ranges: [f32; 3]) -> Vec<usize> {
         let mut f = every_beam_at_2m(30);
-        f.section_count = 3;
-        for (k, r) in ranges.into_iter().enumerate() {
-            f.sections[k].first_beam = 10 * k as u16;
-            f.sections[k].end_beam = 10 * k as u16 + 10;
-            f.sections[k].sonar_index = k as u8;
-            f.sections[k].sonar_range = r;
+        set_sections(&mut f, &[(0, 10, 0), (10, 20, 1), (20, 30, 2)]);
+        for (d, r) in f.sections.iter_mut().zip(ranges) {
+            d.sonar_range = r;
         }
         f.beam_source[..30].fill(SectionSource::Sonar as u8);
         let mut r = RangeScan::default();
@@ -499,13 +502,7 @@ mod tests {
         let mut f = every_beam_at_2m(19);
         f.scan.angle_min = -std::f32::consts::FRAC_PI_2;
         f.scan.angle_increment = 10f32.to_radians();
-        f.section_count = 2;
-        f.sections[0].sonar_index = 3;
-        f.sections[0].first_beam = 0;
-        f.sections[0].end_beam = 15;
-        f.sections[1].sonar_index = 4;
-        f.sections[1].first_beam = 15;
-        f.sections[1].end_beam = 19;
+        set_sections(&mut f, &[(0, 15, 3), (15, 19, 4)]);
         for i in 8..=10 {
             f.beam_source[i] = SectionSource::Sonar as u8;
         }
