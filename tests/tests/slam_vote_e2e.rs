@@ -402,6 +402,7 @@ fn map_vote_aligns_saved_maps_and_votes_out_what_one_member_alone_drew() {
         "vote (consensus)",
         "vote (majority-reference)",
         "vote (corroborated)",
+        "vote (corroborated-reference)",
     ] {
         assert!(error(rule).is_finite());
     }

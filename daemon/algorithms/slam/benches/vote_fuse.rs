@@ -95,6 +95,7 @@ fn main() {
         (VoteRule::Majority, true),
         (VoteRule::Weighted, false),
         (VoteRule::Corroborated, true),
+        (VoteRule::CorroboratedReference, true),
     ] {
         let section = VoteSection {
             rule,

@@ -107,7 +107,10 @@ pub fn run(a: VoteArgs) -> anyhow::Result<()> {
     if v.voters() == 2
         && matches!(
             rule,
-            VoteRule::Majority | VoteRule::MajorityReference | VoteRule::Corroborated
+            VoteRule::Majority
+                | VoteRule::MajorityReference
+                | VoteRule::Corroborated
+                | VoteRule::CorroboratedReference
         )
     {
         println!(

@@ -25,8 +25,8 @@
 //!   spans the whole window again.
 //! - **Vote** ([`rule`]): per cell of the reference's grid over occupied /
 //!   free / unknown, the paper's majority (no majority → occupied; with two
-//!   members left, the first of them decides) or the
-//!   weighted variant. Recomputed every `fuse_period_s` on a thread of its own
+//!   members left, the first of them decides), one of its variants that
+//!   break a three-way split otherwise, or the weighted variant. Recomputed every `fuse_period_s` on a thread of its own
 //!   (online) or when the map is asked for (lockstep).
 //! - **Fused pose**: the pose of the member whose map agrees best with the
 //!   vote (share of its known cells with the fused state; before the first
@@ -53,7 +53,8 @@ use align::{Alignment, DistanceField, SearchWindow, align_with, wall_points};
 use member::{Job, Member, MemberFault, WorkerConfig};
 use nalgebra::Matrix3;
 use rule::{
-    CellState, Consensus, WeightedVote, corroborated_doubt, majority_or, strict_majority, weighted,
+    CellState, Consensus, WeightedVote, corroborated_doubt, majority_or,
+    reference_corroborated_doubt, strict_majority, weighted,
 };
 use smokenav_platform_config::{SlamSection, VoteRule, VoteSection};
 use smokenav_platform_map::OccupancyGrid;
@@ -428,7 +429,7 @@ impl Fuser {
                     self.fused_states[i] = majority_or(&self.votes, fallback);
                 }
             }
-            VoteRule::Corroborated => {
+            VoteRule::Corroborated | VoteRule::CorroboratedReference => {
                 for i in 0..n {
                     self.votes.clear();
                     self.votes.extend((0..k_n).map(|k| self.states[k * n + i]));
@@ -436,7 +437,10 @@ impl Fuser {
                         Some(s) => s,
                         // Two voting: the first decides, as under the majority.
                         None if k_n == 2 => self.states[i],
-                        None => corroborated_doubt(&self.states, k_n, w, h, i),
+                        None if rule == VoteRule::Corroborated => {
+                            corroborated_doubt(&self.states, k_n, w, h, i)
+                        }
+                        None => reference_corroborated_doubt(&self.states, k_n, (w, h), 1, i),
                     };
                 }
             }

@@ -405,6 +405,58 @@ fn corroborated_draws_a_split_cell_only_where_another_member_has_a_wall_beside_i
 }
 
 #[test]
+fn corroborated_reference_keeps_the_reference_where_members_split_but_not_its_lone_walls() {
+    use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
+    // Three-way splits on an 80-wide room:
+    // - `lone`: the reference draws a wall, member 1 free, member 2 nothing,
+    //   and no other member has a wall near it (a phantom of the reference);
+    // - `beside`: the same, but member 2 has a wall a cell east (the same
+    //   wall, drawn a cell off);
+    // - `other`: member 1 draws a wall where the reference sees free floor
+    //   and member 2 nothing, with member 2's wall beside it.
+    let (w, lone, beside, other) = (80, 20 * 80 + 20, 30 * 80 + 20, 40 * 80 + 20);
+    let mut members: Vec<OccupancyGrid> = vec![room(); 3];
+    for at in [lone, beside] {
+        members[0].cells[at] = OCCUPIED;
+        members[1].cells[at] = FREE;
+        members[2].cells[at] = UNKNOWN;
+    }
+    members[2].cells[beside + 1] = OCCUPIED;
+    members[1].cells[other] = OCCUPIED;
+    members[2].cells[other] = UNKNOWN;
+    members[2].cells[other + 1] = OCCUPIED;
+    let inputs = inputs_of(members, |_| false);
+    let fuse = |rule: VoteRule| {
+        let section = VoteSection {
+            rule,
+            ..VoteSection::default()
+        };
+        fused_once(section, &inputs).out.map.clone().unwrap()
+    };
+    let c = fuse(VoteRule::CorroboratedReference);
+    assert_eq!(
+        c.cells[lone], FREE,
+        "the reference's lone wall is not drawn"
+    );
+    assert_eq!(
+        c.cells[beside], OCCUPIED,
+        "a reference wall another member has beside it is"
+    );
+    assert_eq!(
+        c.cells[other], FREE,
+        "without a majority the reference's free floor stands"
+    );
+    // `corroborated` would draw the last one (member 1's wall has member 2's
+    // beside it), `majority-reference` the first.
+    assert_eq!(fuse(VoteRule::Corroborated).cells[other], OCCUPIED);
+    assert_eq!(fuse(VoteRule::MajorityReference).cells[lone], OCCUPIED);
+    // Where a majority exists the rules agree.
+    let room_wall = (60 - 1) * w + 10;
+    assert_eq!(c.cells[room_wall], OCCUPIED);
+    assert_eq!(c.cells[10 * w + 10], FREE);
+}
+
+#[test]
 fn with_a_member_out_two_maps_do_not_vote_their_union() {
     use smokenav_platform_map::{FREE, OCCUPIED};
     // Member 1 draws the partition (x = 40) one cell east: the kind of
@@ -422,6 +474,7 @@ fn with_a_member_out_two_maps_do_not_vote_their_union() {
         VoteRule::Majority,
         VoteRule::MajorityReference,
         VoteRule::Corroborated,
+        VoteRule::CorroboratedReference,
     ] {
         let section = VoteSection {
             rule,
