@@ -662,6 +662,12 @@ mod tests {
             section("[vote]\nrule = \"corroborated\"\n").vote.rule,
             crate::slam_vote::VoteRule::Corroborated
         );
+        assert_eq!(
+            section("[vote]\nrule = \"corroborated-reference\"\n")
+                .vote
+                .rule,
+            crate::slam_vote::VoteRule::CorroboratedReference
+        );
         let err = parse_toml::<SlamSection>("[vote]\nmax_residual = 0.2\n", Path::new("slam.toml"))
             .unwrap_err()
             .to_string();

@@ -26,8 +26,9 @@
 //! - **Vote** ([`rule`]): per cell of the reference's grid over occupied /
 //!   free / unknown, the paper's majority (no majority → occupied; with two
 //!   members left, the first of them decides), one of its variants that
-//!   break a three-way split otherwise, or the weighted variant. Recomputed every `fuse_period_s` on a thread of its own
-//!   (online) or when the map is asked for (lockstep).
+//!   break a three-way split otherwise, or the weighted variant. Recomputed
+//!   every `fuse_period_s` on a thread of its own (online) or when the map
+//!   is asked for (lockstep).
 //! - **Fused pose**: the pose of the member whose map agrees best with the
 //!   vote (share of its known cells with the fused state; before the first
 //!   vote, the reference member), taken into the reference frame by its
