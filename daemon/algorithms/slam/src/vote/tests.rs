@@ -364,6 +364,15 @@ fn majority_reference_takes_the_references_cell_where_the_members_split() {
     assert_eq!(out.cells[split], FREE, "member 1's free floor");
 }
 
+/// The fused map of one vote under `rule`, the other keys at their defaults.
+fn fused_map(rule: VoteRule, inputs: &[FuseInput]) -> Arc<OccupancyGrid> {
+    let section = VoteSection {
+        rule,
+        ..VoteSection::default()
+    };
+    fused_once(section, inputs).out.map.clone().unwrap()
+}
+
 #[test]
 fn corroborated_draws_a_split_cell_only_where_another_member_has_a_wall_beside_it() {
     use smokenav_platform_map::{FREE, OCCUPIED, UNKNOWN};
@@ -379,13 +388,7 @@ fn corroborated_draws_a_split_cell_only_where_another_member_has_a_wall_beside_i
     members[2].cells[beside + 1] = OCCUPIED;
     let members_free = members.clone();
     let inputs = inputs_of(members, |_| false);
-    let fuse = |rule: VoteRule| {
-        let section = VoteSection {
-            rule,
-            ..VoteSection::default()
-        };
-        fused_once(section, &inputs).out.map.clone().unwrap()
-    };
+    let fuse = |rule: VoteRule| fused_map(rule, &inputs);
     let paper = fuse(VoteRule::Majority);
     assert_eq!(
         [paper.cells[lone], paper.cells[beside]],
@@ -426,13 +429,7 @@ fn corroborated_reference_keeps_the_reference_where_members_split_but_not_its_lo
     members[2].cells[other] = UNKNOWN;
     members[2].cells[other + 1] = OCCUPIED;
     let inputs = inputs_of(members, |_| false);
-    let fuse = |rule: VoteRule| {
-        let section = VoteSection {
-            rule,
-            ..VoteSection::default()
-        };
-        fused_once(section, &inputs).out.map.clone().unwrap()
-    };
+    let fuse = |rule: VoteRule| fused_map(rule, &inputs);
     let c = fuse(VoteRule::CorroboratedReference);
     assert_eq!(
         c.cells[lone], FREE,
