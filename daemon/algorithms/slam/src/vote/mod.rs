@@ -441,7 +441,7 @@ impl Fuser {
                         None if rule == VoteRule::Corroborated => {
                             corroborated_doubt(&self.states, k_n, w, h, i)
                         }
-                        None => reference_corroborated_doubt(&self.states, k_n, (w, h), 1, i),
+                        None => reference_corroborated_doubt(&self.states, k_n, w, h, i),
                     };
                 }
             }

@@ -148,52 +148,59 @@ pub fn corroborated_doubt(
     i: usize,
 ) -> CellState {
     let n = width * height;
-    let (x, y) = (i % width, i / width);
-    let wall_near = |k: usize| {
-        (y.saturating_sub(1)..(y + 2).min(height)).any(|yy| {
-            (x.saturating_sub(1)..(x + 2).min(width))
-                .any(|xx| states[k * n + yy * width + xx] == CellState::Occupied)
-        })
-    };
-    let says = |k: usize, state: CellState| states[k * n + i] == state;
-    if (0..members)
-        .any(|k| says(k, CellState::Occupied) && (0..members).any(|j| j != k && wall_near(j)))
-    {
+    let wall_near = |k: usize| wall_within_a_cell(states, k, width, height, i);
+    if (0..members).any(|k| {
+        states[k * n + i] == CellState::Occupied && (0..members).any(|j| j != k && wall_near(j))
+    }) {
         CellState::Occupied
-    } else if (0..members).any(|k| says(k, CellState::Free)) {
-        CellState::Free
     } else {
-        CellState::Unknown
+        free_if_seen(states, members, n, i)
     }
 }
 
 /// The `corroborated-reference` rule's state of cell `i` where the members
 /// have no majority: the reference's (member 0's) state, but a reference
-/// wall without another member's wall within `radius` cells is not drawn
-/// (free if any member sees free space there, else unknown). `states` as in
+/// wall without another member's wall within a cell is not drawn (free if
+/// any member sees free space there, else unknown). Arguments as in
 /// [`corroborated_doubt`].
 pub fn reference_corroborated_doubt(
     states: &[CellState],
     members: usize,
-    (width, height): (usize, usize),
-    radius: usize,
+    width: usize,
+    height: usize,
     i: usize,
 ) -> CellState {
-    let n = width * height;
     let reference = states[i];
-    if reference != CellState::Occupied {
-        return reference;
+    if reference != CellState::Occupied
+        || (1..members).any(|k| wall_within_a_cell(states, k, width, height, i))
+    {
+        reference
+    } else {
+        free_if_seen(states, members, width * height, i)
     }
+}
+
+/// Member `k` has a wall in cell `i` or one of its eight neighbours.
+#[inline]
+fn wall_within_a_cell(
+    states: &[CellState],
+    k: usize,
+    width: usize,
+    height: usize,
+    i: usize,
+) -> bool {
+    let n = width * height;
     let (x, y) = (i % width, i / width);
-    let corroborated = (1..members).any(|k| {
-        (y.saturating_sub(radius)..(y + radius + 1).min(height)).any(|yy| {
-            (x.saturating_sub(radius)..(x + radius + 1).min(width))
-                .any(|xx| states[k * n + yy * width + xx] == CellState::Occupied)
-        })
-    });
-    if corroborated {
-        CellState::Occupied
-    } else if (1..members).any(|k| states[k * n + i] == CellState::Free) {
+    (y.saturating_sub(1)..(y + 2).min(height)).any(|yy| {
+        (x.saturating_sub(1)..(x + 2).min(width))
+            .any(|xx| states[k * n + yy * width + xx] == CellState::Occupied)
+    })
+}
+
+/// Free if any member sees free space in cell `i`, else unknown.
+#[inline]
+fn free_if_seen(states: &[CellState], members: usize, n: usize, i: usize) -> CellState {
+    if (0..members).any(|k| states[k * n + i] == CellState::Free) {
         CellState::Free
     } else {
         CellState::Unknown
