@@ -29,6 +29,7 @@
 //! Deterministic: no randomness, ties go to the first candidate in a fixed order.
 
 use crate::degeneracy::{DegeneracyParams, ScanConstraint};
+use crate::grid::floor_cell;
 use crate::side_wall::{SideOf, SideWalls};
 use nalgebra::{Matrix3, Vector3};
 use smokenav_shared_types::Pose2;
@@ -190,6 +191,8 @@ pub struct FrontEnd {
     blur: Vec<u8>,
     /// Scratch of the row pass of the pooling.
     pool: Vec<u8>,
+    /// Scratch of the table build: the cells the local map's points fall in.
+    point_cells: Vec<(i32, i32)>,
     degeneracy: DegeneracyParams,
     /// Scans whose match had at least one direction replaced by the prediction.
     degenerate_matches: u64,
@@ -246,6 +249,7 @@ impl FrontEnd {
             prior_r: 0.0,
             blur,
             pool: Vec::new(),
+            point_cells: Vec::new(),
             degeneracy: DegeneracyParams::default(),
             degenerate_matches: 0,
             bootstrap_map: false,
@@ -678,16 +682,16 @@ impl FrontEnd {
         let res = self.p.resolution;
         let half =
             ((MAX_POINT_RANGE + self.p.window_m) / res).ceil() as i32 + BLUR_RADIUS + (1 << LEVELS);
-        let cx = (center.x / res).floor() as i32;
-        let cy = (center.y / res).floor() as i32;
+        let cx = floor_cell(center.x / res);
+        let cy = floor_cell(center.y / res);
         // Cells of the whole square a point may blur into.
         let (lo_x, lo_y) = (cx - half + BLUR_RADIUS, cy - half + BLUR_RADIUS);
         let (hi_x, hi_y) = (cx + half - BLUR_RADIUS, cy + half - BLUR_RADIUS);
         let inside = |gx: i32, gy: i32| gx >= lo_x && gy >= lo_y && gx <= hi_x && gy <= hi_y;
         let mut bbox = (i32::MAX, i32::MAX, i32::MIN, i32::MIN);
         for &(px, py) in self.history.iter().flatten() {
-            let gx = (px as f64 / res).floor() as i32;
-            let gy = (py as f64 / res).floor() as i32;
+            let gx = floor_cell(px as f64 / res);
+            let gy = floor_cell(py as f64 / res);
             if inside(gx, gy) {
                 bbox = (
                     bbox.0.min(gx),
@@ -712,26 +716,37 @@ impl FrontEnd {
         base.clear();
         base.resize(n, 0);
         let side = 2 * BLUR_RADIUS + 1;
+        // Scans of one place put most of their points in cells another
+        // point already took: each cell is blurred once. Only a point's own
+        // cell gets the kernel's peak, so the peak marks a cell taken.
+        let peak = self.blur[(BLUR_RADIUS * side + BLUR_RADIUS) as usize];
+        let mut cells = std::mem::take(&mut self.point_cells);
+        cells.clear();
         for scan in &self.history {
             for &(px, py) in scan {
-                let (ax, ay) = (
-                    (px as f64 / res).floor() as i32,
-                    (py as f64 / res).floor() as i32,
-                );
+                let (ax, ay) = (floor_cell(px as f64 / res), floor_cell(py as f64 / res));
                 if !inside(ax, ay) {
                     continue;
                 }
                 let (gx, gy) = (ax - self.table_x0, ay - self.table_y0);
-                for dy in 0..side {
-                    let row = ((gy + dy - BLUR_RADIUS) * w + gx - BLUR_RADIUS) as usize;
-                    let krow = (dy * side) as usize;
-                    let cells = &mut base[row..row + side as usize];
-                    for (cell, &v) in cells.iter_mut().zip(&self.blur[krow..krow + side as usize]) {
-                        *cell = (*cell).max(v);
-                    }
+                let cell = &mut base[(gy * w + gx) as usize];
+                if *cell != peak {
+                    *cell = peak;
+                    cells.push((gx, gy));
                 }
             }
         }
+        for &(gx, gy) in &cells {
+            for dy in 0..side {
+                let row = ((gy + dy - BLUR_RADIUS) * w + gx - BLUR_RADIUS) as usize;
+                let krow = (dy * side) as usize;
+                let span = &mut base[row..row + side as usize];
+                for (cell, &v) in span.iter_mut().zip(&self.blur[krow..krow + side as usize]) {
+                    *cell = (*cell).max(v);
+                }
+            }
+        }
+        self.point_cells = cells;
         // Level l holds, at each cell, the max over the 2^l × 2^l block
         // starting there (clamped at the table's edge): a max along the rows,
         // then along the columns.
@@ -741,7 +756,7 @@ impl FrontEnd {
             let step = 1usize << (level - 1);
             let (prev, rest) = self.tables.split_at_mut(level);
             let src = &prev[level - 1];
-            rows.clear();
+            // Every cell of `rows` and `dst` is written below: no clearing.
             rows.resize(n, 0);
             for (out, row) in rows.chunks_exact_mut(wu).zip(src.chunks_exact(wu)) {
                 let split = wu.saturating_sub(step);
@@ -754,7 +769,6 @@ impl FrontEnd {
                 }
             }
             let dst = &mut rest[0];
-            dst.clear();
             dst.resize(n, 0);
             for y in 0..hu {
                 let y2 = (y + step).min(hu - 1);
@@ -818,8 +832,8 @@ impl FrontEnd {
                 let wx = prediction.x + c * x - s * y;
                 let wy = prediction.y + s * x + c * y;
                 out.push((
-                    (wx / res).floor() as i32 - self.table_x0,
-                    (wy / res).floor() as i32 - self.table_y0,
+                    floor_cell(wx / res) - self.table_x0,
+                    floor_cell(wy / res) - self.table_y0,
                 ));
             }
         }
@@ -881,8 +895,8 @@ impl FrontEnd {
             // Table coordinates with cell centres at integers.
             let gx = (pose.x + c * x - s * y) / res - self.table_x0 as f64 - 0.5;
             let gy = (pose.y + s * x + c * y) / res - self.table_y0 as f64 - 0.5;
-            let (fx, fy) = (gx.floor(), gy.floor());
-            let (ix, iy) = (fx as i32, fy as i32);
+            let (ix, iy) = (floor_cell(gx), floor_cell(gy));
+            let (fx, fy) = (ix as f64, iy as f64);
             if ix < 0 || iy < 0 || ix + 1 >= w || iy + 1 >= h {
                 continue;
             }
@@ -1116,6 +1130,64 @@ mod tests {
             map_range_margin_m: MAP_RANGE_MARGIN,
             square_after_blind_m: 3.0,
             side_wall_window_m: 1.5,
+        }
+    }
+
+    #[test]
+    fn the_table_is_each_point_blurred_once_whatever_shares_its_cell() {
+        // Three passes along the same walls (most points share cells, some
+        // land a fraction of a cell apart) and one point off on its own.
+        let mut fe = FrontEnd::new(params());
+        for pass in 0..3 {
+            let jitter = pass as f32 * 0.013;
+            let scan: Vec<(f32, f32)> = scene_from(&Pose2::new(0.0, 0.0, 0.0))
+                .into_iter()
+                .map(|(x, y)| (x as f32 + jitter, y as f32 - jitter))
+                .chain([(-3.3, -2.7)])
+                .collect();
+            fe.history.push_back(scan);
+        }
+        fe.build_tables(&Pose2::new(0.2, -0.1, 0.0));
+        // The table by definition: each point's kernel, max over all points.
+        let (w, h) = (fe.table_w, fe.table_h);
+        let mut expected = vec![0u8; (w * h) as usize];
+        let side = 2 * BLUR_RADIUS + 1;
+        for &(px, py) in fe.history.iter().flatten() {
+            let gx = (px as f64 / 0.05).floor() as i32 - fe.table_x0;
+            let gy = (py as f64 / 0.05).floor() as i32 - fe.table_y0;
+            for dy in 0..side {
+                for dx in 0..side {
+                    let (x, y) = (gx + dx - BLUR_RADIUS, gy + dy - BLUR_RADIUS);
+                    let cell = &mut expected[(y * w + x) as usize];
+                    *cell = (*cell).max(fe.blur[(dy * side + dx) as usize]);
+                }
+            }
+        }
+        assert!(fe.point_cells.len() < fe.history.iter().map(Vec::len).sum::<usize>());
+        assert_eq!(fe.tables[0], expected);
+        // The pooled levels are rebuilt over buffers that are not cleared:
+        // a second, smaller build must not keep anything of the first.
+        fe.history.truncate(1);
+        fe.history[0].truncate(50);
+        fe.build_tables(&Pose2::new(0.0, 0.0, 0.0));
+        let (w, h) = (fe.table_w as usize, fe.table_h as usize);
+        for level in 1..=LEVELS {
+            let block = 1usize << level;
+            for y in 0..h {
+                for x in 0..w {
+                    let mut m = 0u8;
+                    for by in y..(y + block).min(h) {
+                        for bx in x..(x + block).min(w) {
+                            m = m.max(fe.tables[0][by * w + bx]);
+                        }
+                    }
+                    assert_eq!(
+                        fe.tables[level][y * w + x],
+                        m,
+                        "level {level} at ({x}, {y})"
+                    );
+                }
+            }
         }
     }
 
