@@ -14,7 +14,10 @@ pub mod relations;
 pub mod trajectory;
 
 pub use consistency::{ConsistencyOptions, ScanConsistency, scan_consistency};
-pub use map::{Alignment, DistanceStats, MapMetricError, MapOptions, MapReport, evaluate_maps};
+pub use map::{
+    Alignment, Band, DistanceStats, ErrorBands, FarGroup, MapMetricError, MapOptions, MapReport,
+    evaluate_maps,
+};
 pub use relations::{
     Relation, RelationsError, RelationsMetricError, RelationsReport, evaluate_relations,
     load_relations, parse_relations,

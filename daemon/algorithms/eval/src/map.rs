@@ -128,6 +128,123 @@ impl DistanceStats {
     }
 }
 
+/// Walls nearer than this to the other map's, in ground-truth cells, are on
+/// it (the metric's own noise: a wall drawn one cell thick beside a wall one
+/// cell thick is up to a cell and a half off).
+pub const ON_WALL_CELLS: f64 = 1.5;
+/// Walls further than this from the other map's, in ground-truth cells, are
+/// not a misplaced copy of one: a wall the estimate lacks (truth → map) or
+/// one the building lacks (map → truth: smoke mapped as an obstacle).
+pub const NOT_A_WALL_CELLS: f64 = 6.0;
+
+/// One band of one direction's distances: how many cells fall in it and how
+/// much they add to the k-NN error (their sum over the direction's count,
+/// halved), m. The six bands of a [`MapReport`] add up to its k-NN error.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct Band {
+    pub cells: usize,
+    pub knn_share_m: f64,
+}
+
+/// A group of cells more than [`NOT_A_WALL_CELLS`] from the other map's walls
+/// (each within [`FAR_LINK_CELLS`] of another, in the ground truth's cells):
+/// where a wall is missing or a phantom stands, in the ground truth's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FarGroup {
+    pub cells: usize,
+    /// Mean position of its cells, m.
+    pub x_m: f64,
+    pub y_m: f64,
+    /// What it adds to the k-NN error, m.
+    pub knn_share_m: f64,
+}
+
+/// Where one direction's part of the k-NN error comes from.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct ErrorBands {
+    /// Within [`ON_WALL_CELLS`].
+    pub on_wall: Band,
+    /// Between [`ON_WALL_CELLS`] and [`NOT_A_WALL_CELLS`]: a wall drawn off its place.
+    pub misplaced: Band,
+    /// Beyond [`NOT_A_WALL_CELLS`]: missing (truth → map) or phantom (map → truth) walls.
+    pub far: Band,
+    /// The far cells' largest groups, largest share first (at most [`MAX_FAR_GROUPS`]).
+    pub far_groups: Vec<FarGroup>,
+}
+
+/// Far groups a report lists.
+pub const MAX_FAR_GROUPS: usize = 5;
+/// Far cells this close (in cells, either axis) belong to one group: smoke
+/// mapped from afar is a scatter, not a line.
+pub const FAR_LINK_CELLS: i64 = 3;
+
+impl ErrorBands {
+    /// `points` (ground-truth frame) with their distances to the other map's walls.
+    fn new(points: &[(f64, f64)], distances: &[f64], resolution: f64) -> Self {
+        let n = distances.len().max(1) as f64;
+        let share = |d: f64| d / n / 2.0;
+        let mut bands = Self::default();
+        let mut far = std::collections::HashMap::new();
+        for (&p, &d) in points.iter().zip(distances) {
+            let band = if d < ON_WALL_CELLS * resolution {
+                &mut bands.on_wall
+            } else if d <= NOT_A_WALL_CELLS * resolution {
+                &mut bands.misplaced
+            } else {
+                let cell = (
+                    (p.0 / resolution).floor() as i64,
+                    (p.1 / resolution).floor() as i64,
+                );
+                // Two estimated cells can fall in one ground-truth cell once turned.
+                let e = far.entry(cell).or_insert((0usize, 0.0, 0.0, 0.0));
+                *e = (e.0 + 1, e.1 + p.0, e.2 + p.1, e.3 + d);
+                &mut bands.far
+            };
+            band.cells += 1;
+            band.knn_share_m += share(d);
+        }
+        // Flood the far cells into groups, visiting cells in a
+        // fixed order so equal inputs give equal reports.
+        let mut cells: Vec<(i64, i64)> = far.keys().copied().collect();
+        cells.sort_unstable();
+        let mut seen = std::collections::HashSet::new();
+        let mut stack = Vec::new();
+        for start in cells {
+            if !seen.insert(start) {
+                continue;
+            }
+            stack.push(start);
+            let (mut count, mut sx, mut sy, mut sum) = (0usize, 0.0, 0.0, 0.0);
+            while let Some((cx, cy)) = stack.pop() {
+                let (k, x, y, d) = far[&(cx, cy)];
+                count += k;
+                sx += x;
+                sy += y;
+                sum += d;
+                for dy in -FAR_LINK_CELLS..=FAR_LINK_CELLS {
+                    for dx in -FAR_LINK_CELLS..=FAR_LINK_CELLS {
+                        let next = (cx + dx, cy + dy);
+                        if far.contains_key(&next) && seen.insert(next) {
+                            stack.push(next);
+                        }
+                    }
+                }
+            }
+            bands.far_groups.push(FarGroup {
+                cells: count,
+                x_m: sx / count as f64,
+                y_m: sy / count as f64,
+                knn_share_m: share(sum),
+            });
+        }
+        bands
+            .far_groups
+            .sort_by(|a, b| b.knn_share_m.total_cmp(&a.knn_share_m));
+        bands.far_groups.truncate(MAX_FAR_GROUPS);
+        bands
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MapReport {
     /// Ground-truth cell side, m.
@@ -137,6 +254,9 @@ pub struct MapReport {
     pub truth_to_map: DistanceStats,
     /// Estimated walls → nearest ground-truth wall (phantom or misplaced walls).
     pub map_to_truth: DistanceStats,
+    /// Where the k-NN error comes from, each direction in three bands.
+    pub truth_to_map_bands: ErrorBands,
+    pub map_to_truth_bands: ErrorBands,
     /// The k-NN error: mean of the two directions' mean distances, m.
     pub knn_error_m: f64,
     /// The same in ground-truth cells (pixels).
@@ -501,18 +621,18 @@ pub fn evaluate_maps(
     let bucket = 4.0 * truth.resolution;
     let est_index = PointIndex::new(est_aligned.clone(), bucket);
     let truth_index = PointIndex::new(truth_pts.clone(), bucket);
-    let truth_to_map = DistanceStats::from_distances(
-        truth_pts
-            .iter()
-            .map(|&(x, y)| est_index.nearest_distance(x, y))
-            .collect(),
-    );
-    let map_to_truth = DistanceStats::from_distances(
-        est_aligned
-            .iter()
-            .map(|&(x, y)| truth_index.nearest_distance(x, y))
-            .collect(),
-    );
+    let to_map: Vec<f64> = truth_pts
+        .iter()
+        .map(|&(x, y)| est_index.nearest_distance(x, y))
+        .collect();
+    let to_truth: Vec<f64> = est_aligned
+        .iter()
+        .map(|&(x, y)| truth_index.nearest_distance(x, y))
+        .collect();
+    let truth_to_map_bands = ErrorBands::new(&truth_pts, &to_map, truth.resolution);
+    let map_to_truth_bands = ErrorBands::new(&est_aligned, &to_truth, truth.resolution);
+    let truth_to_map = DistanceStats::from_distances(to_map);
+    let map_to_truth = DistanceStats::from_distances(to_truth);
     let knn_error_m = (truth_to_map.mean_m + map_to_truth.mean_m) / 2.0;
 
     // SLAMfusion's pixel error over the ground-truth grid, the estimate sampled at each aligned cell centre.
@@ -535,6 +655,8 @@ pub fn evaluate_maps(
         alignment,
         truth_to_map,
         map_to_truth,
+        truth_to_map_bands,
+        map_to_truth_bands,
         knn_error_m,
         knn_error_cells: knn_error_m / truth.resolution,
         pixel_error: sum2.sqrt(),
@@ -650,6 +772,16 @@ mod tests {
                 r.truth_to_map
             );
             assert!((r.knn_error_cells - k as f64 * 31.0 / n).abs() < 1e-6);
+            // Shifted by up to 6 cells it is a misplaced wall; by 8, a missing one and a phantom.
+            let (misplaced, far) = if k <= 6 { (31, 0) } else { (0, 31) };
+            for b in [&r.truth_to_map_bands, &r.map_to_truth_bands] {
+                assert_eq!(
+                    (b.misplaced.cells, b.far.cells),
+                    (misplaced, far),
+                    "k = {k}"
+                );
+            }
+            assert_bands_add_up(&r);
             // SLAMfusion's error: 31 cells went occupied → free and 31 free → occupied, each (1 − 0)² = 1.
             assert!(
                 (r.pixel_error - 62f64.sqrt()).abs() < 1e-9,
@@ -783,6 +915,48 @@ mod tests {
         assert!(r.knn_error_m > 0.0);
         let clean = evaluate_maps(&truth, &truth, &MapOptions::default()).unwrap();
         assert!(r.knn_error_m > clean.knn_error_m && r.pixel_error > clean.pixel_error);
+        // The breakdown names it: one phantom where the bar is, nothing missing.
+        let b = &r.map_to_truth_bands;
+        assert_eq!(r.truth_to_map_bands.far.cells, 0);
+        assert_eq!(b.far_groups.len(), 1, "{b:?}");
+        let g = b.far_groups[0];
+        assert_eq!(g.cells, b.far.cells);
+        assert!(
+            (g.x_m - 2.9).abs() < 1e-9 && (g.y_m - 1.425).abs() < 1e-9,
+            "{g:?}"
+        );
+        assert!((g.knn_share_m - b.far.knn_share_m).abs() < 1e-12);
+        assert_bands_add_up(&r);
+        assert_eq!(
+            clean.map_to_truth_bands.far.cells + clean.truth_to_map_bands.far.cells,
+            0
+        );
+    }
+
+    /// The six bands are the k-NN error, split.
+    fn assert_bands_add_up(r: &MapReport) {
+        let sum: f64 = [&r.truth_to_map_bands, &r.map_to_truth_bands]
+            .iter()
+            .flat_map(|b| [b.on_wall, b.misplaced, b.far])
+            .map(|band| band.knn_share_m)
+            .sum();
+        assert!(
+            (sum - r.knn_error_m).abs() < 1e-12,
+            "{sum} vs {}",
+            r.knn_error_m
+        );
+        assert_eq!(
+            r.truth_to_map_bands.on_wall.cells
+                + r.truth_to_map_bands.misplaced.cells
+                + r.truth_to_map_bands.far.cells,
+            r.truth_to_map.count
+        );
+        assert_eq!(
+            r.map_to_truth_bands.on_wall.cells
+                + r.map_to_truth_bands.misplaced.cells
+                + r.map_to_truth_bands.far.cells,
+            r.map_to_truth.count
+        );
     }
 
     #[test]
@@ -795,6 +969,16 @@ mod tests {
         let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
         assert!(r.truth_to_map.max_m > 1.0, "{:?}", r.truth_to_map);
         assert_eq!(r.map_to_truth.max_m, 0.0);
+        // The whole partition is missing, as one group along x = 1.425 m.
+        let b = &r.truth_to_map_bands;
+        assert_eq!((b.far.cells, b.far_groups.len()), (31, 1), "{b:?}");
+        let g = b.far_groups[0];
+        assert!(
+            (g.x_m - 1.425).abs() < 1e-9 && (g.y_m - 1.175).abs() < 1e-9,
+            "{g:?}"
+        );
+        assert_eq!(r.map_to_truth_bands.far.cells, 0);
+        assert_bands_add_up(&r);
     }
 
     #[test]

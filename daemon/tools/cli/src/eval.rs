@@ -11,6 +11,7 @@ use serde::Serialize;
 use smokenav_algorithms_eval::{
     MapOptions, MapReport, RelationsReport, TrajectoryOptions, TrajectoryReport,
     evaluate_relations, load_relations, load_trajectory,
+    map::{NOT_A_WALL_CELLS, ON_WALL_CELLS},
 };
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -249,6 +250,37 @@ fn map_text(s: &mut String, truth: &Path, est: &Path, m: &MapReport, no_align: b
         "  pixel error   {:.3}  (SLAMfusion: √Σ(T−M)² over {} cells; rms {:.4})",
         m.pixel_error, m.pixel_count, m.pixel_rms
     );
+    let _ = writeln!(
+        s,
+        "  where the k-NN error comes from (m of it, cells): on a wall < {ON_WALL_CELLS} cells, \
+         misplaced ≤ {NOT_A_WALL_CELLS}, beyond that missing (truth → map) or phantom (map → truth)"
+    );
+    for (label, far, b) in [
+        ("  truth → map  ", "missing", &m.truth_to_map_bands),
+        ("  map → truth  ", "phantom", &m.map_to_truth_bands),
+    ] {
+        let _ = writeln!(
+            s,
+            "{label}on a wall {:.4} ({})  misplaced {:.4} ({})  {far} {:.4} ({})",
+            b.on_wall.knn_share_m,
+            b.on_wall.cells,
+            b.misplaced.knn_share_m,
+            b.misplaced.cells,
+            b.far.knn_share_m,
+            b.far.cells,
+        );
+        for g in &b.far_groups {
+            let _ = writeln!(
+                s,
+                "      {far} around ({:.2}, {:.2}) m: {} cell{}, {:.4} m",
+                g.x_m,
+                g.y_m,
+                g.cells,
+                if g.cells == 1 { "" } else { "s" },
+                g.knn_share_m
+            );
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1083,7 +1083,13 @@ fn map_error(truth: &OccupancyGrid, map: &OccupancyGrid) -> String {
         map,
         &smokenav_algorithms_eval::MapOptions::default(),
     ) {
-        Ok(r) => format!("k-NN {:.3} m, pixel RMS {:.3}", r.knn_error_m, r.pixel_rms),
+        Ok(r) => format!(
+            "k-NN {:.3} m, pixel RMS {:.3}; of the k-NN, walls missing {:.4} m, phantom {:.4} m (`smokenav eval` says where)",
+            r.knn_error_m,
+            r.pixel_rms,
+            r.truth_to_map_bands.far.knn_share_m,
+            r.map_to_truth_bands.far.knn_share_m
+        ),
         Err(e) => format!("not comparable: {e}"),
     }
 }
