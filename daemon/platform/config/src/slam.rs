@@ -275,6 +275,16 @@ slam_section! {
     /// cleared across the whole cone. Only the graph's map: the particle
     /// filter matches its sonar beams against its own map and keeps them.
     sonar_arc_middle: f64 = (1.0 / 3.0, 1.0),
+    /// The maps (the particle filter's and the graph's) draw no wall at the
+    /// end of a laser beam the sonar contradicts (its section's sonar heard
+    /// its first echo more than 0.3 m further) whose range jitters from
+    /// beam to beam more than this (median |second difference| of the
+    /// ranges over ±2 beams), m, and clear the space up to it. That is a
+    /// smoke cloud seen from clean air, which the fusion keeps while the
+    /// smoke sensor on the robot reads clean; a wall's ranges run smoothly
+    /// however obliquely it is met (a URG-04LX's ±10 mm noise gives ~17 mm).
+    /// 0 draws every laser return, as the Table 3 preset does (GMapping).
+    smoke_return_rough_m: f64 = (0.15, 0.0),
     /// Log-odds removed from a cell a beam passes through.
     miss_logodds: f64 = (0.4, 0.4),
     /// Log-odds saturate at ± this value, so the map can still change.
@@ -458,6 +468,12 @@ impl Validate for SlamSection {
         v.within(&k("hit_logodds"), self.hit_logodds, 0.01, 20.0);
         v.within(&k("sonar_hit_logodds"), self.sonar_hit_logodds, 0.01, 20.0);
         v.within(&k("sonar_arc_middle"), self.sonar_arc_middle, 0.0, 1.0);
+        v.within(
+            &k("smoke_return_rough_m"),
+            self.smoke_return_rough_m,
+            0.0,
+            10.0,
+        );
         v.within(&k("miss_logodds"), self.miss_logodds, 0.01, 20.0);
         v.within(&k("max_logodds"), self.max_logodds, 0.1, 50.0);
         v.within(&k("sonar_sigma_m"), self.sonar_sigma_m, 0.001, 5.0);

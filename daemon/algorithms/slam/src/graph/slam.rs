@@ -1494,7 +1494,7 @@ impl SlamBackend for GraphSlam {
                         .map(|b| BeamEnd {
                             ex: pose.x + c * b.x - s * b.y,
                             ey: pose.y + s * b.x + c * b.y,
-                            hit: b.hit && !b.arc_flank,
+                            hit: b.hit && !b.arc_flank && !b.smoke_return,
                         })
                         .map(|e| match &laser {
                             // Up to the wall, cone clear; no echo drawn.
@@ -1790,6 +1790,61 @@ mod tests {
             assert!((0..50).contains(&at(g, 42.0, r - 0.2)));
             assert!((0..50).contains(&at(g, 60.0, r - 0.2)));
         }
+    }
+
+    /// Occupied cells between x = 0.8 and 1.5 m of the map of six nodes
+    /// backing away 0.3 m at a time from a wall at x = 3 m, each seeing a
+    /// smoke cloud in front of it (|y| ≤ 0.15 m) that the laser returns
+    /// from at x = 1.0 or 1.3 m by turns, marked as the sonar contradicting
+    /// it (roughness 0.6 m), with `[slam] smoke_return_rough_m` = `rough_m`.
+    fn cloud_walls(rough_m: f64) -> usize {
+        let cfg = SlamSection {
+            smoke_return_rough_m: rough_m,
+            ..SlamSection::default()
+        };
+        let mut slam = GraphSlam::new(&cfg, GraphParams::default());
+        for k in 0..6u32 {
+            let x0 = -0.3 * f64::from(k);
+            let mut scan = RangeScan {
+                stamp_ns: 1 + u64::from(k) * 100_000_000,
+                laser_noise_factor: 1.0,
+                ..Default::default()
+            };
+            for i in 0..=480 {
+                let a = (-60.0 + 0.25 * f64::from(i)).to_radians();
+                let cloud_x = if i % 2 == 0 { 1.0 } else { 1.3 };
+                let cloud = ((cloud_x - x0) * a.tan()).abs() <= 0.15;
+                let range = if cloud { cloud_x - x0 } else { 3.0 - x0 } / a.cos();
+                scan.beams.push(Beam {
+                    angle: a as f32,
+                    range: Some(range as f32),
+                    kind: BeamKind::Laser,
+                });
+                scan.laser_roughness
+                    .push(if cloud { 0.6 } else { f32::NAN });
+            }
+            slam.process(&scan, &Pose2::new(x0, 0.0, 0.0));
+        }
+        let map = slam.map().expect("nodes");
+        let mut walls = 0;
+        for cy in 0..map.height {
+            for cx in 0..map.width {
+                let (x, _) = map.cell_center(cx, cy);
+                if (0.8..1.5).contains(&x) && map.get(cx, cy).is_some_and(|v| v >= 65) {
+                    walls += 1;
+                }
+            }
+        }
+        walls
+    }
+
+    #[test]
+    fn a_smoke_cloud_the_sonar_contradicts_is_not_drawn_as_a_wall() {
+        let drawn = cloud_walls(0.0);
+        assert!(drawn >= 8, "drawn when the check is off: {drawn}");
+        assert_eq!(cloud_walls(0.15), 0);
+        // A threshold above the cloud's roughness draws it.
+        assert_eq!(cloud_walls(1.0), drawn);
     }
 
     /// Six nodes 0.3 m apart along y facing a wall at x = 2 m: the first four
@@ -2529,6 +2584,7 @@ mod tests {
                 hit: true,
                 sonar: false,
                 arc_flank: false,
+                smoke_return: false,
             },
             RobotBeam {
                 x: 0.2,
@@ -2536,6 +2592,7 @@ mod tests {
                 hit: true,
                 sonar: false,
                 arc_flank: false,
+                smoke_return: false,
             },
         ];
         let node = Node::new(Vec::new(), beams, Pose2::new(0.2, 0.0, 0.0), 0.0);

@@ -456,7 +456,7 @@ fn integrate(
             buf.push(BeamEnd {
                 ex: p.pose.x + c * b.x - s * b.y,
                 ey: p.pose.y + s * b.x + c * b.y,
-                hit: b.hit,
+                hit: b.hit && !b.smoke_return,
             });
         }
         let model = if sonar {

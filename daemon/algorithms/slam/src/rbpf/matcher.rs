@@ -56,6 +56,11 @@ pub struct RobotBeam {
     /// `[slam] sonar_arc_middle`): the graph's map clears its cone but draws
     /// no wall at its end.
     pub arc_flank: bool,
+    /// A laser return the sonar contradicts that jitters like a smoke
+    /// cloud's (rougher than `[slam] smoke_return_rough_m`, see
+    /// [`crate::scan::RangeScan::laser_roughness`]): the maps clear space
+    /// up to it but draw no wall at its end.
+    pub smoke_return: bool,
 }
 
 /// A scan turned into what matching and mapping need, computed once per scan
@@ -93,6 +98,8 @@ pub struct MatchParams {
     pub degeneracy: DegeneracyParams,
     /// `[slam] sonar_arc_middle`.
     pub sonar_arc_middle: f64,
+    /// `[slam] smoke_return_rough_m` (0: off).
+    pub smoke_return_rough_m: f64,
 }
 
 impl MatchParams {
@@ -112,6 +119,7 @@ impl MatchParams {
             null_likelihood: c.null_likelihood,
             degeneracy: DegeneracyParams::default(),
             sonar_arc_middle: c.sonar_arc_middle,
+            smoke_return_rough_m: c.smoke_return_rough_m,
         }
     }
 }
@@ -160,6 +168,11 @@ impl PreparedScan {
                     .arc_offset
                     .get(i)
                     .is_some_and(|&o| f64::from(o) > p.sonar_arc_middle),
+                smoke_return: p.smoke_return_rough_m > 0.0
+                    && scan
+                        .laser_roughness
+                        .get(i)
+                        .is_some_and(|&r| f64::from(r) > p.smoke_return_rough_m),
             });
         }
         scan.endpoints(&p.endpoint_limits(), &mut self.endpoints);
@@ -615,6 +628,31 @@ mod tests {
             });
         }
         scan
+    }
+
+    #[test]
+    fn a_rough_contradicted_laser_return_is_flagged_as_smoke_unless_turned_off() {
+        let mut scan = RangeScan::default();
+        for (i, rough) in [f32::NAN, 0.1, 0.6].into_iter().enumerate() {
+            scan.beams.push(Beam {
+                angle: 0.1 * i as f32,
+                range: Some(1.0),
+                kind: BeamKind::Laser,
+            });
+            scan.laser_roughness.push(rough);
+        }
+        let mut prepared = PreparedScan::default();
+        let flags = |p: &PreparedScan| p.beams.iter().map(|b| b.smoke_return).collect::<Vec<_>>();
+        prepared.prepare(&scan, &params());
+        assert_eq!(flags(&prepared), [false, false, true]);
+        // Every beam still ends on an obstacle as far as matching goes.
+        assert!(prepared.beams.iter().all(|b| b.hit));
+        let off = MatchParams {
+            smoke_return_rough_m: 0.0,
+            ..params()
+        };
+        prepared.prepare(&scan, &off);
+        assert_eq!(flags(&prepared), [false, false, false]);
     }
 
     #[test]

@@ -139,7 +139,10 @@ fn scans_text(g: &GraphSlam) -> String {
         }
         s.push_str("\nB");
         for b in &n.beams {
-            let flags = u8::from(b.hit) | (u8::from(b.sonar) << 1) | (u8::from(b.arc_flank) << 2);
+            let flags = u8::from(b.hit)
+                | (u8::from(b.sonar) << 1)
+                | (u8::from(b.arc_flank) << 2)
+                | (u8::from(b.smoke_return) << 3);
             let _ = write!(s, " {} {} {flags}", b.x, b.y);
         }
         s.push('\n');
@@ -288,13 +291,14 @@ fn read_scans<R: BufRead>(input: R, file: &Path) -> Result<SavedScans, SavedGrap
         let f = l.expect("B", Some(3 * nb))?;
         let beams = (0..nb)
             .map(|i| {
-                let flags: u8 = l.num(&f, 3 * i + 2, "flags", |v: u8| v <= 7)?;
+                let flags: u8 = l.num(&f, 3 * i + 2, "flags", |v: u8| v <= 15)?;
                 Ok(RobotBeam {
                     x: l.num(&f, 3 * i, "x", fin)?,
                     y: l.num(&f, 3 * i + 1, "y", fin)?,
                     hit: flags & 1 != 0,
                     sonar: flags & 2 != 0,
                     arc_flank: flags & 4 != 0,
+                    smoke_return: flags & 8 != 0,
                 })
             })
             .collect::<Result<Vec<_>, SavedGraphError>>()?;
