@@ -59,11 +59,13 @@ pub struct RangeScan {
     /// although its section's sonar heard its first echo more than
     /// [`CONTRADICTION_MARGIN_M`] further (the sonar contradicts it), how
     /// much its range jitters from beam to beam: the median |second
-    /// difference| of the ranges over ±2 beams, m. `f32::NAN` for every
-    /// other beam, and where a neighbour has no range. A wall's ranges run
-    /// smoothly however obliquely it is met; the returns of a smoke cloud
-    /// seen from clean air, which the fusion keeps while the smoke sensor
-    /// reads clean, scatter by tenths of a metre.
+    /// difference| of the ranges over ±2 beams, m, a second difference
+    /// over a beam without a return counting as unbounded (so a return next
+    /// to a dropout is rough: a cloud's come between dropouts). `f32::NAN`
+    /// for every other beam and within three beams of the scan's ends. A
+    /// wall's ranges run smoothly however obliquely it is met; the returns
+    /// of a smoke cloud seen from clean air, which the fusion keeps while
+    /// the smoke sensor reads clean, scatter by tenths of a metre.
     pub laser_roughness: Vec<f32>,
 }
 
@@ -81,18 +83,22 @@ fn contradicted_roughness(beams: &[Beam], echo: impl Fn(usize) -> Option<f32>, o
         let (Some(r), Some(e)) = (range(i), echo(i)) else {
             continue;
         };
-        if beams[i].kind != BeamKind::Laser || r >= e - CONTRADICTION_MARGIN_M || i < 3 {
+        if beams[i].kind != BeamKind::Laser
+            || r >= e - CONTRADICTION_MARGIN_M
+            || i < 3
+            || i + 3 >= beams.len()
+        {
             continue;
         }
         let mut d = [0.0f32; 5];
         let second = |j: usize| Some((range(j - 1)? - 2.0 * range(j)? + range(j + 1)?).abs());
-        let all = (i - 2..=i + 2)
-            .zip(d.iter_mut())
-            .all(|(j, dj)| second(j).map(|v| *dj = v).is_some());
-        if all {
-            d.sort_by(f32::total_cmp);
-            *rough = d[2];
+        // A laser that returns nothing next door is no smoother for it: a
+        // dropout counts as a jump without end.
+        for (j, dj) in (i - 2..=i + 2).zip(d.iter_mut()) {
+            *dj = second(j).unwrap_or(f32::INFINITY);
         }
+        d.sort_by(f32::total_cmp);
+        *rough = d[2];
     }
 }
 
@@ -551,6 +557,45 @@ mod tests {
         // A plain laser scan has none.
         r.fill_from_laser(&f.scan, Pose2::default());
         assert!(r.laser_roughness.is_empty());
+    }
+
+    #[test]
+    fn a_contradicted_return_next_to_a_dropout_is_rough() {
+        // Two sections of 30 beams, both sonars heard 2.5 m. 0: a smooth
+        // wall at 1.0–3.5 m with one dropout (beam 15). 1: a smoke cloud
+        // the laser returns from at an even 2 m, every third beam nothing.
+        let mut f = every_beam_at_2m(60);
+        set_sections(&mut f, &[(0, 30, 0), (30, 60, 1)]);
+        for d in f.sections.iter_mut() {
+            d.sonar_range = 2.5;
+        }
+        for i in 0..30 {
+            f.scan
+                .set_beam(i, BeamReading::Range(1.0 + 0.003 * (i * i) as f32));
+        }
+        f.scan.set_beam(15, BeamReading::NoReturn);
+        for i in (30..60).step_by(3) {
+            f.scan.set_beam(i, BeamReading::NoReturn);
+        }
+        let mut r = RangeScan::default();
+        r.fill_from_fused(&f, Pose2::default(), 1.0);
+        let rough = &r.laser_roughness;
+        // Once without a return, the wall is still smooth two beams away
+        // (the median of five second differences has two unbounded ones).
+        for i in (3..14).chain(17..20) {
+            assert!((rough[i] - 0.006).abs() < 1e-4, "beam {i}: {}", rough[i]);
+        }
+        // Before, a neighbour without a return left every one of these
+        // unmeasured (NaN), and the cloud was drawn as a wall.
+        for i in [14, 16].into_iter().chain((31..57).filter(|i| i % 3 != 0)) {
+            assert_eq!(rough[i], f32::INFINITY, "beam {i}");
+        }
+        // Where the sonar does not contradict the wall (from beam 20 it is
+        // 2.2 m away or more) and within three beams of the scan's ends
+        // nothing is measured.
+        for i in (0..3).chain(20..30).chain(57..60) {
+            assert!(rough[i].is_nan(), "beam {i}: {}", rough[i]);
+        }
     }
 
     /// Three adjacent sections of ten beams, all painted from their sonars,
