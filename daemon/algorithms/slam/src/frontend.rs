@@ -376,26 +376,34 @@ impl FrontEnd {
             && self.blind_m >= self.p.square_after_blind_m
             && self.points.len() >= SQUARE_MIN_POINTS
         {
-            // Once per stretch: the next scans' views are no better.
-            self.blind_m = 0.0;
+            // Once per stretch, from the first view that is clearly square
+            // (a view that is not, say a few walls seen past smoke, leaves
+            // it to the next scan's).
             if let Some(turn) = self.square_heading(&prediction) {
-                prediction.theta += turn;
-                squared_turn = turn;
+                self.blind_m = 0.0;
+                if turn.abs() >= SQUARE_MIN_TURN {
+                    prediction.theta += turn;
+                    squared_turn = turn;
+                }
             }
         }
         // Nothing matched and a side sonar runs along a straight wall: the
         // heading from the angle to it, the sideways drift from the
-        // distance to it.
+        // distance to it. A match by heading only keeps the prediction's
+        // position, so the drift is still the odometry's then and the
+        // shift applies too (the heading is the match's).
         let mut side_turn = 0.0;
-        if found.is_none()
+        if (found.is_none() || heading_only)
             && squared_turn == 0.0
             && let Some((h, shift)) = self.side_wall_correction(&prediction)
         {
             prediction.x += SIDE_WALL_GAIN * shift.0;
             prediction.y += SIDE_WALL_GAIN * shift.1;
-            side_turn =
-                SIDE_WALL_GAIN * smokenav_shared_types::normalize_angle(h - prediction.theta);
-            prediction.theta += side_turn;
+            if found.is_none() {
+                side_turn =
+                    SIDE_WALL_GAIN * smokenav_shared_types::normalize_angle(h - prediction.theta);
+                prediction.theta += side_turn;
+            }
         }
         let (pose, score, degenerate, covariance) = match found {
             Some((matched, score)) if heading_match => {
@@ -516,7 +524,8 @@ impl FrontEnd {
     /// mostly built square, so the turn (within ± 45°) that lays the
     /// scan's walls parallel or square to the local map's is the heading
     /// error, if both are clearly square; a round or diagonal hall is left
-    /// to the match.
+    /// to the match. `None` if either is not clearly square; the turn,
+    /// however small, if both are.
     fn square_heading(&self, prediction: &Pose2) -> Option<f64> {
         let map_dir = self.map_square_direction()?;
         let (sc, ss, sw) = square_directions(&self.points, |p| p);
@@ -528,7 +537,7 @@ impl FrontEnd {
         let mut turn = map_dir - scan_dir;
         let quarter = std::f64::consts::FRAC_PI_2;
         turn -= quarter * (turn / quarter).round();
-        (turn.abs() >= SQUARE_MIN_TURN).then_some(turn)
+        Some(turn)
     }
 
     /// The local map's wall direction modulo 90°, rad, if it is clearly square.
@@ -1427,6 +1436,12 @@ mod tests {
     /// point) along x while the odometry turns `drift_deg` that the robot
     /// did not, and tracks the first scan of `seen` there, at the truth.
     fn after_a_blind_stretch(drift_deg: f64, seen: &[(f64, f64, f64, f64)]) -> Tracked {
+        after_a_blind_stretch_views(drift_deg, &[seen])
+    }
+
+    /// [`after_a_blind_stretch`] tracking one scan of each of `views` in
+    /// turn, standing there; the last one's.
+    fn after_a_blind_stretch_views(drift_deg: f64, views: &[&[(f64, f64, f64, f64)]]) -> Tracked {
         let mut fe = with_a_corner_mapped(params());
         let start = Pose2::default();
         let steps = 40;
@@ -1438,11 +1453,15 @@ mod tests {
             assert_eq!(t.squared_turn, 0.0, "blind: nothing to square");
         }
         let truth = Pose2::new(4.0, 0.0, 0.0);
-        fe.track(
-            walls_from(&truth, seen).into_iter(),
-            &odom,
-            (3 + steps) * 100_000_000,
-        )
+        let mut last = None;
+        for (i, seen) in (0..).zip(views) {
+            last = Some(fe.track(
+                walls_from(&truth, seen).into_iter(),
+                &odom,
+                (3 + steps + i) * 100_000_000,
+            ));
+        }
+        last.expect("a view")
     }
 
     /// A room 7 m on from the corner the local map holds: three square walls.
@@ -1512,6 +1531,46 @@ mod tests {
         }
     }
 
+    /// Drives 6 m down the corridor of [`corridor_from`], every scan
+    /// tracked by heading only (smoke in some sections), the left sonar
+    /// reading the wall 1.3 m away in whole inches, while the odometry
+    /// slips sideways 4 mm a step the robot did not move. The poses after
+    /// 3 and 6 m.
+    fn heading_only_down_a_corridor_slipping(window_m: f64) -> (Pose2, Pose2) {
+        let mut fe = FrontEnd::new(FrontEndParams {
+            side_wall_window_m: window_m,
+            ..params()
+        });
+        let inch: f64 = 0.0254;
+        let mut odom = Pose2::default();
+        let mut poses = Vec::new();
+        for i in 0..=60u64 {
+            let truth = Pose2::new(0.1 * i as f64, 0.0, 0.0);
+            fe.set_side_ranges([Some((1.3 / inch).round() * inch), None]);
+            let t = fe.track_heading(corridor_from(&truth, i).into_iter(), &odom, i * 100_000_000);
+            if i > 0 {
+                assert!(t.score.is_some(), "scan {i}: the walls give the heading");
+            }
+            assert!(t.pose.theta.abs() < 0.01, "scan {i}: {:?}", t.pose);
+            poses.push(t.pose);
+            odom = odom.compose(&Pose2::new(0.1, 0.004, 0.0));
+        }
+        (poses[30], poses[60])
+    }
+
+    #[test]
+    fn a_side_sonar_corrects_the_sideways_drift_a_heading_match_leaves() {
+        // Without the side sonar the position is the odometry's: 0.12 m
+        // aside over the last 3 m.
+        let (mid, end) = heading_only_down_a_corridor_slipping(0.0);
+        let off = end.y - mid.y;
+        assert!((off - 0.12).abs() < 0.01, "without: {off} m");
+        // With it, once the fit spans its window, well under half of that.
+        let (mid, end) = heading_only_down_a_corridor_slipping(1.5);
+        let held = end.y - mid.y;
+        assert!(held.abs() < off / 2.0, "{held} m ({off} m without)");
+    }
+
     #[test]
     fn a_round_hall_after_a_blind_stretch_is_left_to_the_match() {
         let round: Vec<(f64, f64, f64, f64)> = (0..72)
@@ -1530,6 +1589,36 @@ mod tests {
             .collect();
         let t = after_a_blind_stretch(10.0, &round);
         assert_eq!(t.squared_turn, 0.0);
+    }
+
+    #[test]
+    fn a_view_that_is_not_square_leaves_the_squaring_to_the_next_one() {
+        // The first view after the stretch is a round pillar (as a part
+        // view through thinning smoke can be): nothing square to turn onto,
+        // and the room seen next still squares the heading.
+        let pillar: Vec<(f64, f64, f64, f64)> = (0..36)
+            .map(|i| {
+                let (a, b) = (
+                    f64::from(i) * 10f64.to_radians(),
+                    f64::from(i + 1) * 10f64.to_radians(),
+                );
+                (
+                    6.5 + 0.6 * a.cos(),
+                    0.6 * a.sin(),
+                    6.5 + 0.6 * b.cos(),
+                    0.6 * b.sin(),
+                )
+            })
+            .collect();
+        let drift = 9.0;
+        let t = after_a_blind_stretch_views(drift, &[&pillar]);
+        assert_eq!(t.squared_turn, 0.0, "the pillar alone");
+        let t = after_a_blind_stretch_views(drift, &[&pillar, &ROOM]);
+        assert!(
+            (t.squared_turn.to_degrees() + drift).abs() < 1.0,
+            "squared by {:.2}° after the pillar",
+            t.squared_turn.to_degrees()
+        );
     }
 
     #[test]

@@ -372,16 +372,27 @@ impl SlamPipeline {
                 if !trusted {
                     self.stats.frontend_withheld += 1;
                 }
-                let laser = self
+                // Matched in full: the laser's own sections. By heading
+                // only: also the laser ranges in sections smoke gave to the
+                // sonar that the sonar's echo did not contradict — walls
+                // seen through thinning smoke, which hold the heading
+                // through a turn the odometry slips in.
+                let matched = self
                     .endpoints
                     .iter()
-                    .filter(|e| e.kind == BeamKind::Laser)
+                    .filter(|e| {
+                        if trusted {
+                            e.kind == BeamKind::Laser
+                        } else {
+                            e.laser_range
+                        }
+                    })
                     .map(|e| (e.x, e.y));
                 fe.set_side_ranges(self.side_sonars.ranges(&scan.sonar));
                 let tracked = if trusted {
-                    fe.track(laser, &odom, scan.stamp_ns)
+                    fe.track(matched, &odom, scan.stamp_ns)
                 } else {
-                    fe.track_heading(laser, &odom, scan.stamp_ns)
+                    fe.track_heading(matched, &odom, scan.stamp_ns)
                 };
                 self.stats.side_wall_headings += u64::from(tracked.side_turn != 0.0);
                 if tracked.squared_turn != 0.0 {

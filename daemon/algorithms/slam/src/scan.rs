@@ -172,6 +172,10 @@ pub struct Endpoint {
     pub cos: f64,
     pub sin: f64,
     pub kind: BeamKind,
+    /// The range is the laser's: a laser beam, or one in a section the
+    /// fusion gave to the sonar whose echo did not contradict it (`Both`;
+    /// `kind` is then [`BeamKind::Sonar`]).
+    pub laser_range: bool,
 }
 
 impl RangeScan {
@@ -184,7 +188,7 @@ impl RangeScan {
         let min_spacing2 = lim.min_spacing * lim.min_spacing;
         let sensor = &self.sensor_pose;
         let mut used = 0usize;
-        for beam in &self.beams {
+        for (i, beam) in self.beams.iter().enumerate() {
             let Some(r) = beam.range else { continue };
             let r = r as f64;
             if !(r > 0.0 && r < lim.max_range && beam.angle.is_finite()) || r > lim.max_urange {
@@ -209,6 +213,8 @@ impl RangeScan {
                 cos,
                 sin,
                 kind: beam.kind,
+                laser_range: beam.kind == BeamKind::Laser
+                    || self.sonar_of.get(i).is_some_and(|&s| s == NO_SONAR),
             });
         }
     }
