@@ -161,6 +161,8 @@ pub struct SlamPipeline {
     footprint_m: f64,
     /// [`Self::with_side_sonars`].
     side_sonars: SideSonars,
+    /// `[fusion.v2] contradiction_margin_m` ([`Self::with_contradiction_margin`]).
+    contradiction_margin_m: f32,
 }
 
 impl SlamPipeline {
@@ -207,6 +209,7 @@ impl SlamPipeline {
             last_update: None,
             footprint_m: 0.0,
             side_sonars: SideSonars::default(),
+            contradiction_margin_m: crate::scan::CONTRADICTION_MARGIN_M,
         }
     }
 
@@ -262,7 +265,8 @@ impl SlamPipeline {
     pub fn push_fused(&mut self, f: &FusedScan) {
         self.supersede();
         let factor = self.noise.factor(f64::from(f.smoke_level));
-        self.scan.fill_from_fused(f, self.sensor_pose, factor);
+        self.scan
+            .fill_from_fused(f, self.sensor_pose, factor, self.contradiction_margin_m);
         if self.scan.sonar_stamp_ns != 0 {
             self.sonar_ages
                 .observe(self.scan.sonar_stamp_ns, &self.scan.sonar);
@@ -500,6 +504,16 @@ impl SlamPipeline {
     /// heading along a wall while the laser is blind ([`crate::side_wall`]).
     pub fn with_side_sonars(mut self, sonars: SideSonars) -> Self {
         self.side_sonars = sonars;
+        self
+    }
+
+    /// The fusion's `[fusion.v2] contradiction_margin_m`: how much nearer
+    /// than its section's sonar echo a laser range is one the sonar
+    /// contradicts, for the maps' smoke-return check (0.3 m unless set).
+    pub fn with_contradiction_margin(mut self, margin_m: f64) -> Self {
+        if margin_m.is_finite() && margin_m >= 0.0 {
+            self.contradiction_margin_m = margin_m as f32;
+        }
         self
     }
 

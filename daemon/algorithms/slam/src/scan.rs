@@ -70,12 +70,20 @@ pub struct RangeScan {
 }
 
 /// How much nearer than its section's sonar echo a laser range must be for
-/// the sonar to contradict it, m (v2's `contradiction_margin_m` default).
+/// the sonar to contradict it, m, unless told otherwise: v2's
+/// `contradiction_margin_m` default ([`RangeScan::fill_from_fused`] takes
+/// the profile's).
 pub const CONTRADICTION_MARGIN_M: f32 = 0.3;
 
 /// [`RangeScan::laser_roughness`] of `beams`: `echo(i)` is the sonar range
-/// of the section beam `i` lies in, if any.
-fn contradicted_roughness(beams: &[Beam], echo: impl Fn(usize) -> Option<f32>, out: &mut Vec<f32>) {
+/// of the section beam `i` lies in, if any; a laser range more than
+/// `margin` nearer is contradicted.
+fn contradicted_roughness(
+    beams: &[Beam],
+    echo: impl Fn(usize) -> Option<f32>,
+    margin: f32,
+    out: &mut Vec<f32>,
+) {
     out.clear();
     out.resize(beams.len(), f32::NAN);
     let range = |i: usize| beams.get(i).and_then(|b| b.range);
@@ -83,11 +91,7 @@ fn contradicted_roughness(beams: &[Beam], echo: impl Fn(usize) -> Option<f32>, o
         let (Some(r), Some(e)) = (range(i), echo(i)) else {
             continue;
         };
-        if beams[i].kind != BeamKind::Laser
-            || r >= e - CONTRADICTION_MARGIN_M
-            || i < 3
-            || i + 3 >= beams.len()
-        {
+        if beams[i].kind != BeamKind::Laser || r >= e - margin || i < 3 || i + 3 >= beams.len() {
             continue;
         }
         let mut d = [0.0f32; 5];
@@ -324,12 +328,16 @@ impl RangeScan {
     }
 
     /// Fills from a fused scan: beams whose source is sonar get the sonar's
-    /// noise; `Neither` beams carry no range; the laser's noise follows the smoke level.
+    /// noise; `Neither` beams carry no range; the laser's noise follows the
+    /// smoke level. `contradiction_margin_m` is the fusion's (`[fusion.v2]
+    /// contradiction_margin_m`): a laser range that much nearer than its
+    /// section's echo is one the sonar contradicts.
     pub fn fill_from_fused(
         &mut self,
         fused: &FusedScan,
         sensor_pose: Pose2,
         laser_noise_factor: f64,
+        contradiction_margin_m: f32,
     ) {
         self.fill_from_laser(&fused.scan, sensor_pose);
         self.laser_noise_factor = if laser_noise_factor.is_finite() && laser_noise_factor > 0.0 {
@@ -391,7 +399,12 @@ impl RangeScan {
                 .find(|d| (usize::from(d.first_beam)..usize::from(d.end_beam)).contains(&i))?;
             (d.sonar_range.is_finite() && d.sonar_range > 0.0).then_some(d.sonar_range)
         };
-        contradicted_roughness(&self.beams, echo, &mut self.laser_roughness);
+        contradicted_roughness(
+            &self.beams,
+            echo,
+            contradiction_margin_m,
+            &mut self.laser_roughness,
+        );
         self.sonar.extend(
             fused.sections[..used]
                 .iter()
@@ -450,7 +463,7 @@ mod tests {
         f.sections[1].sonar_index = 4;
         f.sections[5].sonar_range = 2.0; // beyond section_count: not read
         let mut r = RangeScan::default();
-        r.fill_from_fused(&f, Pose2::default(), 1.3);
+        r.fill_from_fused(&f, Pose2::default(), 1.3, CONTRADICTION_MARGIN_M);
         assert_eq!(r.sonar.len(), 1);
         assert_eq!(r.sonar[0].0, 3);
         assert!((r.sonar[0].1 - 1.2).abs() < 1e-6);
@@ -506,7 +519,7 @@ mod tests {
         }
         f.beam_source[10] = SectionSource::Both as u8;
         let mut r = RangeScan::default();
-        r.fill_from_fused(&f, Pose2::default(), 1.0);
+        r.fill_from_fused(&f, Pose2::default(), 1.0, CONTRADICTION_MARGIN_M);
         assert_eq!(r.arc_offset.len(), 30);
         assert_eq!(r.arc_offset[5], 1.0);
         assert_eq!(r.arc_offset[15], 1.0);
@@ -541,7 +554,7 @@ mod tests {
             f.beam_source[i] = SectionSource::Sonar as u8;
         }
         let mut r = RangeScan::default();
-        r.fill_from_fused(&f, Pose2::default(), 1.0);
+        r.fill_from_fused(&f, Pose2::default(), 1.0, CONTRADICTION_MARGIN_M);
         assert_eq!(r.laser_roughness.len(), 60);
         for i in 3..12 {
             let rough = r.laser_roughness[i];
@@ -566,6 +579,25 @@ mod tests {
     }
 
     #[test]
+    fn the_sonar_contradicts_by_the_fusions_margin() {
+        // One section, a smooth wall at 1.0–1.6 m, its sonar heard 2.5 m.
+        let mut f = every_beam_at_2m(15);
+        set_sections(&mut f, &[(0, 15, 0)]);
+        f.sections[0].sonar_range = 2.5;
+        for i in 0..15 {
+            f.scan
+                .set_beam(i, BeamReading::Range(1.0 + 0.003 * (i * i) as f32));
+        }
+        let mut r = RangeScan::default();
+        // 0.9 m or more nearer than the echo: contradicted at 0.3 m...
+        r.fill_from_fused(&f, Pose2::default(), 1.0, 0.3);
+        assert!((3..12).all(|i| r.laser_roughness[i].is_finite()));
+        // ...but not with a fusion told to keep laser ranges within 1.6 m.
+        r.fill_from_fused(&f, Pose2::default(), 1.0, 1.6);
+        assert!(r.laser_roughness.iter().all(|x| x.is_nan()));
+    }
+
+    #[test]
     fn a_contradicted_return_next_to_a_dropout_is_rough() {
         // Two sections of 30 beams, both sonars heard 2.5 m. 0: a smooth
         // wall at 1.0–3.5 m with one dropout (beam 15). 1: a smoke cloud
@@ -584,7 +616,7 @@ mod tests {
             f.scan.set_beam(i, BeamReading::NoReturn);
         }
         let mut r = RangeScan::default();
-        r.fill_from_fused(&f, Pose2::default(), 1.0);
+        r.fill_from_fused(&f, Pose2::default(), 1.0, CONTRADICTION_MARGIN_M);
         let rough = &r.laser_roughness;
         // Once without a return, the wall is still smooth two beams away
         // (the median of five second differences has two unbounded ones).
@@ -615,7 +647,7 @@ mod tests {
         }
         f.beam_source[..30].fill(SectionSource::Sonar as u8);
         let mut r = RangeScan::default();
-        r.fill_from_fused(&f, Pose2::default(), 1.0);
+        r.fill_from_fused(&f, Pose2::default(), 1.0, CONTRADICTION_MARGIN_M);
         (10..20).filter(|&i| r.arc_offset[i] <= 1.0 / 3.0).collect()
     }
 
@@ -656,7 +688,7 @@ mod tests {
         f.beam_source[18] = SectionSource::Sonar as u8;
         let mount = Pose2::new(0.1, 0.0, 0.0);
         let mut r = RangeScan::default();
-        r.fill_from_fused(&f, mount, 1.0);
+        r.fill_from_fused(&f, mount, 1.0, CONTRADICTION_MARGIN_M);
         assert_eq!(r.sonar_of[9], 3);
         assert_eq!(r.sonar_of[8], NO_SONAR, "Both: the laser's range");
         assert_eq!(r.sonar_of[18], 4);
@@ -683,7 +715,7 @@ mod tests {
             assert_eq!(r.beams[i], before[i], "beam {i}");
         }
         let mut again = RangeScan::default();
-        again.fill_from_fused(&f, mount, 1.0);
+        again.fill_from_fused(&f, mount, 1.0, CONTRADICTION_MARGIN_M);
         again.compensate_sonar(|index| (index == 4).then(|| Pose2::new(-0.3, 0.0, 0.0)));
         assert_eq!(again.beams[9], before[9], "sonar 3 without an age");
         assert_ne!(again.beams[18], before[18]);

@@ -643,7 +643,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             .as_ref()
             .map(|r| SensorRig::from_config(r).side_sonars())
             .unwrap_or_default(),
-    );
+    )
+    .with_contradiction_margin(robot.as_ref().map_or(
+        f64::from(smokenav_algorithms_slam::scan::CONTRADICTION_MARGIN_M),
+        |r| r.fusion.v2.contradiction_margin_m,
+    ));
     let truth_map = match &args.truth_map {
         Some(p) => Some(
             smokenav_platform_map::load_map_server(p)

@@ -329,6 +329,34 @@ fn odometry_reset_is_not_taken_as_motion() {
 }
 
 #[test]
+fn the_smoke_return_check_takes_the_fusions_contradiction_margin() {
+    // One section over the whole scan of the room, its sonar hearing 4 m:
+    // every laser return nearer than 3.7 m is one the sonar contradicts at
+    // v2's default margin, none at a margin of 5 m.
+    let mut f = FusedScan {
+        scan: laser_at(&Pose2::new(-3.5, -1.5, 0.0), 0),
+        ..Default::default()
+    };
+    f.section_count = 1;
+    f.sections[0].first_beam = 0;
+    f.sections[0].end_beam = f.scan.count as u16;
+    f.sections[0].sonar_range = 4.0;
+    let measured = |slam: &SlamPipeline| {
+        slam.scan()
+            .laser_roughness
+            .iter()
+            .filter(|r| !r.is_nan())
+            .count()
+    };
+    let mut slam = pipeline(&cfg(2), false);
+    slam.push_fused(&f);
+    assert!(measured(&slam) > 100, "{}", measured(&slam));
+    let mut slam = pipeline(&cfg(2), false).with_contradiction_margin(5.0);
+    slam.push_fused(&f);
+    assert_eq!(measured(&slam), 0);
+}
+
+#[test]
 fn fused_scans_carry_the_smoke_noise_and_the_beam_sources() {
     let mut slam = pipeline(&cfg(2), false);
     let mut f = FusedScan {
