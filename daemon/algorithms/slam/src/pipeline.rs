@@ -517,6 +517,13 @@ impl SlamPipeline {
         self
     }
 
+    /// What the pipeline takes from the robot's profile beyond `[slam]`:
+    /// its ring's side transducers and the fusion's contradiction margin.
+    pub fn with_robot(self, profile: &smokenav_platform_config::RobotConfig) -> Self {
+        self.with_side_sonars(crate::projected::SensorRig::from_config(profile).side_sonars())
+            .with_contradiction_margin(profile.fusion.v2.contradiction_margin_m)
+    }
+
     /// [`SlamBackend::confidence_map`]: the combined fuzzy map, fuzzy back-end only.
     pub fn confidence_map(&self) -> Option<OccupancyGrid> {
         self.backend.confidence_map()

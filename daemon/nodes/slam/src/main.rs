@@ -355,8 +355,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     }
     .with_sensor_pose(mount)
     .with_footprint(vote_aware_footprint(&cfg, footprint_m))
-    .with_side_sonars(SensorRig::from_config(&p.config).side_sonars())
-    .with_contradiction_margin(p.config.fusion.v2.contradiction_margin_m);
+    .with_robot(&p.config);
     let mut member_maps = Vec::new();
     if cfg.backend == SlamBackendKind::Vote {
         for m in &cfg.vote.members {

@@ -637,17 +637,11 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
             )
         }
     }
-    .with_footprint(own_footprint_m)
-    .with_side_sonars(
-        robot
-            .as_ref()
-            .map(|r| SensorRig::from_config(r).side_sonars())
-            .unwrap_or_default(),
-    )
-    .with_contradiction_margin(robot.as_ref().map_or(
-        f64::from(smokenav_algorithms_slam::scan::CONTRADICTION_MARGIN_M),
-        |r| r.fusion.v2.contradiction_margin_m,
-    ));
+    .with_footprint(own_footprint_m);
+    // Without a profile: no side transducers, v2's default margin.
+    if let Some(r) = &robot {
+        slam = slam.with_robot(r);
+    }
     let truth_map = match &args.truth_map {
         Some(p) => Some(
             smokenav_platform_map::load_map_server(p)

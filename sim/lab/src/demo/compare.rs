@@ -462,8 +462,7 @@ pub(crate) fn replay_slam(
         },
     )
     .with_sensor_pose(Pose2::new(mount.x, mount.y, mount.yaw_rad()))
-    .with_side_sonars(SensorRig::from_config(profile).side_sonars())
-    .with_contradiction_margin(profile.fusion.v2.contradiction_margin_m);
+    .with_robot(profile);
     // Odometry ahead of a scan received at the same time, as the process drains it first.
     let mut received: Vec<(u64, Received<'_>)> = log
         .order
