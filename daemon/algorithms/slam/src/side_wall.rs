@@ -27,6 +27,12 @@ const MAX_RELATIVE_RAD: f64 = 0.14;
 /// Largest turn of the odometry's heading within the window, rad: the
 /// robot drives along the wall, it does not turn off it.
 const MAX_TURN_RAD: f64 = 0.12;
+/// Largest change between one reading and the next taken as the same
+/// wall, m: driving along a wall at up to `MAX_RELATIVE_RAD` the range moves
+/// ~4 cm in the second between a Scout transducer's readings; a wall that
+/// begins or ends beside the robot (a partition's end, a doorway) moves it
+/// by metres. The readings before such a jump are another surface.
+const MAX_JUMP_M: f64 = 0.15;
 /// Readings kept per side (a scan's each; 1.5 m at 10 Hz and 0.3 m/s is 50).
 const CAPACITY: usize = 128;
 
@@ -102,6 +108,15 @@ impl SideWalls {
                 side.samples.clear();
                 continue;
             };
+            // A new surface: the fit starts afresh instead of waiting for
+            // the old surface's readings to leave the window.
+            if side
+                .samples
+                .back()
+                .is_some_and(|last| (r - last.range_m).abs() > MAX_JUMP_M)
+            {
+                side.samples.clear();
+            }
             if side.samples.len() >= CAPACITY {
                 side.samples.pop_front();
             }
@@ -283,6 +298,40 @@ mod tests {
         }
         assert_eq!(w.fit(SideOf::Left).map(|f| f.relative_heading), None);
         assert_eq!(w.fit(SideOf::Right).map(|f| f.relative_heading), None);
+    }
+
+    #[test]
+    fn a_wall_that_begins_beside_the_robot_is_fitted_once_it_spans_enough_of_the_window() {
+        // The far wall of a bay (2.7 m) for the first metre, then a
+        // partition 1.2 m away the robot drives along at 0.05 rad: once
+        // 0.6 m of it are read (window 0.8 m) the fit is the partition's,
+        // though the window still reaches back into the bay.
+        let psi = 0.05_f64;
+        let mut w = SideWalls::new(0.8);
+        let mut fitted_at = None;
+        for i in 0..60 {
+            let t = 0.03 * f64::from(i);
+            let odom = Pose2::new(t, 0.0, 0.0);
+            let r = if t < 1.0 {
+                2.7
+            } else {
+                1.2 - (t - 1.0) * psi.sin()
+            };
+            w.observe(&odom, [Some(r), None]);
+            if let Some(f) = w.fit(SideOf::Left).filter(|_| t >= 1.0) {
+                assert!(
+                    (f.relative_heading - psi).abs() < 1e-6,
+                    "{t}: {}",
+                    f.relative_heading
+                );
+                fitted_at.get_or_insert(t);
+            }
+        }
+        let at = fitted_at.expect("the partition is fitted");
+        assert!(
+            at < 1.0 + 0.8,
+            "fitted only once the bay left the window: {at}"
+        );
     }
 
     #[test]
