@@ -14,7 +14,9 @@
 //! drift than the window leaves them open (slam_toolbox's complaint #692):
 //! widen `closure_window_m` / `closure_window_rad` and `closure_search_m`
 //! with it, at the price of look-alike places matched by mistake (every
-//! closure still passes the score, rival, overlap and consistency checks).
+//! closure still passes the score, rival, overlap and consistency checks,
+//! and one that would move its node further than `closure_review_m` must
+//! reach `closure_wide_min_score`).
 //! Where its estimate is uncertain (a blind stretch in smoke, a long loop)
 //! the back-end widens the search by itself (`closure_wide_*`).
 
@@ -53,7 +55,8 @@ pub struct GraphSection {
     pub closure_wide_max_m: f64,
     /// … and ± rad.
     pub closure_wide_max_rad: f64,
-    /// Score (0–1) a wide match must reach.
+    /// Score (0–1) a wide match must reach; so must any closure that moves
+    /// its node further than `closure_review_m` / `closure_review_rad`.
     pub closure_wide_min_score: f64,
     /// A closure that moves its node further than this from its estimate,
     /// m, … stays under review for the next ten nodes: a later far match
