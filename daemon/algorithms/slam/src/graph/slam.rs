@@ -868,7 +868,11 @@ impl GraphSlam {
     /// The closure `edge` of node `k` would move it further than `closure_review`.
     fn moves_far(&self, k: usize, edge: &Edge) -> bool {
         let poses = self.graph.poses();
-        let moved = poses[k].between(&poses[edge.from].compose(&edge.measurement));
+        self.is_far(&poses[k].between(&poses[edge.from].compose(&edge.measurement)))
+    }
+
+    /// A correction `moved` beyond `closure_review`.
+    fn is_far(&self, moved: &Pose2) -> bool {
         let (m, rad) = self.p.closure_review;
         moved.translation_norm() > m || moved.theta.abs() > rad
     }
@@ -1064,9 +1068,7 @@ impl GraphSlam {
         // dense-smoke trial's last corner a node mid-turn, a quarter of its
         // scan withheld, matched the aisle before at 0.46 and moved 0.6 m
         // along it.
-        let moved = here.between(&matched);
-        let (far_m, far_rad) = self.p.closure_review;
-        if (moved.translation_norm() > far_m || moved.theta.abs() > far_rad)
+        if self.is_far(&here.between(&matched))
             && score < self.p.closure_wide_min_score.max(min_score)
         {
             self.stats.closures_low_score += 1;
