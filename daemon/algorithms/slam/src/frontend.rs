@@ -95,6 +95,17 @@ const SQUARE_SPAN: usize = 4;
 /// the local map's square directions for the wall to be taken as one of
 /// them, rad.
 const SIDE_WALL_MAX_SNAP: f64 = 0.14;
+/// ... plus this much per metre (rad/m) and per radian turned (rad/rad)
+/// since the heading was last fixed (by a match, the walls' squaring or a
+/// side wall within `SIDE_WALL_MAX_SNAP`): the odometry's heading drifts
+/// with both, and on the dense-smoke trial it slipped 6° in one corner's
+/// quarter turn and 3° a metre after it, past `SIDE_WALL_MAX_SNAP` before
+/// the side sonar's readings spanned its window, and the map was lost
+/// (1.2 m off for the rest of the run).
+const SIDE_WALL_SNAP_GROWTH: (f64, f64) = (0.05, 0.1);
+/// ... up to this, rad: short of 45°, where the nearest square direction
+/// stops being the likely one.
+const SIDE_WALL_MAX_SNAP_UNFIXED: f64 = 0.6;
 /// Share of the difference between the side wall's heading and the
 /// prediction a scan takes: the readings are noisy, the odometry's turn
 /// between two scans is not.
@@ -200,6 +211,9 @@ pub struct FrontEnd {
     bootstrap_map: bool,
     /// Odometry travel since a match last gave the heading, m.
     blind_m: f64,
+    /// Odometry travel (m) and turn (rad) since the heading was last fixed
+    /// (see `SIDE_WALL_SNAP_GROWTH`).
+    unfixed: (f64, f64),
     /// The side transducers' readings along the way ([`Self::set_side_ranges`]).
     side_walls: SideWalls,
     side_ranges: [Option<f64>; 2],
@@ -254,6 +268,7 @@ impl FrontEnd {
             degenerate_matches: 0,
             bootstrap_map: false,
             blind_m: 0.0,
+            unfixed: (0.0, 0.0),
             side_walls,
             side_ranges: [None; 2],
         }
@@ -371,6 +386,7 @@ impl FrontEnd {
         // Nothing matched after a blind stretch: the heading from the walls'
         // directions rather than the odometry's alone.
         let mut squared_turn = 0.0;
+        let mut squared = false;
         if found.is_none()
             && self.p.square_after_blind_m > 0.0
             && self.blind_m >= self.p.square_after_blind_m
@@ -381,6 +397,7 @@ impl FrontEnd {
             // it to the next scan's).
             if let Some(turn) = self.square_heading(&prediction) {
                 self.blind_m = 0.0;
+                squared = true;
                 if turn.abs() >= SQUARE_MIN_TURN {
                     prediction.theta += turn;
                     squared_turn = turn;
@@ -393,9 +410,10 @@ impl FrontEnd {
         // position, so the drift is still the odometry's then and the
         // shift applies too (the heading is the match's).
         let mut side_turn = 0.0;
+        let mut side_fixed = false;
         if (found.is_none() || heading_only)
             && squared_turn == 0.0
-            && let Some((h, shift)) = self.side_wall_correction(&prediction)
+            && let Some((h, shift, close)) = self.side_wall_correction(&prediction)
         {
             prediction.x += SIDE_WALL_GAIN * shift.0;
             prediction.y += SIDE_WALL_GAIN * shift.1;
@@ -403,6 +421,7 @@ impl FrontEnd {
                 side_turn =
                     SIDE_WALL_GAIN * smokenav_shared_types::normalize_angle(h - prediction.theta);
                 prediction.theta += side_turn;
+                side_fixed = close;
             }
         }
         let (pose, score, degenerate, covariance) = match found {
@@ -438,6 +457,14 @@ impl FrontEnd {
         } else {
             self.blind_m += last_pose.between(&prediction).translation_norm();
         }
+        self.unfixed = if score.is_some() || squared || side_fixed {
+            (0.0, 0.0)
+        } else {
+            (
+                self.unfixed.0 + step.translation_norm(),
+                self.unfixed.1 + step.theta.abs(),
+            )
+        };
         // A map of heading-tracked scans only (no scan matched in full yet)
         // takes each of them: turning on the spot while the smoke sensor
         // warms up, the laser's few kept sections move from scan to scan and
@@ -559,8 +586,11 @@ impl FrontEnd {
     /// close on the wall more or less than the readings did since the
     /// window's first one, and the fit knows that much of the drift only
     /// once it spans the window. Averaged over both sides when both run
-    /// along a wall.
-    fn side_wall_correction(&self, prediction: &Pose2) -> Option<(f64, (f64, f64))> {
+    /// along a wall. The wall is taken as a square direction within
+    /// `SIDE_WALL_MAX_SNAP` of it, more the longer the heading went unfixed;
+    /// the flag says whether every wall taken was within the plain limit
+    /// (the heading then counts as fixed).
+    fn side_wall_correction(&self, prediction: &Pose2) -> Option<(f64, (f64, f64), bool)> {
         let fits = [SideOf::Left, SideOf::Right].map(|side| (side, self.side_walls.fit(side)));
         if fits.iter().all(|(_, f)| f.is_none()) {
             // The local map's directions cost a pass over its scans.
@@ -568,7 +598,11 @@ impl FrontEnd {
         }
         let map_dir = self.map_square_direction()?;
         let quarter = std::f64::consts::FRAC_PI_2;
+        let (growth_m, growth_rad) = SIDE_WALL_SNAP_GROWTH;
+        let snap = (SIDE_WALL_MAX_SNAP + growth_m * self.unfixed.0 + growth_rad * self.unfixed.1)
+            .min(SIDE_WALL_MAX_SNAP_UNFIXED);
         let (mut turn, mut shift, mut n) = (0.0, (0.0, 0.0), 0.0);
+        let mut close = true;
         for (side, fit) in fits {
             let Some(fit) = fit else {
                 continue;
@@ -576,9 +610,10 @@ impl FrontEnd {
             let wall = prediction.theta - fit.relative_heading;
             let mut off = wall - map_dir;
             off -= quarter * (off / quarter).round();
-            if off.abs() > SIDE_WALL_MAX_SNAP {
+            if off.abs() > snap.max(SIDE_WALL_MAX_SNAP) {
                 continue;
             }
+            close &= off.abs() <= SIDE_WALL_MAX_SNAP;
             turn -= off;
             n += 1.0;
             // Unit normal from the robot towards this side's wall.
@@ -595,7 +630,13 @@ impl FrontEnd {
                 shift.1 += normal.1 * e;
             }
         }
-        (n > 0.0).then(|| (prediction.theta + turn / n, (shift.0 / n, shift.1 / n)))
+        (n > 0.0).then(|| {
+            (
+                prediction.theta + turn / n,
+                (shift.0 / n, shift.1 / n),
+                close,
+            )
+        })
     }
 
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
@@ -1490,9 +1531,10 @@ mod tests {
 
     /// Maps a corner, then drives 4 m blind along x with a wall 1.2 m to
     /// the left that the left sonar reads (in whole inches, as the Scout's
-    /// ring does), the odometry turning `drift_deg` the robot did not: the
-    /// pose at the end (the truth: (4, 0, 0)).
-    fn blind_beside_a_wall(drift_deg: f64, window_m: f64) -> Pose2 {
+    /// ring does), the odometry turning `drift_deg` the robot did not (and
+    /// `slip_deg` more on the first step, as a turn read long): the pose at
+    /// the end (the truth: (4, 0, 0)).
+    fn blind_beside_a_wall(drift_deg: f64, slip_deg: f64, window_m: f64) -> Pose2 {
         let mut fe = with_a_corner_mapped(FrontEndParams {
             side_wall_window_m: window_m,
             ..params()
@@ -1503,7 +1545,12 @@ mod tests {
         let mut odom = start;
         let mut pose = start;
         for i in 0..steps {
-            odom = odom.compose(&Pose2::new(0.1, 0.0, drift_deg.to_radians() / steps as f64));
+            let slip = if i == 0 { slip_deg.to_radians() } else { 0.0 };
+            odom = odom.compose(&Pose2::new(
+                0.1,
+                0.0,
+                drift_deg.to_radians() / steps as f64 + slip,
+            ));
             fe.set_side_ranges([Some((1.2 / inch).round() * inch), None]);
             pose = fe
                 .track_heading(std::iter::empty(), &odom, (3 + i) * 100_000_000)
@@ -1515,20 +1562,40 @@ mod tests {
     #[test]
     fn a_side_sonar_along_a_wall_holds_the_heading_while_blind() {
         for drift in [-6.0_f64, 6.0] {
-            let off = blind_beside_a_wall(drift, 0.0);
+            let off = blind_beside_a_wall(drift, 0.0, 0.0);
             assert!(
                 (off.theta.to_degrees() - drift).abs() < 0.1,
                 "without: {off:?}"
             );
             // The odometry's path bent 0.2 m towards or away from the wall.
             assert!(off.y.abs() > 0.15, "without: {off:?}");
-            let held = blind_beside_a_wall(drift, 1.5);
+            let held = blind_beside_a_wall(drift, 0.0, 1.5);
             assert!(
                 held.theta.to_degrees().abs() < drift.abs() / 3.0
                     && held.y.abs() < off.y.abs() / 3.0,
                 "odometry turned {drift}°: {held:?} ({off:?} without)"
             );
         }
+    }
+
+    #[test]
+    fn a_side_wall_further_off_than_the_snap_still_fixes_a_heading_long_unfixed() {
+        // The odometry read a turn 10° long: more than a side wall may be
+        // off the local map's square directions while the heading is known
+        // (`SIDE_WALL_MAX_SNAP`, 8°), but not for a heading nothing has
+        // fixed since a turn and a metre of driving.
+        let held = blind_beside_a_wall(0.0, 10.0, 1.5);
+        assert!(
+            held.theta.to_degrees().abs() < 1.0,
+            "the wall did not fix the heading: {held:?}"
+        );
+        // A wall 40° off the square directions is not one of them, however
+        // long the heading went unfixed.
+        let diagonal = blind_beside_a_wall(0.0, 40.0, 1.5);
+        assert!(
+            (diagonal.theta.to_degrees() - 40.0).abs() < 0.1,
+            "{diagonal:?}"
+        );
     }
 
     /// Drives 6 m down the corridor of [`corridor_from`], every scan

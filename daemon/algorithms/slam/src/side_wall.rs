@@ -25,7 +25,9 @@ const MAX_RMS_M: f64 = 0.012;
 /// Largest angle between robot and wall taken as driving along it, rad.
 const MAX_RELATIVE_RAD: f64 = 0.14;
 /// Largest turn of the odometry's heading within the window, rad: the
-/// robot drives along the wall, it does not turn off it.
+/// robot drives along the wall, it does not turn off it. Readings taken
+/// more than this away from the newest one's heading are from before a
+/// turn and leave the window.
 const MAX_TURN_RAD: f64 = 0.12;
 /// Largest change between one reading and the next taken as the same
 /// wall, m: driving along a wall at up to `MAX_RELATIVE_RAD` the range moves
@@ -126,11 +128,16 @@ impl SideWalls {
                 heading: odom.theta,
                 pose: None,
             });
-            while side
-                .samples
-                .front()
-                .is_some_and(|s| self.travel_m - s.travel_m > self.window_m)
-            {
+            // Readings from before a turn (a corner, a doorway the robot
+            // turned through) are another stretch: kept, they failed the
+            // fit until 1.5 m of driving had pushed them out of the window,
+            // and the odometry slips most in and just after a turn (10° in
+            // the 3 m after one corner of the dense-smoke trial).
+            while side.samples.front().is_some_and(|s| {
+                self.travel_m - s.travel_m > self.window_m
+                    || smokenav_shared_types::normalize_angle(s.heading - odom.theta).abs()
+                        > MAX_TURN_RAD
+            }) {
                 side.samples.pop_front();
             }
         }
@@ -248,6 +255,7 @@ impl SideSonars {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::FRAC_PI_2;
 
     /// Drives `metres` in 3 cm steps at true heading `psi` to a wall along
     /// x on the left at y = 1.2 (and one on the right at y = −0.8), the
@@ -332,6 +340,38 @@ mod tests {
             at < 1.0 + 0.8,
             "fitted only once the bay left the window: {at}"
         );
+    }
+
+    #[test]
+    fn after_a_corner_the_fit_starts_on_the_new_wall() {
+        // 1.5 m north along a wall 1 m to the left, a quarter turn to the
+        // right on the spot (the range happens to stay 1 m: no jump), then
+        // east along the next wall at 0.04 rad. The readings from before
+        // the turn leave the window with it: the new wall is fitted after
+        // 2/3 of the window (0.8 m), not once the turn has left it.
+        let psi = 0.04_f64;
+        let mut w = SideWalls::new(0.8);
+        for i in 0..50 {
+            let odom = Pose2::new(0.0, 0.03 * f64::from(i), FRAC_PI_2);
+            w.observe(&odom, [Some(1.0), None]);
+        }
+        assert!(w.fit(SideOf::Left).is_some(), "the first wall is fitted");
+        for i in 1..=10 {
+            let odom = Pose2::new(0.0, 1.5, FRAC_PI_2 * (1.0 - f64::from(i) / 10.0));
+            w.observe(&odom, [Some(1.0), None]);
+        }
+        let mut fitted_at = None;
+        for i in 1..=40 {
+            let t = 0.03 * f64::from(i);
+            let odom = Pose2::new(t, 1.5, 0.0);
+            w.observe(&odom, [Some(1.0 - t * psi.sin()), None]);
+            if let Some(f) = w.fit(SideOf::Left) {
+                assert!((f.relative_heading - psi).abs() < 1e-6, "{t}: {f:?}");
+                fitted_at.get_or_insert(t);
+            }
+        }
+        let at = fitted_at.expect("the second wall is fitted");
+        assert!(at < 0.7, "fitted only once the turn left the window: {at}");
     }
 
     #[test]
