@@ -330,6 +330,8 @@ slam_section! {
     /// it (the robot's angle to the wall from how the range changes, the
     /// wall's direction the local map's nearest square one) and the
     /// sideways drift (how far the robot closed on the wall); m, 0 never.
+    /// The window starts afresh where the range jumps (a wall beginning
+    /// beside the robot) and after a turn.
     side_wall_window_m: f64 = (1.5, 1.5),
     /// Health goes degraded while the heading has been odometry's alone
     /// (the laser blind or unmatched in the front end) for more than this
