@@ -180,7 +180,8 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
     for rec in &records {
         let stamp = base_ns + (rec.ipc_timestamp_ns - ipc0);
         publish(&mut odom, &mut scans, rec, stamp)?;
-        let (p, _) = pose_for(&poses, &waiter, stamp, Duration::from_secs(30))?;
+        let (p, _) = pose_for(&poses, &waiter, stamp, Duration::from_secs(30))
+            .map_err(|e| anyhow::anyhow!("{e}; smokenav-slam said:\n{}", slam.output()))?;
         assert_eq!(p.particles, 10);
         assert!(p.n_eff > 0.0 && p.n_eff <= 10.0);
         assert_eq!(p.header.frame_id.as_str(), "map");

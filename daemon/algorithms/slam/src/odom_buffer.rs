@@ -86,11 +86,17 @@ impl OdomBuffer {
     /// Odometry at `stamp_ns`. A stamp past the newest reading gives `NotYet`
     /// until `now_ns` is more than `max_wait_ns` past the stamp; then the newest
     /// reading is held if it is at most `max_gap_ns` older than the stamp.
+    /// With no reading at all the scan waits the same `max_wait_ns`: at
+    /// start-up the first scan may well come before the first odometry.
     pub fn at(&self, stamp_ns: u64, now_ns: u64, max_wait_ns: u64, max_gap_ns: u64) -> OdomAt {
         let (Some(&(first_t, first)), Some(&(last_t, last))) =
             (self.readings.front(), self.readings.back())
         else {
-            return OdomAt::Missing;
+            return if now_ns.saturating_sub(stamp_ns) <= max_wait_ns {
+                OdomAt::NotYet
+            } else {
+                OdomAt::Missing
+            };
         };
         if stamp_ns > last_t {
             if now_ns.saturating_sub(stamp_ns) <= max_wait_ns {
@@ -161,6 +167,18 @@ mod tests {
             OdomAt::Missing
         );
         assert_eq!(OdomBuffer::new(4).at(1, 2, 0, 0), OdomAt::Missing);
+    }
+
+    #[test]
+    fn a_scan_before_any_odometry_waits_for_it() {
+        let mut b = OdomBuffer::new(8);
+        assert_eq!(b.at(100 * MS, 120 * MS, 50 * MS, 200 * MS), OdomAt::NotYet);
+        assert_eq!(b.at(100 * MS, 151 * MS, 50 * MS, 200 * MS), OdomAt::Missing);
+        b.push(110 * MS, Pose2::new(576.5, 0.1, -2.2));
+        assert_eq!(
+            b.at(100 * MS, 120 * MS, 50 * MS, 200 * MS),
+            OdomAt::Oldest(Pose2::new(576.5, 0.1, -2.2))
+        );
     }
 
     #[test]

@@ -151,6 +151,11 @@ pub struct SlamPipeline {
     endpoints: Vec<Endpoint>,
     /// Odometry of the last scan paired (held when a scan has none).
     last_odom: Option<Pose2>,
+    /// Scans were placed on a made-up odometry (the origin: none had come
+    /// yet), so the first real reading starts the odometry frame, as a
+    /// reset does, rather than being travel from the origin — a Pioneer's
+    /// odometry reads wherever it was left (MIT CSAIL's starts at x 576 m).
+    odom_made_up: bool,
     /// Front-end corrected odometry of the last scan handed on.
     last_corrected: Option<Pose2>,
     /// Odometry of the last scan the front end tracked (for the blind stretch).
@@ -203,6 +208,7 @@ impl SlamPipeline {
             pending: false,
             endpoints: Vec::new(),
             last_odom: None,
+            odom_made_up: false,
             last_corrected: None,
             blind_odom: None,
             stats: PipelineStats::default(),
@@ -237,10 +243,14 @@ impl SlamPipeline {
 
     /// An odometry reading arrived.
     pub fn push_odom(&mut self, o: &Odometry) {
-        if o.flags & OdometryFlags::RESET != 0 {
+        let pose = Pose2::new(o.x, o.y, o.theta);
+        let flagged = o.flags & OdometryFlags::RESET != 0;
+        let first_real = self.odom_made_up && pose.is_finite();
+        if flagged || first_real {
             // The odometry frame jumped: poses before and after must not be mixed.
             self.odom.clear();
-            self.stats.odom_resets += 1;
+            self.odom_made_up = false;
+            self.stats.odom_resets += u64::from(flagged);
             // The jump is no travel of the blind stretch.
             self.blind_odom = None;
             match &mut self.frontend {
@@ -252,8 +262,7 @@ impl SlamPipeline {
                 }
             }
         }
-        self.odom
-            .push(o.header.stamp_ns, Pose2::new(o.x, o.y, o.theta));
+        self.odom.push(o.header.stamp_ns, pose);
     }
 
     fn supersede(&mut self) {
@@ -309,7 +318,10 @@ impl SlamPipeline {
             OdomAt::NotYet => return None,
             OdomAt::Missing => {
                 self.stats.no_odometry += 1;
-                self.last_odom.unwrap_or_default()
+                self.last_odom.unwrap_or_else(|| {
+                    self.odom_made_up = true;
+                    Pose2::default()
+                })
             }
             OdomAt::Interpolated(p) | OdomAt::Held(p) | OdomAt::Oldest(p) => p,
         };
