@@ -305,6 +305,10 @@ fn slam_process_tracks_a_replayed_csail_prefix_and_saves_its_map() -> anyhow::Re
             }
         }
     }
+    // Health says what the exports cost the loop (the scans wait meanwhile).
+    slam_health_until(&bus, &slam, |h| {
+        h.metric("map_export_ms").is_some_and(|m| m > 0.0) && h.metric("map_exports_late").is_some()
+    })?;
     let sub = bus.map_subscriber(topics::SLAM_MAP)?;
     let _m = waiter.attach(&sub)?;
 
@@ -533,6 +537,12 @@ fn slam_process_localizes_on_a_saved_graph_and_refuses_localization_without_one(
     mapping.wait_for_line("graph on laser/scan", Duration::from_secs(30))?;
     let bus = open_bus(&instance);
     let mapped = replay_in_lock_step(&bus, usize::MAX)?;
+    // The graph's map is drawn on its own thread and published from there.
+    let cells = newest_map(&bus, topics::SLAM_MAP)?;
+    assert!(cells.iter().filter(|&&c| c == 100).count() > 500);
+    slam_health_until(&bus, &mapping, |h| {
+        h.metric("map_draw_ms").is_some_and(|m| m > 0.0)
+    })?;
     // An operator's pose is refused while mapping (it would tear the map):
     // the command says it was not taken, the process's log says why.
     let out = std::process::Command::new(bin("smokenav"))

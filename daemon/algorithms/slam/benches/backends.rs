@@ -2,12 +2,14 @@
 //! through the one SLAM pipeline (as the SLAM process and `smokenav slam` run
 //! them): total thread CPU time, per-scan CPU p50/p99/max and ATE of the final
 //! trajectory against GMapping's corrected poses (after the best rigid
-//! alignment), plus the graph's loop-closure counters. Beside ATE, the
-//! consistency of the reference's scans placed at each back-end's poses and at
-//! the reference's own (cells at 5 cm holding an endpoint, and the distance of
-//! each endpoint to the nearest one of another pass; see
-//! `smokenav_algorithms_eval::consistency`): the reference is GMapping's
-//! estimate, and a trajectory farther from it can still be the crisper one.
+//! alignment), plus the graph's loop-closure counters and the CPU time of
+//! exporting the final map (what the SLAM process spends on its loop for each
+//! map it publishes). Beside ATE, the consistency of the reference's scans
+//! placed at each back-end's poses and at the reference's own (cells at 5 cm
+//! holding an endpoint, and the distance of each endpoint to the nearest one
+//! of another pass; see `smokenav_algorithms_eval::consistency`): the
+//! reference is GMapping's estimate, and a trajectory farther from it can
+//! still be the crisper one.
 //!
 //! `cargo bench -p smokenav-algorithms-slam --bench backends`
 //! Environment: `CSAIL_DIR` (the folder of the log; required), `CSAIL_DRIFT=SEED` (run on the
@@ -310,7 +312,16 @@ fn main() {
         let traj = slam.trajectory();
         let total = (thread_cpu_ns() - start) as f64 / 1e9;
         let process_total = (process_cpu_ns() - process_start) as f64 / 1e9;
+        // What the SLAM process pays on its loop for each map it publishes.
+        let t_map = thread_cpu_ns();
         let map = slam.map();
+        let map_ms = (thread_cpu_ns() - t_map) as f64 / 1e6;
+        if let Some(m) = &map {
+            println!(
+                "backends {log} {name:>5}: map export {map_ms:.1} CPU-ms ({} × {} cells)",
+                m.width, m.height
+            );
+        }
         times.sort_unstable();
         let pct = |q: f64| {
             times[((q * times.len() as f64).ceil() as usize).clamp(1, times.len()) - 1] as f64 / 1e6

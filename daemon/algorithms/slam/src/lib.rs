@@ -46,7 +46,9 @@ pub mod sonar_age;
 mod testkit;
 pub mod vote;
 
-pub use backend::{BackendOptions, RelocalizeError, SlamBackend, SlamUpdate, StampedPose};
+pub use backend::{
+    BackendOptions, ExportJob, MapJob, RelocalizeError, SlamBackend, SlamUpdate, StampedPose,
+};
 pub use pipeline::SlamPipeline;
 pub use rbpf::Rbpf;
 pub use scan::{Beam, BeamKind, RangeScan};

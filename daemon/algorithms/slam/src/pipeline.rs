@@ -503,6 +503,13 @@ impl SlamPipeline {
         backend::export_map(self.backend.as_ref(), self.footprint_m)
     }
 
+    /// [`Self::map_and_footprint`] as a job for another thread, when the
+    /// back-end's map is costly to draw ([`SlamBackend::map_job`]): the
+    /// scans need not wait while it is drawn. `None`: draw it in place.
+    pub fn map_and_footprint_job(&self) -> Option<backend::ExportJob> {
+        backend::export_map_job(self.backend.as_ref(), self.footprint_m)
+    }
+
     /// Marks free, in every map exported, the cells within `radius_m` of the
     /// trajectory (the robot's body; `[slam] clear_footprint`); 0 turns it off.
     /// For the vote give it to the members instead ([`BackendOptions::footprint_m`],

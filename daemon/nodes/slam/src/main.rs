@@ -9,7 +9,11 @@
 //! the pipeline turned into an update and the back-end's map at `[slam]
 //! map_rate_hz`: thresholded to 0/100/-1 on `slam/map` (what nav2's static
 //! layer and `map_server` tools expect) and as occupancy probability 0..100
-//! on `slam/map_probability`. When it falls behind the pipeline keeps the
+//! on `slam/map_probability`. A map costly to draw (the graph's, re-drawn
+//! from every node) is drawn on a thread of its own and published when it
+//! is back, so the scans never wait for it; health's `map_draw_ms`,
+//! `map_export_ms` (the loop's own share) and `map_exports_late` say what
+//! maps cost. When it falls behind the pipeline keeps the
 //! newest scan and counts the others as skipped: nothing queues without bound
 //! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
 //! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
@@ -32,8 +36,11 @@
 //! smokenav-slam --config robot.toml [--input fused|laser] [--backend rbpf] [--map-dir DIR]
 //! ```
 
+mod renderer;
+
 use anyhow::Context;
 use clap::Parser;
+use renderer::MapRenderer;
 use smokenav_algorithms_slam::backend::footprint_radius;
 use smokenav_algorithms_slam::graph::{GraphParams, ResumedGraph, saved};
 use smokenav_algorithms_slam::pipeline::{PipelineStats, vote_aware_footprint};
@@ -144,7 +151,19 @@ struct Counters {
     maps_saved: u64,
     /// Wall cells the footprint cleared in the last map exported.
     footprint_cleared: u64,
+    /// Wall time the SLAM loop spent on the last map export (drawn in
+    /// place, thresholded, published): the scans wait meanwhile.
+    map_export: Duration,
+    /// Wall time the last map took to draw, on the loop or on the
+    /// renderer's thread ([`renderer::MapRenderer`]).
+    map_draw: Duration,
+    /// Exports, or drawings on the renderer's thread, that took longer than
+    /// a scan period ([`SCAN_PERIOD`]).
+    map_exports_late: u64,
 }
+
+/// The laser's scan period at 10 Hz: a map export longer than this holds up a scan.
+const SCAN_PERIOD: Duration = Duration::from_millis(100);
 
 fn map_info(grid: &OccupancyGrid, stamp_ns: u64) -> MapInfo {
     MapInfo {
@@ -374,6 +393,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let mut map: Option<OccupancyGrid> = None;
     let mut last_map_revision = None;
     let mut counters = Counters::default();
+    let mut renderer = MapRenderer::start().context("cannot start the map drawing thread")?;
     let map_period = Duration::from_secs_f64(1.0 / cfg.map_rate_hz);
     let mut next_map = Instant::now() + map_period;
     let clock = MonotonicClock;
@@ -441,23 +461,61 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             }
             last_update = Some(update);
         }
+        // A map drawn on the renderer's thread is published as soon as it is back.
+        let drawn = match renderer.finished() {
+            Ok(d) => d,
+            Err(e) => {
+                p.health.error(e);
+                None
+            }
+        };
+        let fresh = drawn.is_some();
+        if let Some(d) = drawn {
+            counters.map_draw = d.took;
+            counters.map_exports_late += u64::from(d.took > SCAN_PERIOD);
+            map = d.map.map(|(m, cleared)| {
+                counters.footprint_cleared = cleared as u64;
+                m
+            });
+            last_map_revision = Some(d.revision);
+        }
         let now = Instant::now();
         let save = save_requested.swap(false, Ordering::Relaxed);
-        if now >= next_map || save {
+        let due = now >= next_map;
+        if due || save || fresh {
+            let export_start = Instant::now();
             // Exporting the map copies it: only when it changed since the last export.
             let revision = pipeline.map_revision();
             if last_map_revision != Some(revision) {
-                map = pipeline.map_and_footprint().map(|(m, cleared)| {
-                    counters.footprint_cleared = cleared as u64;
-                    m
-                });
+                // A costly map is drawn on the renderer's thread (a save
+                // waits for its own); until it is back the last one stands.
+                let job = if save || !renderer.alive() {
+                    None
+                } else {
+                    pipeline.map_and_footprint_job()
+                };
+                match job {
+                    Some(job) => {
+                        if due && renderer.idle() {
+                            renderer.draw(revision, job);
+                        }
+                    }
+                    None => {
+                        let t0 = Instant::now();
+                        map = pipeline.map_and_footprint().map(|(m, cleared)| {
+                            counters.footprint_cleared = cleared as u64;
+                            m
+                        });
+                        counters.map_draw = t0.elapsed();
+                        last_map_revision = Some(revision);
+                    }
+                }
                 if fuzzy_maps.is_some() {
                     fuzzy = pipeline.confidence_map();
                 }
-                last_map_revision = Some(revision);
             }
             if let (Some(grid), Some(u)) = (&map, last_update) {
-                if now >= next_map {
+                if due || fresh {
                     let info = map_info(grid, u.stamp_ns);
                     smokenav_platform_map::trinary_cells_into(grid, &mut trinary);
                     match maps.publish(&info, &trinary) {
@@ -496,10 +554,14 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                     }
                 }
             }
-            if now >= next_map {
+            if due {
                 next_map = now + map_period;
                 publish_members(p, &pipeline, &mut member_maps, &mut counters);
             }
+            // What the scans waited for: a map drawn in place and its publishing.
+            let took = export_start.elapsed();
+            counters.map_export = took;
+            counters.map_exports_late += u64::from(took > SCAN_PERIOD);
         }
         flagged = flag_conditions(p, &pipeline, cfg.max_blind_m, flagged);
         report(p, &pipeline, &counters, &scans);
@@ -640,6 +702,10 @@ fn metrics(
     // Scans whose sonar echoes were moved to where the ring heard them ([slam] sonar_age_compensation).
     emit("scans_sonar_compensated", stats.sonar_compensated as f64);
     emit("maps_published", c.maps_published as f64);
+    // A large map's export holds up the scans: how long, and how often past a scan period.
+    emit("map_export_ms", c.map_export.as_secs_f64() * 1e3);
+    emit("map_draw_ms", c.map_draw.as_secs_f64() * 1e3);
+    emit("map_exports_late", c.map_exports_late as f64);
     emit("maps_saved", c.maps_saved as f64);
     // Smoke phantoms in the robot's own path, gone from the map ([slam] clear_footprint).
     emit("footprint_cleared", c.footprint_cleared as f64);

@@ -302,6 +302,80 @@ struct Node {
     view: Vec<(f32, f32)>,
 }
 
+/// What the graph's map is drawn from, taken in a moment: the nodes
+/// shared, their optimised poses copied. Drawn on the caller's thread
+/// ([`SlamBackend::map`]) or on another ([`SlamBackend::map_job`]).
+struct MapSources {
+    nodes: Vec<Arc<Node>>,
+    poses: Vec<Pose2>,
+    resolution: f64,
+    model: LogOddsModel,
+    sonar_model: LogOddsModel,
+    sonar_behind_wall_margin_m: f64,
+}
+
+impl MapSources {
+    fn draw(&self) -> OccupancyGrid {
+        let mut grid = TiledGrid::new(self.resolution);
+        let mut ends = Vec::new();
+        // The laser first, from every node; then the sonar, except echoes
+        // from behind a wall the laser drew: a sonar meeting a wall
+        // obliquely hears no echo from it (specular reflection) and reports a
+        // farther surface heard along another path, and a pose off in a blind
+        // stretch puts an echo behind the wall too. Either would draw a wall
+        // where the laser saw free space beyond a wall, and clear the wall.
+        let mut laser: Option<TiledGrid> = None;
+        for sonar in [false, true] {
+            if sonar && self.sonar_behind_wall_margin_m > 0.0 {
+                laser = Some(grid.clone());
+            }
+            for (node, pose) in self.nodes.iter().zip(&self.poses) {
+                let sensor = pose.compose(&node.sensor);
+                let (s, c) = pose.theta.sin_cos();
+                ends.clear();
+                ends.extend(
+                    node.beams
+                        .iter()
+                        .filter(|b| b.sonar == sonar)
+                        .map(|b| BeamEnd {
+                            ex: pose.x + c * b.x - s * b.y,
+                            ey: pose.y + s * b.x + c * b.y,
+                            hit: b.hit && !b.arc_flank && !b.smoke_return,
+                        })
+                        .map(|e| match &laser {
+                            // Up to the wall, cone clear; no echo drawn.
+                            Some(l) => match l.wall_before(
+                                (sensor.x, sensor.y),
+                                (e.ex, e.ey),
+                                LASER_WALL,
+                                self.sonar_behind_wall_margin_m,
+                            ) {
+                                Some(d) => {
+                                    let (vx, vy) = (e.ex - sensor.x, e.ey - sensor.y);
+                                    let k = ((d - self.resolution) / vx.hypot(vy)).max(0.0);
+                                    BeamEnd {
+                                        ex: sensor.x + k * vx,
+                                        ey: sensor.y + k * vy,
+                                        hit: false,
+                                    }
+                                }
+                                None => e,
+                            },
+                            None => e,
+                        }),
+                );
+                let model = if sonar {
+                    &self.sonar_model
+                } else {
+                    &self.model
+                };
+                grid.integrate(&sensor, &ends, model);
+            }
+        }
+        grid.to_occupancy_grid()
+    }
+}
+
 impl Node {
     fn new(
         points: Vec<(f32, f32)>,
@@ -555,6 +629,18 @@ const WIDE_AGREE_RAD: f64 = 0.05;
 const WIDE_HELD_MAX: usize = 8;
 
 impl GraphSlam {
+    /// The nodes and their poses now, for drawing the map.
+    fn map_sources(&self) -> MapSources {
+        MapSources {
+            nodes: self.nodes.clone(),
+            poses: self.graph.poses().to_vec(),
+            resolution: self.resolution,
+            model: self.model,
+            sonar_model: self.sonar_model,
+            sonar_behind_wall_margin_m: self.p.sonar_behind_wall_margin_m,
+        }
+    }
+
     pub fn new(cfg: &SlamSection, p: GraphParams) -> Self {
         let fe = |window_m: f64, window_rad: f64| {
             FrontEnd::new(FrontEndParams {
@@ -1482,66 +1568,12 @@ impl SlamBackend for GraphSlam {
     }
 
     fn map(&self) -> Option<OccupancyGrid> {
-        if self.nodes.is_empty() {
-            return None;
-        }
-        let mut grid = TiledGrid::new(self.resolution);
-        let mut ends = Vec::new();
-        // The laser first, from every node; then the sonar, except echoes
-        // from behind a wall the laser drew: a sonar meeting a wall
-        // obliquely hears no echo from it (specular reflection) and reports a
-        // farther surface heard along another path, and a pose off in a blind
-        // stretch puts an echo behind the wall too. Either would draw a wall
-        // where the laser saw free space beyond a wall, and clear the wall.
-        let mut laser: Option<TiledGrid> = None;
-        for sonar in [false, true] {
-            if sonar && self.p.sonar_behind_wall_margin_m > 0.0 {
-                laser = Some(grid.clone());
-            }
-            for (node, pose) in self.nodes.iter().zip(self.graph.poses()) {
-                let sensor = pose.compose(&node.sensor);
-                let (s, c) = pose.theta.sin_cos();
-                ends.clear();
-                ends.extend(
-                    node.beams
-                        .iter()
-                        .filter(|b| b.sonar == sonar)
-                        .map(|b| BeamEnd {
-                            ex: pose.x + c * b.x - s * b.y,
-                            ey: pose.y + s * b.x + c * b.y,
-                            hit: b.hit && !b.arc_flank && !b.smoke_return,
-                        })
-                        .map(|e| match &laser {
-                            // Up to the wall, cone clear; no echo drawn.
-                            Some(l) => match l.wall_before(
-                                (sensor.x, sensor.y),
-                                (e.ex, e.ey),
-                                LASER_WALL,
-                                self.p.sonar_behind_wall_margin_m,
-                            ) {
-                                Some(d) => {
-                                    let (vx, vy) = (e.ex - sensor.x, e.ey - sensor.y);
-                                    let k = ((d - self.resolution) / vx.hypot(vy)).max(0.0);
-                                    BeamEnd {
-                                        ex: sensor.x + k * vx,
-                                        ey: sensor.y + k * vy,
-                                        hit: false,
-                                    }
-                                }
-                                None => e,
-                            },
-                            None => e,
-                        }),
-                );
-                let model = if sonar {
-                    &self.sonar_model
-                } else {
-                    &self.model
-                };
-                grid.integrate(&sensor, &ends, model);
-            }
-        }
-        Some(grid.to_occupancy_grid())
+        (!self.nodes.is_empty()).then(|| self.map_sources().draw())
+    }
+
+    fn map_job(&self) -> Option<crate::backend::MapJob> {
+        let sources = (!self.nodes.is_empty()).then(|| self.map_sources());
+        Some(Box::new(move || sources.map(|s| s.draw())))
     }
 
     fn trajectory(&self) -> Vec<StampedPose> {
@@ -2165,6 +2197,47 @@ mod tests {
         // The trajectory has a pose per scan and the map is finite.
         assert_eq!(slam.trajectory().len() as u64, stats.scans);
         assert!(slam.map().is_some());
+    }
+
+    /// The map drawn on another thread ([`SlamBackend::map_job`], so the
+    /// SLAM process's scans need not wait for it) is the map as it was when
+    /// the job was taken, whatever the graph did after (nodes added, a loop
+    /// closed).
+    #[test]
+    fn a_map_job_draws_the_map_as_it_was_when_taken() {
+        let p = GraphParams {
+            closure_every: 2,
+            ..GraphParams::default()
+        };
+        let mut taken = None;
+        let mut k = 0;
+        let (slam, _, _) = drive_legs_with(
+            GraphSlam::new(&drifting(), p),
+            &[10.0, 6.0, 10.0, 6.0, 8.0],
+            &[1, 2, 3],
+            &[],
+            &mut |s| {
+                k += 1;
+                if k == 60 {
+                    taken = Some((s.map_job().unwrap(), s.map().unwrap()));
+                }
+            },
+        );
+        let (job, then) = taken.unwrap();
+        let drawn = std::thread::spawn(job).join().unwrap().unwrap();
+        assert_eq!(
+            (drawn.width, drawn.height, drawn.origin),
+            (then.width, then.height, then.origin)
+        );
+        assert!(drawn.cells == then.cells, "the job drew another map");
+        assert!(slam.stats().closures_accepted >= 1);
+        assert!(
+            slam.map().unwrap().cells != drawn.cells,
+            "the graph moved on"
+        );
+        // Before the first scan there is nothing to draw.
+        let empty = GraphSlam::new(&drifting(), GraphParams::default());
+        assert!(empty.map_job().unwrap()().is_none());
     }
 
     /// A closure that would move its node far (`closure_review`) must reach

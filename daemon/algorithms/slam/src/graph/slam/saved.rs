@@ -792,6 +792,10 @@ impl SlamBackend for ResumedGraph {
         self.inner.map()
     }
 
+    fn map_job(&self) -> Option<crate::backend::MapJob> {
+        self.inner.map_job()
+    }
+
     fn trajectory(&self) -> Vec<StampedPose> {
         if self.localization {
             self.trajectory.clone()
