@@ -9,8 +9,8 @@
 //! the pipeline turned into an update and the back-end's map at `[slam]
 //! map_rate_hz`: thresholded to 0/100/-1 on `slam/map` (what nav2's static
 //! layer and `map_server` tools expect) and as occupancy probability 0..100
-//! on `slam/map_probability`. A map costly to draw (the graph's, re-drawn
-//! from every node) is drawn on a thread of its own and published when it
+//! on `slam/map_probability`. The particle filter's and the graph's maps
+//! (the graph's re-drawn from every node) are drawn on a thread of their own and published when it
 //! is back, so the scans never wait for it; health's `map_draw_ms`,
 //! `map_export_ms` (the loop's own share) and `map_exports_late` say what
 //! maps cost. When it falls behind the pipeline keeps the

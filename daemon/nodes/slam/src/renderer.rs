@@ -1,6 +1,7 @@
 //! Draws SLAM maps on a thread of their own, so the scans never wait for a
 //! map: the graph back-end re-draws every node's scan for each map (176 ms
-//! for MIT CSAIL's 933 nodes, past a 10 Hz laser's period).
+//! for MIT CSAIL's 933 nodes, past a 10 Hz laser's period), and any map
+//! grown large costs in proportion.
 //!
 //! One map at a time: while one is being drawn no other is asked for (the
 //! next one due is asked for once it is back), so the work and the memory

@@ -581,6 +581,14 @@ impl SlamBackend for Rbpf {
             .map(|p| p.grid.to_occupancy_grid())
     }
 
+    /// The best particle's grid shares its tiles (a tile written meanwhile
+    /// is copied then): cheap to take, and a map grown large, or far by a
+    /// pose gone wrong, is then drawn off the scans' path.
+    fn map_job(&self) -> Option<crate::backend::MapJob> {
+        let grid = self.particles.get(self.best).map(|p| p.grid.clone());
+        Some(Box::new(move || grid.map(|g| g.to_occupancy_grid())))
+    }
+
     fn trajectory(&self) -> Vec<StampedPose> {
         let mut out = Vec::new();
         let mut node = self
@@ -696,6 +704,36 @@ mod tests {
         assert_eq!(one.0, three.0);
         assert_eq!(one.1, three.1);
         assert_eq!(one.2, three.2);
+    }
+
+    /// A map job taken now draws the map of now, on another thread, though
+    /// the filter writes on in the tiles it shares with the job meanwhile.
+    #[test]
+    fn a_map_job_draws_the_best_particles_map_as_it_was_when_taken() {
+        let mut slam = rbpf(&SlamSection {
+            map_update_m: 0.2,
+            ..cfg(6)
+        });
+        assert!(slam.map_job().unwrap()().is_none(), "nothing before a scan");
+        let mut truth = Pose2::new(-3.5, -1.5, 0.0);
+        let mut k = 0;
+        let mut drive = |slam: &mut Rbpf, steps: u64| {
+            for _ in 0..steps {
+                slam.process(
+                    &scan_at(&truth, k * 100_000_000),
+                    &Pose2::new(0.1 * k as f64, 0.0, 0.0),
+                );
+                truth.x += 0.1;
+                k += 1;
+            }
+        };
+        drive(&mut slam, 8);
+        let (job, then) = (slam.map_job().unwrap(), slam.map().unwrap());
+        drive(&mut slam, 20);
+        assert!(slam.stats().map_updates > 4);
+        let drawn = std::thread::spawn(job).join().unwrap().unwrap();
+        assert_eq!(drawn, then);
+        assert_ne!(slam.map().unwrap(), drawn, "the filter mapped on");
     }
 
     #[test]
