@@ -6,7 +6,8 @@
 //! is back the reason goes and the longest stretch stays in the report.
 //!
 //! The scans and odometry are the first 200 of the MIT CSAIL log, the
-//! middle ones blinded.
+//! middle ones blinded. A second test: scans without odometry (a base
+//! driver that never started).
 
 use smokenav_algorithms_slam::carmen::LaserRecord;
 use smokenav_platform_bus::Waiter;
@@ -105,6 +106,62 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
         longest > travel - 0.05 && longest < travel + 0.5,
         "longest {longest} against {travel:.2} m"
     );
+    drop(_g);
+    slam.terminate();
+}
+
+/// A base driver that never started: the SLAM process places the scans
+/// without odometry (each waits 100 ms for it first), and after ten in a
+/// row its health turns degraded naming base/odom. When the odometry comes
+/// (MIT CSAIL's reads x 576 m) it starts the odometry frame rather than
+/// being taken as a drive there, and the reason goes.
+#[test]
+fn scans_without_odometry_degrade_health_until_the_base_speaks() {
+    let instance = unique_instance("slam_no_odom_e2e");
+    let dir = tempfile::tempdir().unwrap();
+    let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
+        c.slam.input = SlamInput::Fused;
+        c.laser.mount = MountPose::default();
+    });
+    let mut slam = FusedSlam::spawn(&cfg_path, &instance);
+    let waiter = Waiter::new().unwrap();
+    let _g = [
+        waiter.attach(&slam.poses).unwrap(),
+        waiter.attach(&slam.health).unwrap(),
+    ];
+    let records = csail_prefix();
+    let t0 = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    let mut poses = Vec::new();
+    let mut send = |k: usize, with_odometry: bool| {
+        let rec = &records[k];
+        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
+        if with_odometry {
+            slam.odom.publish(&carmen_odometry(rec, stamp)).unwrap();
+        }
+        slam.scans.publish(&fused(rec, stamp, false)).unwrap();
+        let p =
+            pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
+        poses.push((p.x, p.y));
+    };
+    for k in 0..15 {
+        send(k, false);
+    }
+    let silent = health_until(&slam.health, &waiter, "naming the odometry", |h| {
+        h.last_error.as_str().contains("no odometry on base/odom")
+    });
+    assert_eq!(silent.state(), HealthState::Degraded);
+    assert!(silent.metric("scans_without_odometry").unwrap() >= 10.0);
+    for k in 15..60 {
+        send(k, true);
+    }
+    let back = health_until(&slam.health, &waiter, "without the odometry reason", |h| {
+        !h.last_error.as_str().contains("no odometry")
+    });
+    assert_eq!(back.metric("scans_without_odometry"), Some(15.0));
+    // The first 60 scans of the log lie within a few metres of the start.
+    let far = poses.iter().map(|p| p.0.hypot(p.1)).fold(0.0, f64::max);
+    assert!(far < 10.0, "a pose {far:.0} m from the start");
     drop(_g);
     slam.terminate();
 }

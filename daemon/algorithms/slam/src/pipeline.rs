@@ -92,6 +92,9 @@ pub struct PipelineStats {
     pub superseded: u64,
     /// Scans without odometry at their stamp (the last odometry used was held).
     pub no_odometry: u64,
+    /// Of those, the ones since the last scan that had odometry: a base
+    /// driver gone silent (or never started) shows here.
+    pub no_odometry_in_a_row: u64,
     /// Odometry readings flagged as a reset of the odometry frame.
     pub odom_resets: u64,
     /// Odometry readings dropped because their stamp went backwards (or was not finite).
@@ -318,12 +321,16 @@ impl SlamPipeline {
             OdomAt::NotYet => return None,
             OdomAt::Missing => {
                 self.stats.no_odometry += 1;
+                self.stats.no_odometry_in_a_row += 1;
                 self.last_odom.unwrap_or_else(|| {
                     self.odom_made_up = true;
                     Pose2::default()
                 })
             }
-            OdomAt::Interpolated(p) | OdomAt::Held(p) | OdomAt::Oldest(p) => p,
+            OdomAt::Interpolated(p) | OdomAt::Held(p) | OdomAt::Oldest(p) => {
+                self.stats.no_odometry_in_a_row = 0;
+                p
+            }
         };
         self.pending = false;
         let mut scan = std::mem::take(&mut self.scan);

@@ -637,14 +637,16 @@ fn flag_conditions(
     reasons.extend(conditions(&pipeline.stats(), max_blind_m));
     if !reasons.is_empty() {
         p.health.error(&reasons.join("; "));
-        if p.health.state() == HealthState::Ok {
+        // Its own state: a low rate publishing Ok as Degraded would otherwise
+        // leave it Ok, and the rate's message would replace these reasons.
+        if p.health.own_state() == HealthState::Ok {
             p.health.set_state(HealthState::Degraded);
         }
         true
     } else {
         if flagged {
             p.health.clear_error();
-            if p.health.state() == HealthState::Degraded {
+            if p.health.own_state() == HealthState::Degraded {
                 p.health.set_state(HealthState::Ok);
             }
         }
@@ -652,10 +654,20 @@ fn flag_conditions(
     }
 }
 
-/// Why the pipeline makes the SLAM process degraded: a blind stretch
-/// longer than `max_blind_m` (0: never).
+/// Scans in a row without odometry that make the SLAM process degraded:
+/// a second of a 10 Hz laser.
+const NO_ODOMETRY_SCANS: u64 = 10;
+
+/// Why the pipeline makes the SLAM process degraded: no odometry for
+/// [`NO_ODOMETRY_SCANS`] scans in a row; a blind stretch longer than
+/// `max_blind_m` (0: never).
 fn conditions(stats: &PipelineStats, max_blind_m: f64) -> Vec<String> {
     let mut reasons = Vec::new();
+    if stats.no_odometry_in_a_row >= NO_ODOMETRY_SCANS {
+        reasons.push(format!(
+            "no odometry on base/odom for {NO_ODOMETRY_SCANS}+ scans in a row (is the base driver running?): the poses rest on scan matching alone"
+        ));
+    }
     if max_blind_m > 0.0 && stats.blind_m > max_blind_m {
         // The limit, not the running figure: the text stays the same while
         // the stretch lasts (a new text is logged again); heading_blind_m has the figure.
@@ -748,6 +760,24 @@ mod tests {
         // The same text while the stretch lasts (the log repeats a new text).
         assert_eq!(conditions(&blind(9.0), 5.0), r);
         assert!(conditions(&blind(60.0), 0.0).is_empty(), "0 never flags");
+    }
+
+    #[test]
+    fn scans_without_odometry_in_a_row_are_named_in_health() {
+        let silent = |n: u64| PipelineStats {
+            no_odometry: 50,
+            no_odometry_in_a_row: n,
+            ..PipelineStats::default()
+        };
+        assert!(conditions(&silent(9), 0.0).is_empty());
+        let r = conditions(&silent(10), 0.0);
+        assert_eq!(r.len(), 1);
+        assert!(r[0].starts_with("no odometry on base/odom"), "{r:?}");
+        assert_eq!(
+            conditions(&silent(400), 0.0),
+            r,
+            "the same text while it lasts"
+        );
     }
 
     /// A health report holds `MAX_METRICS`; one past it is lost. Every

@@ -172,6 +172,14 @@ impl HealthReporter {
         self.health.state()
     }
 
+    /// The state the process set ([`Self::set_state`]): an `Ok` one stays
+    /// `Ok` here while a low rate has it published as `Degraded`. A process
+    /// flagging a condition of its own tests this, or the rate's message
+    /// would take the place of the condition's.
+    pub fn own_state(&self) -> HealthState {
+        self.state
+    }
+
     /// Sets the state; an `Ok` one is published as `Degraded` while a rate
     /// with an expected value runs below the rate floor.
     pub fn set_state(&mut self, s: HealthState) {
@@ -248,6 +256,8 @@ impl HealthReporter {
             tracing::warn!("{msg}");
         }
         self.health.last_error.set(msg);
+        // The message is no longer the low rate's: the rate coming back must not clear it.
+        self.rate_error = false;
     }
 
     /// Clears the last error.

@@ -207,6 +207,17 @@ fn odometry_is_interpolated_at_the_scan_stamp() {
     assert!(none.poll(5 + wait + 1).is_some());
     assert_eq!(none.stats().no_odometry, 1);
     assert_eq!(none.last_odometry(), Some(Pose2::default()));
+    // The scans in a row without odometry, until one has it.
+    none.push_laser(&laser_at(&room, 200 * MS));
+    none.poll(200 * MS + wait + 1).unwrap();
+    assert_eq!(none.stats().no_odometry_in_a_row, 2);
+    none.push_odom(&odom(300 * MS, Pose2::default(), 0));
+    none.push_laser(&laser_at(&room, 300 * MS));
+    none.poll(300 * MS).unwrap();
+    assert_eq!(
+        (none.stats().no_odometry, none.stats().no_odometry_in_a_row),
+        (2, 0)
+    );
 }
 
 /// The first odometry comes after scans were placed on the origin for want
