@@ -32,17 +32,24 @@ fn fused(rec: &LaserRecord, stamp: u64, blind: bool) -> FusedScan {
     f
 }
 
-#[test]
-fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
-    let instance = unique_instance("slam_blind_health_e2e");
+/// The graph SLAM process on fused scans from a laser at the robot's
+/// centre (as CARMEN's), `[slam] max_blind_m` as given; the folder holds
+/// its profile.
+fn spawn_slam(test: &str, max_blind_m: f64) -> (tempfile::TempDir, FusedSlam) {
+    let instance = unique_instance(test);
     let dir = tempfile::tempdir().unwrap();
     let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
         c.slam.input = SlamInput::Fused;
-        c.slam.max_blind_m = MAX_BLIND_M;
-        // The CARMEN laser pose is the robot pose.
+        c.slam.max_blind_m = max_blind_m;
         c.laser.mount = MountPose::default();
     });
-    let mut slam = FusedSlam::spawn(&cfg_path, &instance);
+    let slam = FusedSlam::spawn(&cfg_path, &instance);
+    (dir, slam)
+}
+
+#[test]
+fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
+    let (_dir, mut slam) = spawn_slam("slam_blind_health_e2e", MAX_BLIND_M);
     let waiter = Waiter::new().unwrap();
     let _g = [
         waiter.attach(&slam.poses).unwrap(),
@@ -117,13 +124,7 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
 /// being taken as a drive there, and the reason goes.
 #[test]
 fn scans_without_odometry_degrade_health_until_the_base_speaks() {
-    let instance = unique_instance("slam_no_odom_e2e");
-    let dir = tempfile::tempdir().unwrap();
-    let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
-        c.slam.input = SlamInput::Fused;
-        c.laser.mount = MountPose::default();
-    });
-    let mut slam = FusedSlam::spawn(&cfg_path, &instance);
+    let (_dir, mut slam) = spawn_slam("slam_no_odom_e2e", 0.0);
     let waiter = Waiter::new().unwrap();
     let _g = [
         waiter.attach(&slam.poses).unwrap(),
