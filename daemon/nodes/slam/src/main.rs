@@ -486,6 +486,9 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             let export_start = Instant::now();
             // Exporting the map copies it: only when it changed since the last export.
             let revision = pipeline.map_revision();
+            // A map asked of the renderer now is published when it is back,
+            // not the one before it now as well.
+            let mut asked = false;
             if last_map_revision != Some(revision) {
                 // A costly map is drawn on the renderer's thread (a save
                 // waits for its own); until it is back the last one stands.
@@ -497,7 +500,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                 match job {
                     Some(job) => {
                         if due && renderer.idle() {
-                            renderer.draw(revision, job);
+                            asked = renderer.draw(revision, job);
                         }
                     }
                     None => {
@@ -515,7 +518,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                 }
             }
             if let (Some(grid), Some(u)) = (&map, last_update) {
-                if due || fresh {
+                if (due && !asked) || fresh {
                     let info = map_info(grid, u.stamp_ns);
                     smokenav_platform_map::trinary_cells_into(grid, &mut trinary);
                     match maps.publish(&info, &trinary) {
