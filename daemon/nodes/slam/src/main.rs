@@ -10,10 +10,10 @@
 //! map_rate_hz`: thresholded to 0/100/-1 on `slam/map` (what nav2's static
 //! layer and `map_server` tools expect) and as occupancy probability 0..100
 //! on `slam/map_probability`. The particle filter's and the graph's maps
-//! (the graph's re-drawn from every node) are drawn on a thread of their own and published when it
-//! is back, so the scans never wait for it; health's `map_draw_ms`,
-//! `map_export_ms` (the loop's own share) and `map_exports_late` say what
-//! maps cost. When it falls behind the pipeline keeps the
+//! (the graph's re-drawn from every node) are drawn on a thread of their
+//! own and published as each comes back, so the scans never wait for one;
+//! health's `map_draw_ms`, `map_export_ms` (the loop's own share) and
+//! `map_exports_late` say what maps cost. When it falls behind the pipeline keeps the
 //! newest scan and counts the others as skipped: nothing queues without bound
 //! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
 //! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
