@@ -225,12 +225,13 @@ pub type ExportJob = Box<dyn FnOnce() -> Option<(OccupancyGrid, usize)> + Send>;
 /// trajectory marked free ([`OccupancyGrid::clear_footprint`]), and how many
 /// of them read occupied before.
 pub fn export_map(backend: &dyn SlamBackend, footprint_m: f64) -> Option<(OccupancyGrid, usize)> {
-    let map = backend.map()?;
-    Some(clear_path(
-        map,
+    let mut map = backend.map()?;
+    let cleared = map.clear_footprint(
         footprint_path(backend, footprint_m),
         footprint_m,
-    ))
+        OCCUPIED_AT,
+    );
+    Some((map, cleared))
 }
 
 /// [`export_map`] as a job for another thread, for a back-end that offers
@@ -239,11 +240,14 @@ pub fn export_map_job(backend: &dyn SlamBackend, footprint_m: f64) -> Option<Exp
     let job = backend.map_job()?;
     let path = footprint_path(backend, footprint_m);
     Some(Box::new(move || {
-        job().map(|map| clear_path(map, path, footprint_m))
+        let mut map = job()?;
+        let cleared = map.clear_footprint(path, footprint_m, OCCUPIED_AT);
+        Some((map, cleared))
     }))
 }
 
-/// The trajectory's positions, when a footprint is to be cleared along them.
+/// The trajectory's positions, when a footprint is to be cleared along them
+/// (none when not: [`OccupancyGrid::clear_footprint`] then clears nothing).
 fn footprint_path(backend: &dyn SlamBackend, footprint_m: f64) -> Vec<(f64, f64)> {
     if footprint_m > 0.0 {
         backend
@@ -254,19 +258,6 @@ fn footprint_path(backend: &dyn SlamBackend, footprint_m: f64) -> Vec<(f64, f64)
     } else {
         Vec::new()
     }
-}
-
-fn clear_path(
-    mut map: OccupancyGrid,
-    path: Vec<(f64, f64)>,
-    footprint_m: f64,
-) -> (OccupancyGrid, usize) {
-    let cleared = if footprint_m > 0.0 {
-        map.clear_footprint(path, footprint_m, OCCUPIED_AT)
-    } else {
-        0
-    };
-    (map, cleared)
 }
 
 /// The footprint radius to clear in exported maps ([`BackendOptions::footprint_m`]) for a

@@ -89,17 +89,18 @@ impl OdomBuffer {
     /// With no reading at all the scan waits the same `max_wait_ns`: at
     /// start-up the first scan may well come before the first odometry.
     pub fn at(&self, stamp_ns: u64, now_ns: u64, max_wait_ns: u64, max_gap_ns: u64) -> OdomAt {
+        let may_come = now_ns.saturating_sub(stamp_ns) <= max_wait_ns;
         let (Some(&(first_t, first)), Some(&(last_t, last))) =
             (self.readings.front(), self.readings.back())
         else {
-            return if now_ns.saturating_sub(stamp_ns) <= max_wait_ns {
+            return if may_come {
                 OdomAt::NotYet
             } else {
                 OdomAt::Missing
             };
         };
         if stamp_ns > last_t {
-            if now_ns.saturating_sub(stamp_ns) <= max_wait_ns {
+            if may_come {
                 return OdomAt::NotYet;
             }
             return if stamp_ns - last_t <= max_gap_ns {

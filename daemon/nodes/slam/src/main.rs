@@ -490,28 +490,27 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
             // not the one before it now as well.
             let mut asked = false;
             if last_map_revision != Some(revision) {
-                // A costly map is drawn on the renderer's thread (a save
-                // waits for its own); until it is back the last one stands.
-                let job = if save || !renderer.alive() {
-                    None
-                } else {
+                // A map the back-end can have drawn elsewhere is drawn on the
+                // renderer's thread (a save waits for its own), asked for
+                // when due and the renderer is free; until it is back the
+                // last one stands. The renderer is only ever busy, and a
+                // map only ever fresh, with such a back-end.
+                let elsewhere = !save && renderer.alive();
+                let job = if elsewhere && due && renderer.idle() {
                     pipeline.map_and_footprint_job()
+                } else {
+                    None
                 };
-                match job {
-                    Some(job) => {
-                        if due && renderer.idle() {
-                            asked = renderer.draw(revision, job);
-                        }
-                    }
-                    None => {
-                        let t0 = Instant::now();
-                        map = pipeline.map_and_footprint().map(|(m, cleared)| {
-                            counters.footprint_cleared = cleared as u64;
-                            m
-                        });
-                        counters.map_draw = t0.elapsed();
-                        last_map_revision = Some(revision);
-                    }
+                if let Some(job) = job {
+                    asked = renderer.draw(revision, job);
+                } else if !elsewhere || (due && renderer.idle()) {
+                    let t0 = Instant::now();
+                    map = pipeline.map_and_footprint().map(|(m, cleared)| {
+                        counters.footprint_cleared = cleared as u64;
+                        m
+                    });
+                    counters.map_draw = t0.elapsed();
+                    last_map_revision = Some(revision);
                 }
                 if fuzzy_maps.is_some() {
                     fuzzy = pipeline.confidence_map();
