@@ -6,7 +6,7 @@ use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
 /// Metrics one health report can hold.
-pub const MAX_METRICS: usize = 40;
+pub const MAX_METRICS: usize = 48;
 /// Longest metric name, bytes.
 pub const METRIC_NAME_LEN: usize = 28;
 /// Longest role name, bytes.

@@ -7,7 +7,7 @@
 //!
 //! The scans and odometry are the first 200 of the MIT CSAIL log, the
 //! middle ones blinded. A second test: scans without odometry (a base
-//! driver that never started).
+//! driver that never started); a third: a map over `[slam] max_map_cells`.
 
 use smokenav_algorithms_slam::carmen::LaserRecord;
 use smokenav_platform_bus::Waiter;
@@ -33,23 +33,26 @@ fn fused(rec: &LaserRecord, stamp: u64, blind: bool) -> FusedScan {
 }
 
 /// The graph SLAM process on fused scans from a laser at the robot's
-/// centre (as CARMEN's), `[slam] max_blind_m` as given; the folder holds
-/// its profile.
-fn spawn_slam(test: &str, max_blind_m: f64) -> (tempfile::TempDir, FusedSlam) {
-    let instance = unique_instance(test);
+/// centre (as CARMEN's), its `[slam]` section as `slam` leaves it; the
+/// folder holds its profile.
+fn spawn_slam(
+    instance: &str,
+    slam: impl FnOnce(&mut smokenav_platform_config::SlamSection),
+) -> (tempfile::TempDir, FusedSlam) {
     let dir = tempfile::tempdir().unwrap();
     let cfg_path = profile(dir.path(), "pioneer-3dx.toml", |c| {
         c.slam.input = SlamInput::Fused;
-        c.slam.max_blind_m = max_blind_m;
         c.laser.mount = MountPose::default();
+        slam(&mut c.slam);
     });
-    let slam = FusedSlam::spawn(&cfg_path, &instance);
+    let slam = FusedSlam::spawn(&cfg_path, instance);
     (dir, slam)
 }
 
 #[test]
 fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
-    let (_dir, mut slam) = spawn_slam("slam_blind_health_e2e", MAX_BLIND_M);
+    let instance = unique_instance("slam_blind_health_e2e");
+    let (_dir, mut slam) = spawn_slam(&instance, |s| s.max_blind_m = MAX_BLIND_M);
     let waiter = Waiter::new().unwrap();
     let _g = [
         waiter.attach(&slam.poses).unwrap(),
@@ -124,7 +127,8 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
 /// being taken as a drive there, and the reason goes.
 #[test]
 fn scans_without_odometry_degrade_health_until_the_base_speaks() {
-    let (_dir, mut slam) = spawn_slam("slam_no_odom_e2e", 0.0);
+    let instance = unique_instance("slam_no_odom_e2e");
+    let (_dir, mut slam) = spawn_slam(&instance, |s| s.max_blind_m = 0.0);
     let waiter = Waiter::new().unwrap();
     let _g = [
         waiter.attach(&slam.poses).unwrap(),
@@ -163,6 +167,54 @@ fn scans_without_odometry_degrade_health_until_the_base_speaks() {
     // The first 60 scans of the log lie within a few metres of the start.
     let far = poses.iter().map(|p| p.0.hypot(p.1)).fold(0.0, f64::max);
     assert!(far < 10.0, "a pose {far:.0} m from the start");
+    drop(_g);
+    slam.terminate();
+}
+
+/// A map larger than `[slam] max_map_cells` (here 2000 cells, 5 m² at
+/// 5 cm; CSAIL's first scans map some 30 m × 30 m) is neither published
+/// nor kept: health turns degraded naming the key and counts it, and no
+/// map reaches `slam/map`; the poses go on.
+#[test]
+fn a_map_over_the_limit_is_not_published_and_health_says_why() {
+    let instance = unique_instance("slam_map_limit_e2e");
+    let (_dir, mut slam) = spawn_slam(&instance, |s| {
+        s.max_blind_m = 0.0;
+        s.max_map_cells = 2000;
+    });
+    let bus = smokenav_tests::open_bus(&instance);
+    let maps = bus
+        .map_subscriber(smokenav_platform_bus::topics::SLAM_MAP)
+        .unwrap();
+    let waiter = Waiter::new().unwrap();
+    let _g = [
+        waiter.attach(&slam.poses).unwrap(),
+        waiter.attach(&slam.health).unwrap(),
+    ];
+    let records = csail_prefix();
+    let t0 = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    for (k, rec) in records.iter().take(30).enumerate() {
+        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
+        slam.odom.publish(&carmen_odometry(rec, stamp)).unwrap();
+        slam.scans.publish(&fused(rec, stamp, false)).unwrap();
+        pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
+    }
+    // Maps are due once a second, from the process's own timer.
+    let refused = health_until(&slam.health, &waiter, "refusing the map", |h| {
+        h.metric("maps_refused").unwrap_or(0.0) >= 1.0
+    });
+    assert_eq!(refused.state(), HealthState::Degraded);
+    let why = refused.last_error.as_str();
+    assert!(
+        why.contains("slam/map not published") && why.contains("[slam] max_map_cells 2000"),
+        "{why}"
+    );
+    assert_eq!(refused.metric("maps_published"), Some(0.0));
+    assert!(
+        maps.receive().unwrap().is_none(),
+        "a refused map on slam/map"
+    );
     drop(_g);
     slam.terminate();
 }

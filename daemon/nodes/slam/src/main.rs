@@ -13,7 +13,10 @@
 //! (the graph's re-drawn from every node) are drawn on a thread of their
 //! own and published as each comes back, so the scans never wait for one;
 //! health's `map_draw_ms`, `map_export_ms` (the loop's own share) and
-//! `map_exports_late` say what maps cost. When it falls behind the pipeline keeps the
+//! `map_exports_late` say what maps cost. A map over `[slam] max_map_cells`
+//! is not published nor saved (`maps_refused`, health degraded naming it):
+//! a pose gone astray must not grow every subscriber's shared memory to
+//! gigabytes. When it falls behind the pipeline keeps the
 //! newest scan and counts the others as skipped: nothing queues without bound
 //! (the bus keeps at most 32 scans per subscriber and overwrites the oldest).
 //! SIGUSR1 writes the current map to `--map-dir` as map.pgm + map.yaml +
@@ -160,6 +163,41 @@ struct Counters {
     /// Exports, or drawings on the renderer's thread, that took longer than
     /// a scan period ([`SCAN_PERIOD`]).
     map_exports_late: u64,
+    /// Maps not published for being over `[slam] max_map_cells`.
+    maps_refused: u64,
+}
+
+/// Why a map may not go out: it is over `[slam] max_map_cells`.
+fn oversized(grid: &OccupancyGrid, max_cells: usize) -> Option<String> {
+    (grid.width.saturating_mul(grid.height) > max_cells).then(|| {
+        format!(
+            "slam/map not published: the map is {} × {} cells ({:.0} m × {:.0} m), over [slam] max_map_cells {max_cells} (a pose gone astray? see slam/pose)",
+            grid.width,
+            grid.height,
+            grid.width as f64 * grid.resolution,
+            grid.height as f64 * grid.resolution
+        )
+    })
+}
+
+/// A map just drawn, unless it is over `max_cells`: then none, counted,
+/// and the reason kept for health until a map within it is drawn (the map
+/// before it is not published again either: it is no longer the map).
+fn take_map(
+    drawn: Option<(OccupancyGrid, usize)>,
+    max_cells: usize,
+    counters: &mut Counters,
+    refused: &mut Option<String>,
+) -> Option<OccupancyGrid> {
+    let (map, cleared) = drawn?;
+    if let Some(why) = oversized(&map, max_cells) {
+        counters.maps_refused += 1;
+        *refused = Some(why);
+        return None;
+    }
+    counters.footprint_cleared = cleared as u64;
+    *refused = None;
+    Some(map)
 }
 
 /// The laser's scan period at 10 Hz: a map export longer than this holds up a scan.
@@ -391,6 +429,8 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
     let mut flagged = false;
     let mut last_update: Option<SlamUpdate> = None;
     let mut map: Option<OccupancyGrid> = None;
+    // Why the last map drawn was not published (over `[slam] max_map_cells`).
+    let mut map_refused: Option<String> = None;
     let mut last_map_revision = None;
     let mut counters = Counters::default();
     let mut renderer = MapRenderer::start().context("cannot start the map drawing thread")?;
@@ -473,10 +513,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
         if let Some(d) = drawn {
             counters.map_draw = d.took;
             counters.map_exports_late += u64::from(d.took > SCAN_PERIOD);
-            map = d.map.map(|(m, cleared)| {
-                counters.footprint_cleared = cleared as u64;
-                m
-            });
+            map = take_map(d.map, cfg.max_map_cells, &mut counters, &mut map_refused);
             last_map_revision = Some(d.revision);
         }
         let now = Instant::now();
@@ -505,15 +542,19 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                     asked = renderer.draw(revision, job);
                 } else if !elsewhere || (due && renderer.idle()) {
                     let t0 = Instant::now();
-                    map = pipeline.map_and_footprint().map(|(m, cleared)| {
-                        counters.footprint_cleared = cleared as u64;
-                        m
-                    });
+                    map = take_map(
+                        pipeline.map_and_footprint(),
+                        cfg.max_map_cells,
+                        &mut counters,
+                        &mut map_refused,
+                    );
                     counters.map_draw = t0.elapsed();
                     last_map_revision = Some(revision);
                 }
                 if fuzzy_maps.is_some() {
-                    fuzzy = pipeline.confidence_map();
+                    fuzzy = pipeline
+                        .confidence_map()
+                        .filter(|f| oversized(f, cfg.max_map_cells).is_none());
                 }
             }
             if let (Some(grid), Some(u)) = (&map, last_update) {
@@ -556,16 +597,37 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                     }
                 }
             }
+            if save
+                && map.is_none()
+                && let Some(why) = &map_refused
+            {
+                p.health.error(&format!(
+                    "cannot save the map to {}: {why}",
+                    map_dir.display()
+                ));
+            }
             if due {
                 next_map = now + map_period;
-                publish_members(p, &pipeline, &mut member_maps, &mut counters);
+                publish_members(
+                    p,
+                    &pipeline,
+                    &mut member_maps,
+                    cfg.max_map_cells,
+                    &mut counters,
+                );
             }
             // What the scans waited for: a map drawn in place and its publishing.
             let took = export_start.elapsed();
             counters.map_export = took;
             counters.map_exports_late += u64::from(took > SCAN_PERIOD);
         }
-        flagged = flag_conditions(p, &pipeline, cfg.max_blind_m, flagged);
+        flagged = flag_conditions(
+            p,
+            &pipeline,
+            cfg.max_blind_m,
+            map_refused.as_deref(),
+            flagged,
+        );
         report(p, &pipeline, &counters, &scans);
         p.tick()?;
     }
@@ -605,6 +667,7 @@ fn publish_members(
     p: &mut Process,
     pipeline: &SlamPipeline,
     publishers: &mut [(&'static str, smokenav_platform_bus::MapPublisher)],
+    max_cells: usize,
     counters: &mut Counters,
 ) {
     let Some(vote) = pipeline.backend().as_any().downcast_ref::<VoteSlam>() else {
@@ -613,6 +676,10 @@ fn publish_members(
     let stamp = pipeline.last_update().map(|u| u.stamp_ns).unwrap_or(0);
     for m in vote.status().members {
         let Some((grid, _)) = &m.map else { continue };
+        if oversized(grid, max_cells).is_some() {
+            counters.maps_refused += 1;
+            continue;
+        }
         let Some((_, publisher)) = publishers.iter_mut().find(|(n, _)| *n == m.name) else {
             continue;
         };
@@ -625,18 +692,21 @@ fn publish_members(
 }
 
 /// Degraded, naming the reasons, while the back-end names a condition (a
-/// vote member out, a localisation lost) or the heading
-/// has been odometry's alone for more than `max_blind_m`; back to Ok when
+/// vote member out, a localisation lost), the heading
+/// has been odometry's alone for more than `max_blind_m` or the last map
+/// was refused (`map_refused`); back to Ok when
 /// none holds. Returns whether it is flagged now.
 fn flag_conditions(
     p: &mut Process,
     pipeline: &SlamPipeline,
     max_blind_m: f64,
+    map_refused: Option<&str>,
     flagged: bool,
 ) -> bool {
     // The back-end's own first (vote members out, localisation lost).
     let mut reasons: Vec<String> = pipeline.backend().health_condition().into_iter().collect();
     reasons.extend(conditions(&pipeline.stats(), max_blind_m));
+    reasons.extend(map_refused.map(str::to_owned));
     if !reasons.is_empty() {
         p.health.error(&reasons.join("; "));
         // Its own state: a low rate publishing Ok as Degraded would otherwise
@@ -720,6 +790,7 @@ fn metrics(
     emit("map_export_ms", c.map_export.as_secs_f64() * 1e3);
     emit("map_draw_ms", c.map_draw.as_secs_f64() * 1e3);
     emit("map_exports_late", c.map_exports_late as f64);
+    emit("maps_refused", c.maps_refused as f64);
     emit("maps_saved", c.maps_saved as f64);
     // Smoke phantoms in the robot's own path, gone from the map ([slam] clear_footprint).
     emit("footprint_cleared", c.footprint_cleared as f64);
@@ -834,6 +905,40 @@ mod tests {
                 names.len()
             );
         }
+    }
+
+    /// A map over the limit is not taken (nor is the one before it kept),
+    /// is counted, and its reason names the key until a map within it comes.
+    #[test]
+    fn a_map_over_the_limit_is_refused_counted_and_named() {
+        let mut counters = Counters::default();
+        let mut refused = None;
+        let grid = |w, h| Some((OccupancyGrid::new(w, h, 0.05, [0.0; 3]), 3));
+        assert!(take_map(grid(100, 100), 10_000, &mut counters, &mut refused).is_some());
+        assert_eq!((counters.maps_refused, counters.footprint_cleared), (0, 3));
+        assert!(take_map(grid(101, 100), 10_000, &mut counters, &mut refused).is_none());
+        assert_eq!(counters.maps_refused, 1);
+        let why = refused.clone().unwrap();
+        assert!(
+            why.contains("101 × 100 cells (5 m × 5 m)")
+                && why.contains("[slam] max_map_cells 10000"),
+            "{why}"
+        );
+        assert!(take_map(None, 10_000, &mut counters, &mut refused).is_none());
+        assert_eq!(
+            refused.as_ref(),
+            Some(&why),
+            "nothing drawn: the reason stands"
+        );
+        assert!(take_map(grid(50, 50), 10_000, &mut counters, &mut refused).is_some());
+        assert!(refused.is_none());
+        // A corrupt size cannot overflow the check.
+        let huge = OccupancyGrid {
+            width: usize::MAX,
+            height: 2,
+            ..OccupancyGrid::new(1, 1, 0.05, [0.0; 3])
+        };
+        assert!(oversized(&huge, 1 << 30).is_some());
     }
 
     #[test]

@@ -188,6 +188,12 @@ slam_section! {
     resolution_m: f64 = (0.05, 0.01),
     /// How often the SLAM process publishes the best particle's map, Hz.
     map_rate_hz: f64 = (1.0, 1.0),
+    /// Largest map the SLAM process publishes or saves, in cells (width ×
+    /// height; 2²⁵, e.g. 400 m × 200 m at 5 cm). A larger map is refused,
+    /// counted (`maps_refused`) and named in health: a building that size
+    /// is rare, a pose gone astray (odometry taken as a jump of kilometres)
+    /// is not, and every subscriber's shared memory would grow to hold it.
+    max_map_cells: usize = (1 << 25, 1 << 25),
     /// Scan topic the SLAM process consumes.
     input: SlamInput = (SlamInput::Fused, SlamInput::Fused),
     /// The SLAM algorithm (`rbpf`, `graph`, `fuzzy` or `vote`).
@@ -408,6 +414,15 @@ impl Validate for SlamSection {
         }
         v.within(&k("resolution_m"), self.resolution_m, 0.005, 1.0);
         v.within(&k("map_rate_hz"), self.map_rate_hz, 0.01, 20.0);
+        if !(1_000..=1 << 30).contains(&self.max_map_cells) {
+            v.fail(
+                k("max_map_cells"),
+                format!(
+                    "must be 1000 to 2^30 (1073741824), got {}",
+                    self.max_map_cells
+                ),
+            );
+        }
         v.within(&k("max_range_m"), self.max_range_m, 0.1, 1000.0);
         v.within(&k("max_urange_m"), self.max_urange_m, 0.1, 1000.0);
         v.ordered(

@@ -575,3 +575,17 @@ fn particle_filter_threads_default_to_one_per_core_and_are_bounded() {
         "{msg}"
     );
 }
+
+#[test]
+fn the_largest_map_published_is_a_key_and_bounded() {
+    assert_eq!(parse(&pioneer_text()).unwrap().slam.max_map_cells, 1 << 25);
+    let small = pioneer_text().replace("[slam]\n", "[slam]\nmax_map_cells = 4000000\n");
+    assert_eq!(parse(&small).unwrap().slam.max_map_cells, 4_000_000);
+    for bad in ["10", "2000000000"] {
+        let err =
+            parse(&pioneer_text().replace("[slam]\n", &format!("[slam]\nmax_map_cells = {bad}\n")))
+                .unwrap_err();
+        assert_eq!(err.keys(), vec!["slam.max_map_cells"], "{err}");
+        assert!(err.to_string().contains(&format!("got {bad}")), "{err}");
+    }
+}
