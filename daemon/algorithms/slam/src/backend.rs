@@ -246,6 +246,26 @@ pub fn export_map_job(backend: &dyn SlamBackend, footprint_m: f64) -> Option<Exp
     }))
 }
 
+/// Cells (width, height) the back-end's map has at least, at `resolution`:
+/// the extent of its trajectory as it stands (the map holds every place
+/// the robot was, and what it saw around it besides). Cheap, unlike
+/// drawing the map, so a map gone too large (a pose astray by kilometres)
+/// can be refused before it is drawn. (0, 0) without a trajectory.
+pub fn map_cells_at_least(backend: &dyn SlamBackend, resolution: f64) -> (usize, usize) {
+    let mut poses = backend.trajectory().into_iter().map(|p| p.pose);
+    let Some(first) = poses.next() else {
+        return (0, 0);
+    };
+    let (mut lo, mut hi) = ((first.x, first.y), (first.x, first.y));
+    for p in poses.filter(|p| p.x.is_finite() && p.y.is_finite()) {
+        lo = (lo.0.min(p.x), lo.1.min(p.y));
+        hi = (hi.0.max(p.x), hi.1.max(p.y));
+    }
+    // Saturating float-to-int casts: a NaN first pose gives 0.
+    let cells = |span: f64| (span / resolution).floor() as usize + 1;
+    (cells(hi.0 - lo.0), cells(hi.1 - lo.1))
+}
+
 /// The trajectory's positions, when a footprint is to be cleared along them
 /// (none when not: [`OccupancyGrid::clear_footprint`] then clears nothing).
 fn footprint_path(backend: &dyn SlamBackend, footprint_m: f64) -> Vec<(f64, f64)> {

@@ -171,6 +171,8 @@ pub struct SlamPipeline {
     side_sonars: SideSonars,
     /// `[fusion.v2] contradiction_margin_m` ([`Self::with_contradiction_margin`]).
     contradiction_margin_m: f32,
+    /// `[slam] resolution_m`: the maps' cell size.
+    resolution_m: f64,
 }
 
 impl SlamPipeline {
@@ -219,6 +221,7 @@ impl SlamPipeline {
             footprint_m: 0.0,
             side_sonars: SideSonars::default(),
             contradiction_margin_m: crate::scan::CONTRADICTION_MARGIN_M,
+            resolution_m: cfg.resolution_m,
         }
     }
 
@@ -515,6 +518,12 @@ impl SlamPipeline {
     /// scans need not wait while it is drawn. `None`: draw it in place.
     pub fn map_and_footprint_job(&self) -> Option<backend::ExportJob> {
         backend::export_map_job(self.backend.as_ref(), self.footprint_m)
+    }
+
+    /// Cells (width, height) the map has at least
+    /// ([`backend::map_cells_at_least`]), known without drawing it.
+    pub fn map_cells_at_least(&self) -> (usize, usize) {
+        backend::map_cells_at_least(self.backend.as_ref(), self.resolution_m)
     }
 
     /// Marks free, in every map exported, the cells within `radius_m` of the

@@ -169,13 +169,22 @@ struct Counters {
 
 /// Why a map may not go out: it is over `[slam] max_map_cells`.
 fn oversized(grid: &OccupancyGrid, max_cells: usize) -> Option<String> {
-    (grid.width.saturating_mul(grid.height) > max_cells).then(|| {
+    too_large((grid.width, grid.height), grid.resolution, "", max_cells)
+}
+
+/// Why a map of `size` cells (or, with `at_least` = "at least ", of no
+/// fewer) may not go out.
+fn too_large(
+    (width, height): (usize, usize),
+    resolution: f64,
+    at_least: &str,
+    max_cells: usize,
+) -> Option<String> {
+    (width.saturating_mul(height) > max_cells).then(|| {
         format!(
-            "slam/map not published: the map is {} × {} cells ({:.0} m × {:.0} m), over [slam] max_map_cells {max_cells} (a pose gone astray? see slam/pose)",
-            grid.width,
-            grid.height,
-            grid.width as f64 * grid.resolution,
-            grid.height as f64 * grid.resolution
+            "slam/map not published: the map is {at_least}{width} × {height} cells ({:.0} m × {:.0} m), over [slam] max_map_cells {max_cells} (a pose gone astray? see slam/pose)",
+            width as f64 * resolution,
+            height as f64 * resolution
         )
     })
 }
@@ -533,23 +542,37 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                 // last one stands. The renderer is only ever busy, and a
                 // map only ever fresh, with such a back-end.
                 let elsewhere = !save && renderer.alive();
-                let job = if elsewhere && due && renderer.idle() {
-                    pipeline.map_and_footprint_job()
-                } else {
-                    None
-                };
-                if let Some(job) = job {
-                    asked = renderer.draw(revision, job);
-                } else if !elsewhere || (due && renderer.idle()) {
-                    let t0 = Instant::now();
-                    map = take_map(
-                        pipeline.map_and_footprint(),
+                if !elsewhere || (due && renderer.idle()) {
+                    // A map too large is refused before it is drawn where
+                    // its trajectory alone says so: drawing it would take
+                    // as much memory as publishing it.
+                    let at_least = too_large(
+                        pipeline.map_cells_at_least(),
+                        cfg.resolution_m,
+                        "at least ",
                         cfg.max_map_cells,
-                        &mut counters,
-                        &mut map_refused,
                     );
-                    counters.map_draw = t0.elapsed();
-                    last_map_revision = Some(revision);
+                    if let Some(why) = at_least {
+                        counters.maps_refused += 1;
+                        map_refused = Some(why);
+                        map = None;
+                        last_map_revision = Some(revision);
+                    } else if let Some(job) = elsewhere
+                        .then(|| pipeline.map_and_footprint_job())
+                        .flatten()
+                    {
+                        asked = renderer.draw(revision, job);
+                    } else {
+                        let t0 = Instant::now();
+                        map = take_map(
+                            pipeline.map_and_footprint(),
+                            cfg.max_map_cells,
+                            &mut counters,
+                            &mut map_refused,
+                        );
+                        counters.map_draw = t0.elapsed();
+                        last_map_revision = Some(revision);
+                    }
                 }
                 if fuzzy_maps.is_some() {
                     fuzzy = pipeline

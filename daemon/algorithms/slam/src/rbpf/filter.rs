@@ -736,6 +736,35 @@ mod tests {
         assert_ne!(slam.map().unwrap(), drawn, "the filter mapped on");
     }
 
+    /// What the SLAM process checks before drawing a map: never more than
+    /// the map drawn, and the trajectory's span.
+    #[test]
+    fn the_map_has_at_least_the_cells_its_trajectory_spans() {
+        use crate::backend::map_cells_at_least;
+        let c = cfg(6);
+        // The path kept, as the SLAM process keeps it to clear the footprint.
+        let mut slam = Rbpf::new(RbpfParams::from_config(&c), true);
+        assert_eq!(map_cells_at_least(&slam, c.resolution_m), (0, 0));
+        let mut truth = Pose2::new(-3.5, -1.5, 0.0);
+        for k in 0..20u64 {
+            slam.process(
+                &scan_at(&truth, k * 100_000_000),
+                &Pose2::new(0.1 * k as f64, 0.0, 0.0),
+            );
+            truth.x += 0.1;
+        }
+        let (w, h) = map_cells_at_least(&slam, c.resolution_m);
+        let map = slam.map().unwrap();
+        // 1.9 m driven along x at 5 cm cells.
+        assert!((35..=40).contains(&w) && h >= 1, "{w} × {h}");
+        assert!(
+            w <= map.width && h <= map.height,
+            "{w} × {h} of {} × {}",
+            map.width,
+            map.height
+        );
+    }
+
     #[test]
     fn systematic_resampling_copies_heavy_particles() {
         let mut slam = rbpf(&cfg(4));
