@@ -74,6 +74,11 @@ impl OdomBuffer {
         self.readings.back().map(|r| r.0)
     }
 
+    /// The newest reading: its stamp and pose.
+    pub fn newest(&self) -> Option<(u64, Pose2)> {
+        self.readings.back().copied()
+    }
+
     /// Odometry at `stamp_ns` only where two readings (or one exactly) are
     /// there to say it: nothing is waited for, held or extrapolated.
     pub fn interpolated(&self, stamp_ns: u64) -> Option<Pose2> {

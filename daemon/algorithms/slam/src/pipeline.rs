@@ -97,6 +97,10 @@ pub struct PipelineStats {
     pub no_odometry_in_a_row: u64,
     /// Odometry readings flagged as a reset of the odometry frame.
     pub odom_resets: u64,
+    /// Odometry readings that moved further from the one before than any
+    /// robot drives in the time between ([`odometry_jumped`]), unflagged:
+    /// taken as a reset, not as motion.
+    pub odom_jumps: u64,
     /// Odometry readings dropped because their stamp went backwards (or was not finite).
     pub odom_out_of_order: u64,
     /// Scans without a usable endpoint (odometry and free space only).
@@ -173,6 +177,29 @@ pub struct SlamPipeline {
     contradiction_margin_m: f32,
     /// `[slam] resolution_m`: the maps' cell size.
     resolution_m: f64,
+}
+
+/// Fastest a base's odometry may move between two readings, m/s: well
+/// above any platform smokenav drives (a Pioneer 3-DX tops out at
+/// 1.2 m/s, a Nomad Scout near 1 m/s).
+const MAX_ODOM_SPEED_M_S: f64 = 5.0;
+/// … plus this much whatever the time between (readings stamped close
+/// together, jitter), m.
+const MAX_ODOM_STEP_M: f64 = 0.5;
+
+/// Whether odometry moved from reading `last` to `now` (stamp ns, pose)
+/// further than a robot drives in the time between: a frame that jumped
+/// without its reset flag (a driver's fault, a corrupt reading, a base
+/// that reconnected unnoticed). Taken as motion it carries the poses, and
+/// the map with them, as far. A reading not newer than `last` is left to
+/// the buffer, which drops it.
+fn odometry_jumped(last: (u64, Pose2), now: (u64, Pose2)) -> bool {
+    let ((t0, p0), (t1, p1)) = (last, now);
+    if t1 <= t0 || !p1.is_finite() {
+        return false;
+    }
+    let dt = (t1 - t0) as f64 * 1e-9;
+    (p1.x - p0.x).hypot(p1.y - p0.y) > MAX_ODOM_STEP_M + MAX_ODOM_SPEED_M_S * dt
 }
 
 impl SlamPipeline {
@@ -252,7 +279,19 @@ impl SlamPipeline {
         let pose = Pose2::new(o.x, o.y, o.theta);
         let flagged = o.flags & OdometryFlags::RESET != 0;
         let first_real = self.odom_made_up && pose.is_finite();
-        if flagged || first_real {
+        let jump = self
+            .odom
+            .newest()
+            .filter(|&last| !flagged && odometry_jumped(last, (o.header.stamp_ns, pose)));
+        if let Some((t, p)) = jump {
+            self.stats.odom_jumps += 1;
+            tracing::warn!(
+                "odometry moved {:.1} m in {:.2} s without a reset flag: taken as a reset of its frame, not as motion (is the base driver sound?)",
+                (pose.x - p.x).hypot(pose.y - p.y),
+                (o.header.stamp_ns - t) as f64 * 1e-9
+            );
+        }
+        if flagged || first_real || jump.is_some() {
             // The odometry frame jumped: poses before and after must not be mixed.
             self.odom.clear();
             self.odom_made_up = false;

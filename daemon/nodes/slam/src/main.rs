@@ -796,6 +796,8 @@ fn metrics(
     emit("scans_without_ranges", stats.empty_scans as f64);
     emit("scans_held_back", stats.held_back as f64);
     emit("odom_resets", stats.odom_resets as f64);
+    // Unflagged jumps no robot drives, taken as resets.
+    emit("odom_jumps", stats.odom_jumps as f64);
     emit("odom_out_of_order", stats.odom_out_of_order as f64);
     emit("frontend_fallbacks", stats.frontend_fallbacks as f64);
     emit("frontend_withheld", stats.frontend_withheld as f64);

@@ -541,8 +541,8 @@ fn run_bag(
     let s = slam.stats();
     let _ = writeln!(
         report,
-        "pairing            {} superseded, {} without odometry, {} odometry out of order, {} odometry resets",
-        s.superseded, s.no_odometry, s.odom_out_of_order, s.odom_resets
+        "pairing            {} superseded, {} without odometry, {} odometry out of order, {} odometry resets, {} unflagged odometry jumps taken as resets",
+        s.superseded, s.no_odometry, s.odom_out_of_order, s.odom_resets, s.odom_jumps
     );
     Ok(report)
 }

@@ -183,19 +183,19 @@ fn odom(stamp_ns: u64, p: Pose2, flags: u32) -> Odometry {
 fn odometry_is_interpolated_at_the_scan_stamp() {
     let room = Pose2::new(-3.5, -1.5, 0.0);
     let mut slam = pipeline(&cfg(2), false);
-    slam.push_odom(&odom(100, Pose2::new(0.0, 0.0, 0.0), 0));
-    slam.push_odom(&odom(200, Pose2::new(1.0, 0.0, 0.2), 0));
-    slam.push_laser(&laser_at(&room, 150));
-    assert!(slam.poll(150).is_some(), "bracketed: no need to wait");
+    slam.push_odom(&odom(100 * MS, Pose2::new(0.0, 0.0, 0.0), 0));
+    slam.push_odom(&odom(200 * MS, Pose2::new(0.1, 0.0, 0.2), 0));
+    slam.push_laser(&laser_at(&room, 150 * MS));
+    assert!(slam.poll(150 * MS).is_some(), "bracketed: no need to wait");
     let p = slam.last_odometry().unwrap();
-    assert!((p.x - 0.5).abs() < 1e-12 && (p.theta - 0.1).abs() < 1e-12);
+    assert!((p.x - 0.05).abs() < 1e-12 && (p.theta - 0.1).abs() < 1e-12);
     // Before the oldest reading kept: that reading; after the newest: it is held.
-    slam.push_laser(&laser_at(&room, 50));
-    slam.poll(150).unwrap();
+    slam.push_laser(&laser_at(&room, 50 * MS));
+    slam.poll(150 * MS).unwrap();
     assert_eq!(slam.last_odometry().unwrap().x, 0.0);
-    slam.push_laser(&laser_at(&room, 900));
-    slam.poll(900 + 200 * MS).unwrap();
-    assert_eq!(slam.last_odometry().unwrap().x, 1.0);
+    slam.push_laser(&laser_at(&room, 290 * MS));
+    slam.poll(490 * MS).unwrap();
+    assert_eq!(slam.last_odometry().unwrap().x, 0.1);
     assert_eq!(slam.stats().no_odometry, 0);
     // No odometry yet: the scan waits for it as for a late reading (at
     // start-up the laser's first scan may come before the base's first
@@ -378,10 +378,39 @@ fn odometry_reset_is_not_taken_as_motion() {
         assert_eq!(stats.odom_resets, 1);
         assert_eq!(stats.scans, 20);
     }
-    // The same jump unflagged is driven as 50 m of motion.
-    let (error, stats) = drive_through_a_reset(false, false);
-    assert!(error > 10.0, "{error}");
-    assert_eq!(stats.odom_resets, 0);
+    // The same jump unflagged, 54 m in 50 ms, is no motion any robot
+    // makes: taken as a reset too, counted apart (it was driven as 54 m).
+    for frontend in [false, true] {
+        let (error, stats) = drive_through_a_reset(frontend, false);
+        assert!(error < 0.1, "front end {frontend}: {error} m off");
+        assert_eq!((stats.odom_resets, stats.odom_jumps), (0, 1));
+    }
+}
+
+#[test]
+fn odometry_is_taken_as_motion_up_to_what_a_robot_can_drive() {
+    let at = |ms: u64, x: f64| (ms * MS, Pose2::new(576.5 + x, 0.1, -2.2));
+    // 0.5 m whatever the time, then 5 m/s.
+    assert!(!odometry_jumped(at(0, 0.0), at(50, 0.74)));
+    assert!(odometry_jumped(at(0, 0.0), at(50, 0.76)));
+    assert!(!odometry_jumped(at(0, 0.0), at(1, 0.5)));
+    assert!(
+        !odometry_jumped(at(0, 0.0), at(10_000, 50.0)),
+        "10 s silent"
+    );
+    assert!(odometry_jumped(at(0, 0.0), at(100, -600.0)));
+    // Not newer, or not a pose: the buffer drops it; no jump.
+    assert!(!odometry_jumped(at(100, 0.0), at(100, 600.0)));
+    assert!(!odometry_jumped(at(100, 0.0), at(50, 600.0)));
+    assert!(!odometry_jumped(
+        at(0, 0.0),
+        (MS, Pose2::new(f64::NAN, 0.0, 0.0))
+    ));
+    // Turning on the spot is never a jump (headings wrap).
+    assert!(!odometry_jumped(
+        at(0, 0.0),
+        (MS, Pose2::new(576.5, 0.1, 3.1))
+    ));
 }
 
 #[test]
