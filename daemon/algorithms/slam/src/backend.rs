@@ -261,7 +261,8 @@ pub fn map_cells_at_least(backend: &dyn SlamBackend, resolution: f64) -> (usize,
         lo = (lo.0.min(p.x), lo.1.min(p.y));
         hi = (hi.0.max(p.x), hi.1.max(p.y));
     }
-    // Saturating float-to-int casts: a NaN first pose gives 0.
+    // f64::min/max pass over a NaN; a span still NaN (no finite pose)
+    // casts to 0 (float-to-int casts saturate).
     let cells = |span: f64| (span / resolution).floor() as usize + 1;
     (cells(hi.0 - lo.0), cells(hi.1 - lo.1))
 }
