@@ -19,7 +19,12 @@
 //! per back-end, default 60; `LIVE_BENCH_BACKENDS`, default `rbpf/1,rbpf,graph`:
 //! `NAME/N` runs that back-end with `[slam] threads = N`, so the particle
 //! filter on one thread and on its default pool, one per core, are measured
-//! side by side in one run).
+//! side by side in one run; `graph+G` runs the graph back-end going on from
+//! the graph `LIVE_BENCH_LOAD_GRAPH` names (`smokenav slam --save-graph`,
+//! e.g. all of MIT CSAIL), so the trial's scans are mapped beside a large
+//! map, which the SLAM process re-draws every second while they come).
+//! Each run prints what the SLAM process's health said of its maps last:
+//! how long one took to draw, the loop's own share, and how many were late.
 
 use smokenav_platform_bus::{Bus, BusOptions, Waiter, topics};
 use smokenav_platform_config::RobotConfig;
@@ -110,6 +115,8 @@ struct Figures {
     misses: usize,
     fused: usize,
     slam_skipped: u64,
+    /// The SLAM process's last health: `map_draw_ms`, `map_export_ms`, `map_exports_late`.
+    maps: [f64; 3],
 }
 
 fn spawn(bin: &Path, args: &[&str], instance: &str) -> Child {
@@ -125,6 +132,7 @@ fn run_backend(
     bins: &(PathBuf, PathBuf),
     profile_path: &Path,
     backend: &str,
+    load_graph: Option<&str>,
     stream: &[(u64, DirectMessage)],
 ) -> Figures {
     // One bus per run: `rbpf/1` and `rbpf` differ only in their profile's file.
@@ -132,7 +140,8 @@ fn run_backend(
         .file_stem()
         .and_then(|s| s.to_str())
         .unwrap_or("robot");
-    let instance = format!("live_bench_{}_{backend}_{stem}", std::process::id());
+    let loaded = if load_graph.is_some() { "_loaded" } else { "" };
+    let instance = format!("live_bench_{}_{backend}{loaded}_{stem}", std::process::id());
     let bus = Bus::open(&BusOptions::new(&instance, "live-bench")).expect("bus");
     let mut laser = bus.publisher(topics::LASER_SCAN).expect("publisher");
     let mut sonar = bus.publisher(topics::BASE_SONAR).expect("publisher");
@@ -145,9 +154,13 @@ fn run_backend(
         bus.subscriber(topics::health("slam")).expect("health"),
     ];
     let cfg = profile_path.to_str().expect("utf-8 path");
+    let mut slam_args = vec!["--config", cfg, "--backend", backend];
+    if let Some(g) = load_graph {
+        slam_args.extend(["--load-graph", g]);
+    }
     let mut children = vec![
         spawn(&bins.0, &["--config", cfg], &instance),
-        spawn(&bins.1, &["--config", cfg, "--backend", backend], &instance),
+        spawn(&bins.1, &slam_args, &instance),
     ];
     // Ready: each process has published its health (its subscribers are up by then).
     let ready_by = Instant::now() + Duration::from_secs(60);
@@ -233,6 +246,15 @@ fn run_backend(
         let _ = waiter.wait(Some(Duration::from_millis(50)));
         drain(&mut fused_with, &mut received, &mut slam_skipped);
     }
+    let mut maps = [f64::NAN; 3];
+    while let Ok(Some(h)) = health[1].receive() {
+        for (v, name) in maps
+            .iter_mut()
+            .zip(["map_draw_ms", "map_export_ms", "map_exports_late"])
+        {
+            *v = h.metric(name).unwrap_or(f64::NAN);
+        }
+    }
     for c in &mut children {
         let _ = smokenav_platform_runtime::launch::stop(c, Duration::from_secs(5));
     }
@@ -265,6 +287,7 @@ fn run_backend(
         misses,
         fused: fused_with.len(),
         slam_skipped,
+        maps,
     }
 }
 
@@ -293,7 +316,16 @@ fn main() {
         stream.len()
     );
     for label in backends.split(',').map(str::trim).filter(|b| !b.is_empty()) {
-        let (backend, path) = match label.split_once('/') {
+        let (label_backend, load_graph) = match label.split_once('+') {
+            Some((b, _)) => {
+                let g = std::env::var("LIVE_BENCH_LOAD_GRAPH").unwrap_or_else(|_| {
+                    panic!("{label}: set LIVE_BENCH_LOAD_GRAPH to a graph saved with --save-graph")
+                });
+                (b, Some(g))
+            }
+            None => (label, None),
+        };
+        let (backend, path) = match label_backend.split_once('/') {
             Some((backend, threads)) => {
                 let mut p = profile.clone();
                 p.slam.threads = threads
@@ -303,9 +335,9 @@ fn main() {
                 std::fs::write(&path, p.to_toml()).expect("write profile");
                 (backend, path)
             }
-            None => (label, profile_path.clone()),
+            None => (label_backend, profile_path.clone()),
         };
-        let f = run_backend(&bins, &path, backend, &stream);
+        let f = run_backend(&bins, &path, backend, load_graph.as_deref(), &stream);
         let target_ms = match backend {
             "graph" => Some(15.0),
             "rbpf" => Some(30.0),
@@ -315,7 +347,7 @@ fn main() {
         v.sort_unstable();
         if v.is_empty() {
             println!(
-                "  {label:<8} no pose arrived ({} scans, {} misses)",
+                "  {label:<12} no pose arrived ({} scans, {} misses)",
                 f.scans, f.misses
             );
             continue;
@@ -323,7 +355,7 @@ fn main() {
         let at = |p: f64| v[((v.len() as f64 * p) as usize).min(v.len() - 1)] as f64 / 1e3;
         let over = target_ms.map_or(0, |t| v.iter().filter(|&&x| x as f64 / 1e3 > t).count());
         println!(
-            "  {label:<8} scans {:>5}  p50 {:>6.2} ms  p99 {:>6.2} ms  max {:>7.2} ms  missed (no pose) {}  over {} ms {}  (fused {}, skipped by slam {})",
+            "  {label:<12} scans {:>5}  p50 {:>6.2} ms  p99 {:>6.2} ms  max {:>7.2} ms  missed (no pose) {}  over {} ms {}  (fused {}, skipped by slam {})",
             f.scans,
             at(0.5),
             at(0.99),
@@ -333,6 +365,10 @@ fn main() {
             over,
             f.fused,
             f.slam_skipped
+        );
+        println!(
+            "  {:<12} maps (last health): drawn in {:.1} ms, the loop's share {:.1} ms, {} late",
+            "", f.maps[0], f.maps[1], f.maps[2]
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
