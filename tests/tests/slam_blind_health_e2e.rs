@@ -6,13 +6,16 @@
 //! is back the reason goes and the longest stretch stays in the report.
 //!
 //! The scans and odometry are the first 200 of the MIT CSAIL log, the
-//! middle ones blinded. A second test: scans without odometry (a base
-//! driver that never started); a third: a map over `[slam] max_map_cells`.
+//! middle ones blinded. The other tests: scans without odometry (a base
+//! driver that never started); maps over `[slam] max_map_cells`;
+//! odometry that jumps further than a robot drives.
 
 use smokenav_algorithms_slam::carmen::LaserRecord;
-use smokenav_platform_bus::Waiter;
+use smokenav_platform_bus::{Publisher, Subscriber, Waiter};
 use smokenav_platform_config::{MountPose, SlamInput};
-use smokenav_shared_types::{Clock, FusedScan, Health, HealthState, MonotonicClock, SectionSource};
+use smokenav_shared_types::{
+    Clock, FusedScan, Health, HealthState, MonotonicClock, Odometry, PoseEstimate, SectionSource,
+};
 use smokenav_tests::{
     FusedSlam, carmen_odometry, csail_prefix, fill_carmen_scan, health_until, pose_for_scan,
     profile, unique_instance,
@@ -49,6 +52,32 @@ fn spawn_slam(
     (dir, slam)
 }
 
+/// Feeds the SLAM process the CSAIL prefix in lock step: `send(k,
+/// odometry, blind)` publishes record `k`'s odometry (moved `odometry` m
+/// along x and y; `None`: none at all) and its scan (withheld entirely
+/// when `blind`), and returns that scan's pose before the next goes out.
+fn lock_step<'a>(
+    odom: &'a mut Publisher<Odometry>,
+    scans: &'a mut Publisher<FusedScan>,
+    poses: &'a Subscriber<PoseEstimate>,
+    waiter: &'a Waiter,
+) -> impl FnMut(usize, Option<f64>, bool) -> PoseEstimate + 'a {
+    let records = csail_prefix();
+    let t0 = MonotonicClock.now_ns();
+    let ipc0 = records[0].ipc_timestamp_ns;
+    move |k, odometry, blind| {
+        let rec = &records[k];
+        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
+        if let Some(moved) = odometry {
+            let mut o = carmen_odometry(rec, stamp);
+            (o.x, o.y) = (o.x + moved, o.y + moved);
+            odom.publish(&o).unwrap();
+        }
+        scans.publish(&fused(rec, stamp, blind)).unwrap();
+        pose_for_scan(poses, waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"))
+    }
+}
+
 #[test]
 fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
     let instance = unique_instance("slam_blind_health_e2e");
@@ -66,20 +95,9 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
         .sum();
     assert!(travel > 2.0 * MAX_BLIND_M, "{travel} m");
 
-    let t0 = MonotonicClock.now_ns();
-    let ipc0 = records[0].ipc_timestamp_ns;
-    let mut send = |k: usize| {
-        let rec = &records[k];
-        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
-        slam.odom.publish(&carmen_odometry(rec, stamp)).unwrap();
-        slam.scans
-            .publish(&fused(rec, stamp, BLIND.contains(&k)))
-            .unwrap();
-        // Lock step: the pose of this scan before the next one goes out.
-        pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
-    };
+    let mut send = lock_step(&mut slam.odom, &mut slam.scans, &slam.poses, &waiter);
     for k in 0..BLIND.end {
-        send(k);
+        send(k, Some(0.0), BLIND.contains(&k));
     }
     let blind = health_until(&slam.health, &waiter, "naming the blind stretch", |h| {
         h.last_error
@@ -99,7 +117,7 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
         "every blinded scan counted"
     );
     for k in BLIND.end..records.len() {
-        send(k);
+        send(k, Some(0.0), false);
     }
     let back = health_until(&slam.health, &waiter, "without the blind stretch", |h| {
         metric(h, "heading_blind_m") == 0.0
@@ -116,6 +134,7 @@ fn a_blind_stretch_past_the_limit_degrades_health_until_the_laser_is_back() {
         longest > travel - 0.05 && longest < travel + 0.5,
         "longest {longest} against {travel:.2} m"
     );
+    drop(send);
     drop(_g);
     slam.terminate();
 }
@@ -134,19 +153,10 @@ fn scans_without_odometry_degrade_health_until_the_base_speaks() {
         waiter.attach(&slam.poses).unwrap(),
         waiter.attach(&slam.health).unwrap(),
     ];
-    let records = csail_prefix();
-    let t0 = MonotonicClock.now_ns();
-    let ipc0 = records[0].ipc_timestamp_ns;
     let mut poses = Vec::new();
+    let mut feed = lock_step(&mut slam.odom, &mut slam.scans, &slam.poses, &waiter);
     let mut send = |k: usize, with_odometry: bool| {
-        let rec = &records[k];
-        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
-        if with_odometry {
-            slam.odom.publish(&carmen_odometry(rec, stamp)).unwrap();
-        }
-        slam.scans.publish(&fused(rec, stamp, false)).unwrap();
-        let p =
-            pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
+        let p = feed(k, with_odometry.then_some(0.0), false);
         poses.push((p.x, p.y));
     };
     for k in 0..15 {
@@ -160,6 +170,7 @@ fn scans_without_odometry_degrade_health_until_the_base_speaks() {
     for k in 15..60 {
         send(k, true);
     }
+    drop(feed);
     let back = health_until(&slam.health, &waiter, "without the odometry reason", |h| {
         !h.last_error.as_str().contains("no odometry")
     });
@@ -191,14 +202,9 @@ fn a_map_over_the_limit_is_not_published_and_health_says_why() {
         waiter.attach(&slam.poses).unwrap(),
         waiter.attach(&slam.health).unwrap(),
     ];
-    let records = csail_prefix();
-    let t0 = MonotonicClock.now_ns();
-    let ipc0 = records[0].ipc_timestamp_ns;
-    for (k, rec) in records.iter().take(30).enumerate() {
-        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
-        slam.odom.publish(&carmen_odometry(rec, stamp)).unwrap();
-        slam.scans.publish(&fused(rec, stamp, false)).unwrap();
-        pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
+    let mut send = lock_step(&mut slam.odom, &mut slam.scans, &slam.poses, &waiter);
+    for k in 0..30 {
+        send(k, Some(0.0), false);
     }
     // Maps are due once a second, from the process's own timer.
     let refused = health_until(&slam.health, &waiter, "refusing the map", |h| {
@@ -215,6 +221,7 @@ fn a_map_over_the_limit_is_not_published_and_health_says_why() {
         maps.receive().unwrap().is_none(),
         "a refused map on slam/map"
     );
+    drop(send);
     drop(_g);
     slam.terminate();
 }
@@ -235,14 +242,9 @@ fn a_trajectory_over_the_limit_is_refused_a_map_before_it_is_drawn() {
         waiter.attach(&slam.poses).unwrap(),
         waiter.attach(&slam.health).unwrap(),
     ];
-    let records = csail_prefix();
-    let t0 = MonotonicClock.now_ns();
-    let ipc0 = records[0].ipc_timestamp_ns;
-    for (k, rec) in records.iter().enumerate() {
-        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
-        slam.odom.publish(&carmen_odometry(rec, stamp)).unwrap();
-        slam.scans.publish(&fused(rec, stamp, false)).unwrap();
-        pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"));
+    let mut send = lock_step(&mut slam.odom, &mut slam.scans, &slam.poses, &waiter);
+    for k in 0..csail_prefix().len() {
+        send(k, Some(0.0), false);
     }
     let refused = health_until(&slam.health, &waiter, "refusing before drawing", |h| {
         h.last_error.as_str().contains("the map is at least ")
@@ -257,6 +259,7 @@ fn a_trajectory_over_the_limit_is_refused_a_map_before_it_is_drawn() {
     );
     assert_eq!(refused.state(), HealthState::Degraded);
     assert_eq!(refused.metric("maps_published"), Some(0.0));
+    drop(send);
     drop(_g);
     slam.terminate();
 }
@@ -275,20 +278,9 @@ fn odometry_gone_astray_is_taken_as_a_reset_not_a_drive() {
         waiter.attach(&slam.poses).unwrap(),
         waiter.attach(&slam.health).unwrap(),
     ];
-    let records = csail_prefix();
-    let t0 = MonotonicClock.now_ns();
-    let ipc0 = records[0].ipc_timestamp_ns;
-    let mut send = |k: usize, astray: f64| {
-        let rec = &records[k];
-        let stamp = t0 + (rec.ipc_timestamp_ns - ipc0);
-        let mut odom = carmen_odometry(rec, stamp);
-        (odom.x, odom.y) = (odom.x + astray, odom.y + astray);
-        slam.odom.publish(&odom).unwrap();
-        slam.scans.publish(&fused(rec, stamp, false)).unwrap();
-        pose_for_scan(&slam.poses, &waiter, stamp).unwrap_or_else(|e| panic!("scan {k}: {e}"))
-    };
-    let before: Vec<_> = (0..30).map(|k| send(k, 0.0)).collect();
-    let after: Vec<_> = (30..60).map(|k| send(k, 600.0)).collect();
+    let mut send = lock_step(&mut slam.odom, &mut slam.scans, &slam.poses, &waiter);
+    let before: Vec<_> = (0..30).map(|k| send(k, Some(0.0), false)).collect();
+    let after: Vec<_> = (30..60).map(|k| send(k, Some(600.0), false)).collect();
     // The first 60 scans of the log lie within a few metres of the start.
     let far = before
         .iter()
@@ -301,6 +293,7 @@ fn odometry_gone_astray_is_taken_as_a_reset_not_a_drive() {
     });
     assert_eq!(jumped.metric("odom_jumps"), Some(1.0));
     assert_eq!(jumped.metric("odom_resets"), Some(0.0), "none was flagged");
+    drop(send);
     drop(_g);
     slam.terminate();
 }
