@@ -191,8 +191,8 @@ slam_section! {
     /// Largest map the SLAM process publishes or saves, in cells (width ×
     /// height; 2²⁵, e.g. 400 m × 200 m at 5 cm). A larger map is refused,
     /// counted (`maps_refused`) and named in health: a building that size
-    /// is rare, a pose gone astray (odometry taken as a jump of kilometres)
-    /// is not, and every subscriber's shared memory would grow to hold it.
+    /// is rare, a pose gone astray less so, and every subscriber's shared
+    /// memory would grow to hold its map.
     max_map_cells: usize = (1 << 25, 1 << 25),
     /// Scan topic the SLAM process consumes.
     input: SlamInput = (SlamInput::Fused, SlamInput::Fused),
