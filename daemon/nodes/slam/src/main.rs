@@ -200,13 +200,22 @@ fn take_map(
 ) -> Option<OccupancyGrid> {
     let (map, cleared) = drawn?;
     if let Some(why) = oversized(&map, max_cells) {
-        counters.maps_refused += 1;
-        *refused = Some(why);
-        return None;
+        return refuse(why, counters, refused);
     }
     counters.footprint_cleared = cleared as u64;
     *refused = None;
     Some(map)
+}
+
+/// A map refused for `why`: counted, the reason kept for health; no map.
+fn refuse(
+    why: String,
+    counters: &mut Counters,
+    refused: &mut Option<String>,
+) -> Option<OccupancyGrid> {
+    counters.maps_refused += 1;
+    *refused = Some(why);
+    None
 }
 
 /// The laser's scan period at 10 Hz: a map export longer than this holds up a scan.
@@ -553,9 +562,7 @@ fn run(p: &mut Process, args: &Args) -> anyhow::Result<()> {
                         cfg.max_map_cells,
                     );
                     if let Some(why) = at_least {
-                        counters.maps_refused += 1;
-                        map_refused = Some(why);
-                        map = None;
+                        map = refuse(why, &mut counters, &mut map_refused);
                         last_map_revision = Some(revision);
                     } else if let Some(job) = elsewhere
                         .then(|| pipeline.map_and_footprint_job())
