@@ -62,6 +62,7 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
     ]);
 
     assert_eq!(v["scenario"], "r32-dense-crossing");
+    assert_eq!(v["sim_seed"], 3, "the scenario's own seed");
     assert_eq!(v["duration_s"], 30.0);
     // The occupancy comparison per rule on `heights` (its first 30 s, as --duration says).
     let occ = &v["occupancy_rules"];
@@ -170,6 +171,8 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
         "1",
         "--scenario",
         "mrl-clean",
+        "--sim-seed",
+        "11",
         "--no-map3d",
         "--duration",
         "12",
@@ -180,6 +183,13 @@ fn a_scenario_without_smoke_has_no_clean_reference() {
         &out,
     ]);
     assert_eq!(v["scenario"], "mrl-clean");
+    // Another draw of the same scenario: the simulator ran with that seed.
+    assert_eq!(v["sim_seed"], 11, "{v}");
+    let mut play = Playback::open(&Path::new(&out).join("recording.mcap")).unwrap();
+    while play.read_next().unwrap().is_some() {}
+    let meta = play.source().metadata();
+    let seed = meta.iter().find_map(|(_, m)| m.get("seed").cloned());
+    assert_eq!(seed.as_deref(), Some("11"), "{meta:?}");
     assert!(v.get("occupancy_rules").is_none(), "--no-map3d");
     assert!(v.get("clean_reference").is_none(), "{v}");
     assert!(v["methods"]["v2"]["map_error_m"].is_f64());

@@ -19,6 +19,10 @@ pub struct SimArgs {
     /// (default: OUT/robot.toml).
     #[arg(long, value_name = "FILE")]
     pub profile_out: Option<PathBuf>,
+    /// The simulator's random seed (sensor noise, odometry error, the smoke's
+    /// turbulence) instead of the scenario's `seed`.
+    #[arg(long, value_name = "N")]
+    pub sim_seed: Option<u64>,
     /// Simulated seconds per real second (the devices keep their real rates).
     #[arg(long, value_name = "X", default_value_t = 1.0)]
     pub speed: f64,
@@ -54,8 +58,11 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     }
     let shutdown = smokenav_platform_runtime::Shutdown::install()
         .context("cannot install the signal handlers")?;
-    let scenario = Scenario::builtin_or_file(&args.scenario)
+    let mut scenario = Scenario::builtin_or_file(&args.scenario)
         .with_context(|| format!("cannot load scenario {}", args.scenario))?;
+    if let Some(seed) = args.sim_seed {
+        scenario.seed = seed;
+    }
     let instance = args
         .instance
         .clone()

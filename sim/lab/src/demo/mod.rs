@@ -80,6 +80,12 @@ pub struct DemoArgs {
     /// Skip the live run: record straight from the simulator, as fast as possible, then compare.
     #[arg(long)]
     pub fast: bool,
+    /// The simulator's random seed (sensor noise, odometry error, the smoke's
+    /// turbulence) instead of the scenario's `seed`: the same trial drawn
+    /// again. One draw's figures can be far from another's; compare methods
+    /// over several.
+    #[arg(long, value_name = "N")]
+    pub sim_seed: Option<u64>,
     /// Output folder.
     #[arg(long, value_name = "DIR", default_value = "smokenav-demo-out")]
     pub out: PathBuf,
@@ -165,6 +171,8 @@ impl Say {
 pub(crate) struct Comparison {
     pub scenario: String,
     pub description: String,
+    /// The simulator's seed the scenario ran with.
+    pub sim_seed: u64,
     pub sim_s: f64,
     pub scans: usize,
     pub truth: TruthTrack,
@@ -348,6 +356,7 @@ fn compare_recording(
     let c = Comparison {
         scenario: scenario.name.clone(),
         description: scenario.description.clone(),
+        sim_seed: scenario.seed,
         sim_s,
         scans: log.lasers.len(),
         truth,
@@ -478,18 +487,22 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         bail!("--seeds must be 1–20, got {}", args.seeds);
     }
     let say = Say { json: args.json };
-    let scenario = Scenario::builtin_or_file(&args.scenario)
+    let mut scenario = Scenario::builtin_or_file(&args.scenario)
         .with_context(|| format!("cannot load scenario {}", args.scenario))?;
+    if let Some(seed) = args.sim_seed {
+        scenario.seed = seed;
+    }
     let until = args.duration.map_or(Until::RouteDone, Until::SimSeconds);
     let profile = demo_profile(&scenario, args.particles);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let started = Instant::now();
     say.line(&format!(
-        "smokenav-lab demo: {} — {} ({} s scripted{})",
+        "smokenav-lab demo: {} — {} ({} s scripted, simulator seed {}{})",
         scenario.name,
         scenario.description,
         scenario.duration_s,
+        scenario.seed,
         if args.fast { ", fast" } else { ", live" }
     ));
 

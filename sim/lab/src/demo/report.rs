@@ -75,6 +75,7 @@ fn methods_json(c: &Comparison) -> Value {
 pub fn json_value(main: &Comparison, clean: Option<&Comparison>) -> Value {
     let mut v = json!({
         "scenario": main.scenario,
+        "sim_seed": main.sim_seed,
         "slam_seeds": main.seeds,
         "duration_s": (main.sim_s * 10.0).round() / 10.0,
         "scans": main.scans,
