@@ -16,39 +16,13 @@
 //! eight more), `DRAWS_BENCH_SCENARIO` the scenario (default
 //! `r32-dense-crossing`).
 
+mod support;
+
 use serde_json::Value;
-use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
 const BACKENDS: [&str; 2] = ["rbpf", "graph"];
-
-fn workspace_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// target/<profile>/ (this bench runs from target/<profile>/deps/).
-fn profile_dir() -> PathBuf {
-    let exe = std::env::current_exe().expect("current_exe");
-    exe.parent()
-        .and_then(Path::parent)
-        .expect("bench in target/<profile>/deps")
-        .to_owned()
-}
-
-/// Builds `smokenav-lab` in this bench's profile, so it never runs a stale one.
-fn build_lab() -> PathBuf {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.current_dir(workspace_root())
-        .args(["build", "--quiet", "-p", "smokenav-sim-lab"]);
-    if profile_dir().ends_with("release") {
-        cmd.arg("--release");
-    }
-    let status = cmd.status().expect("cannot run cargo");
-    assert!(status.success(), "cargo build of smokenav-lab failed");
-    profile_dir().join("smokenav-lab")
-}
 
 /// (v2's map error in smoke, in clean air, their ratio) of `backend`, m.
 fn v2_errors(v: &Value, backend: &str) -> Option<(f64, f64, f64)> {
@@ -73,7 +47,8 @@ fn main() {
         .collect();
     let scenario =
         std::env::var("DRAWS_BENCH_SCENARIO").unwrap_or_else(|_| "r32-dense-crossing".into());
-    let lab = build_lab();
+    support::build(&["smokenav-sim-lab"]);
+    let lab = support::profile_dir().join("smokenav-lab");
     let out = std::env::temp_dir().join(format!("smokenav-draws-{}", std::process::id()));
     println!(
         "{scenario}: SmokeNav v2's map error in smoke / in clean air, one SLAM seed, {} draws",

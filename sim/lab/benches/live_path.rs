@@ -26,6 +26,8 @@
 //! Each run prints what the SLAM process's health said of its maps last:
 //! how long one took to draw, the loop's own share, and how many were late.
 
+mod support;
+
 use smokenav_platform_bus::{Bus, BusOptions, Waiter, topics};
 use smokenav_platform_config::RobotConfig;
 use smokenav_shared_types::clock::monotonic_now_ns;
@@ -34,7 +36,7 @@ use smokenav_sim_link::DirectMessage;
 use smokenav_sim_world::{Scenario, StepOutput, World};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 /// Stamp of sim time 0 in the generated stream (moved onto the bus clock when replayed).
@@ -42,39 +44,12 @@ const T0_NS: u64 = 1_000_000_000;
 /// Scans at the start left out of the figures (the first map, page faults).
 const WARMUP_SCANS: usize = 20;
 
-fn workspace_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// target/<profile>/ (this bench runs from target/<profile>/deps/).
-fn profile_dir() -> PathBuf {
-    let exe = std::env::current_exe().expect("current_exe");
-    exe.parent()
-        .and_then(Path::parent)
-        .expect("bench in target/<profile>/deps")
-        .to_owned()
-}
-
 /// Builds the two processes in this bench's profile, so it never runs stale ones.
 fn build_processes() -> (PathBuf, PathBuf) {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.current_dir(workspace_root()).args([
-        "build",
-        "--quiet",
-        "-p",
-        "smokenav-nodes-fusion",
-        "-p",
-        "smokenav-nodes-slam",
-    ]);
-    if profile_dir().ends_with("release") {
-        cmd.arg("--release");
-    }
-    let status = cmd.status().expect("cannot run cargo");
-    assert!(status.success(), "cargo build of fusion and slam failed");
+    support::build(&["smokenav-nodes-fusion", "smokenav-nodes-slam"]);
     (
-        profile_dir().join("smokenav-fusion"),
-        profile_dir().join("smokenav-slam"),
+        support::profile_dir().join("smokenav-fusion"),
+        support::profile_dir().join("smokenav-slam"),
     )
 }
 
