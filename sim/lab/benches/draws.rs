@@ -10,7 +10,7 @@
 //! recording straight from the simulator, fusion and both back-ends over it
 //! and over the smoke-free twin, scored against the ground truth.
 //!
-//! Run: `cargo bench -p smokenav-sim-lab --bench draws` (about 3 minutes a
+//! Run: `cargo bench -p smokenav-sim-lab --bench draws` (about 2 minutes a
 //! draw on 2 cores in release). `DRAWS_BENCH_SEEDS` lists the simulator
 //! seeds (default `3,47,53,59,61,67,71,73,79`: the scenario's own, then
 //! eight more), `DRAWS_BENCH_SCENARIO` the scenario (default
@@ -35,7 +35,6 @@ fn v2_errors(v: &Value, backend: &str) -> Option<(f64, f64, f64)> {
 }
 
 fn main() {
-    // `cargo bench` passes `--bench`; a filter argument is not ours to read.
     let seeds: Vec<u64> = std::env::var("DRAWS_BENCH_SEEDS")
         .unwrap_or_else(|_| "3,47,53,59,61,67,71,73,79".into())
         .split(',')

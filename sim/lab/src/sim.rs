@@ -46,6 +46,17 @@ pub struct SimArgs {
     pub format: crate::demo::TrajectoryFiles,
 }
 
+/// A bundled scenario or a scenario file, with the simulator's seed
+/// `sim_seed` instead of its own when given (`--sim-seed`).
+pub(crate) fn load_scenario(spec: &str, sim_seed: Option<u64>) -> anyhow::Result<Scenario> {
+    let mut scenario =
+        Scenario::builtin_or_file(spec).with_context(|| format!("cannot load scenario {spec}"))?;
+    if let Some(seed) = sim_seed {
+        scenario.seed = seed;
+    }
+    Ok(scenario)
+}
+
 pub fn run(args: SimArgs) -> anyhow::Result<()> {
     if std::env::var_os("RUST_LOG").is_some() {
         smokenav_platform_runtime::init_logging("sim");
@@ -58,11 +69,7 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     }
     let shutdown = smokenav_platform_runtime::Shutdown::install()
         .context("cannot install the signal handlers")?;
-    let mut scenario = Scenario::builtin_or_file(&args.scenario)
-        .with_context(|| format!("cannot load scenario {}", args.scenario))?;
-    if let Some(seed) = args.sim_seed {
-        scenario.seed = seed;
-    }
+    let scenario = load_scenario(&args.scenario, args.sim_seed)?;
     let instance = args
         .instance
         .clone()

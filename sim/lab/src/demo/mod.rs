@@ -487,11 +487,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         bail!("--seeds must be 1–20, got {}", args.seeds);
     }
     let say = Say { json: args.json };
-    let mut scenario = Scenario::builtin_or_file(&args.scenario)
-        .with_context(|| format!("cannot load scenario {}", args.scenario))?;
-    if let Some(seed) = args.sim_seed {
-        scenario.seed = seed;
-    }
+    let scenario = crate::sim::load_scenario(&args.scenario, args.sim_seed)?;
     let until = args.duration.map_or(Until::RouteDone, Until::SimSeconds);
     let profile = demo_profile(&scenario, args.particles);
     std::fs::create_dir_all(&args.out)
