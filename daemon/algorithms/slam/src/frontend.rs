@@ -56,6 +56,19 @@ const MAX_EXTRAPOLATION_S: f64 = 1.5;
 /// this much of the score (a mean table value in 0–1, so 0.03 ≈ 3 % of the
 /// points leaving the obstacles). The deviations scale with the predicted motion.
 const PRIOR_WEIGHT: f64 = 0.03;
+/// A side wall the local map holds (its laser points within this of where
+/// the side sonar puts the wall, beside the stretch it was fitted over) says
+/// where the robot is across it, not only how far it drifted since the
+/// window began ([`FrontEnd::map_wall_offset`]), m.
+const SIDE_MAP_GATE_M: f64 = 0.2;
+/// Fewest local-map points on that wall.
+const SIDE_MAP_MIN_POINTS: usize = 10;
+/// Largest spread (median absolute deviation) of their distances: more is
+/// not one straight surface (a door, clutter by the wall), m.
+const SIDE_MAP_MAX_SPREAD_M: f64 = 0.03;
+/// How far ahead of the robot the map's wall is looked at, m (the cone's
+/// footprint; behind it, the fit's window).
+const SIDE_MAP_AHEAD_M: f64 = 0.25;
 /// Translation σ of the prediction: a floor plus a share of the predicted step, m and m/m.
 const PRIOR_SIGMA_T: (f64, f64) = (0.05, 0.15);
 /// Rotation σ of the prediction: a floor plus a share of the predicted turn, rad and
@@ -217,6 +230,8 @@ pub struct FrontEnd {
     /// The side transducers' readings along the way ([`Self::set_side_ranges`]).
     side_walls: SideWalls,
     side_ranges: [Option<f64>; 2],
+    /// Scratch of [`Self::map_wall_offset`].
+    wall_offsets: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -271,6 +286,7 @@ impl FrontEnd {
             unfixed: (0.0, 0.0),
             side_walls,
             side_ranges: [None; 2],
+            wall_offsets: Vec::new(),
         }
     }
 
@@ -590,7 +606,7 @@ impl FrontEnd {
     /// `SIDE_WALL_MAX_SNAP` of it, more the longer the heading went unfixed;
     /// the flag says whether every wall taken was within the plain limit
     /// (the heading then counts as fixed).
-    fn side_wall_correction(&self, prediction: &Pose2) -> Option<(f64, (f64, f64), bool)> {
+    fn side_wall_correction(&mut self, prediction: &Pose2) -> Option<(f64, (f64, f64), bool)> {
         let fits = [SideOf::Left, SideOf::Right].map(|side| (side, self.side_walls.fit(side)));
         if fits.iter().all(|(_, f)| f.is_none()) {
             // The local map's directions cost a pass over its scans.
@@ -623,10 +639,22 @@ impl FrontEnd {
                 SideOf::Left => (-s, c),
                 SideOf::Right => (s, -c),
             };
-            if let Some(p0) = fit.first_pose {
-                let closed = normal.0 * (prediction.x - p0.x) + normal.1 * (prediction.y - p0.y);
-                let e =
-                    (fit.closed_m - closed).clamp(-SIDE_WALL_MAX_SHIFT_M, SIDE_WALL_MAX_SHIFT_M);
+            // Where the local map has the wall, the robot's distance to
+            // it; else how far it closed on it since the window began.
+            let along = (
+                prediction.theta.cos() * self.side_walls.window_m(),
+                prediction.theta.sin() * self.side_walls.window_m(),
+            );
+            let e = self
+                .map_wall_offset(prediction, normal, along, fit.range_m)
+                .or_else(|| {
+                    let p0 = fit.first_pose?;
+                    let closed =
+                        normal.0 * (prediction.x - p0.x) + normal.1 * (prediction.y - p0.y);
+                    Some(fit.closed_m - closed)
+                });
+            if let Some(e) = e {
+                let e = e.clamp(-SIDE_WALL_MAX_SHIFT_M, SIDE_WALL_MAX_SHIFT_M);
                 shift.0 += normal.0 * e;
                 shift.1 += normal.1 * e;
             }
@@ -638,6 +666,55 @@ impl FrontEnd {
                 close,
             )
         })
+    }
+
+    /// How much further along `normal` (unit, map frame, towards the wall)
+    /// the local map's laser points put the wall beside the robot than the
+    /// side sonar's `range_m` from `prediction` does: the shift that puts
+    /// the robot where the map's wall is `range_m` away. Only the points
+    /// beside the fitted stretch (from `back` behind the robot, a map-frame
+    /// vector, to `SIDE_MAP_AHEAD_M` ahead) within `SIDE_MAP_GATE_M` of the
+    /// sonar's wall count, and only if they lie on one straight surface.
+    /// `None` while the map is of heading-tracked scans (placed by the
+    /// same drifting odometry).
+    fn map_wall_offset(
+        &mut self,
+        prediction: &Pose2,
+        normal: (f64, f64),
+        back: (f64, f64),
+        range_m: f64,
+    ) -> Option<f64> {
+        if self.bootstrap_map {
+            return None;
+        }
+        let back_m = back.0.hypot(back.1);
+        let dir = if back_m > 0.0 {
+            (back.0 / back_m, back.1 / back_m)
+        } else {
+            (prediction.theta.cos(), prediction.theta.sin())
+        };
+        self.wall_offsets.clear();
+        for &(x, y) in self.history.iter().flatten() {
+            let (dx, dy) = (f64::from(x) - prediction.x, f64::from(y) - prediction.y);
+            let a = dir.0 * dx + dir.1 * dy;
+            let o = normal.0 * dx + normal.1 * dy - range_m;
+            if (-back_m..=SIDE_MAP_AHEAD_M).contains(&a) && o.abs() <= SIDE_MAP_GATE_M {
+                self.wall_offsets.push(o);
+            }
+        }
+        let n = self.wall_offsets.len();
+        if n < SIDE_MAP_MIN_POINTS {
+            return None;
+        }
+        let median = |v: &mut [f64]| {
+            v.sort_unstable_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let m = median(&mut self.wall_offsets);
+        for o in &mut self.wall_offsets {
+            *o = (*o - m).abs();
+        }
+        (median(&mut self.wall_offsets) <= SIDE_MAP_MAX_SPREAD_M).then_some(m)
     }
 
     fn predict(&self, last_pose: &Pose2, odom: &Pose2, stamp_ns: u64, stale: bool) -> Pose2 {
@@ -1597,6 +1674,55 @@ mod tests {
             (diagonal.theta.to_degrees() - 40.0).abs() < 0.1,
             "{diagonal:?}"
         );
+    }
+
+    /// Maps a room whose left wall runs along x at `mapped_y` (3 scans
+    /// matched in full at the origin), then drives 4 m blind along x (no
+    /// laser point), the left sonar reading a wall 1.22 m away in whole
+    /// inches, while the odometry's first step slips 0.1 m to the right
+    /// that the robot did not move (a turn's slip, say). The truth ends at
+    /// (4, 0, 0): the pose at the end.
+    fn blind_after_a_slip(mapped_y: f64) -> Pose2 {
+        let mut fe = FrontEnd::new(params());
+        let start = Pose2::default();
+        let room = [
+            (-2.0, mapped_y, 9.0, mapped_y),
+            (9.0, mapped_y, 9.0, -3.0),
+            (9.0, -3.0, -2.0, -3.0),
+        ];
+        for i in 0..3 {
+            fe.track(
+                walls_from(&start, &room).into_iter(),
+                &start,
+                i * 100_000_000,
+            );
+        }
+        let inch: f64 = 0.0254;
+        let mut odom = start;
+        let mut pose = start;
+        for i in 0..40 {
+            let slip = if i == 0 { -0.1 } else { 0.0 };
+            odom = odom.compose(&Pose2::new(0.1, slip, 0.0));
+            fe.set_side_ranges([Some((1.22 / inch).round() * inch), None]);
+            pose = fe
+                .track_heading(std::iter::empty(), &odom, (3 + i) * 100_000_000)
+                .pose;
+        }
+        pose
+    }
+
+    #[test]
+    fn a_side_wall_the_local_map_holds_puts_the_robot_back_across_it() {
+        // The map's wall where the sonar hears it: the slip is taken back.
+        let held = blind_after_a_slip(1.22);
+        assert!(held.y.abs() < 0.02, "{held:?}");
+        // The laser saw the wall 0.4 m further than the sonar hears one
+        // (another surface: a cabinet along it): the map says nothing about
+        // where the robot is across it, and the fit over the window only
+        // how far it drifted since the window began, which the slip
+        // preceded.
+        let other = blind_after_a_slip(1.62);
+        assert!((other.y + 0.1).abs() < 0.02, "{other:?}");
     }
 
     /// Drives 6 m down the corridor of [`corridor_from`], every scan

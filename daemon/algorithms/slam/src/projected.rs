@@ -61,8 +61,8 @@ impl SensorRig {
 
     /// The ring's side transducers ([`crate::side_wall`]).
     pub fn side_sonars(&self) -> crate::side_wall::SideSonars {
-        crate::side_wall::SideSonars::from_axes(
-            self.rig.sonars.iter().map(|(i, m)| (*i, m.pose.theta)),
+        crate::side_wall::SideSonars::from_mounts(
+            self.rig.sonars.iter().map(|(i, m)| (*i, m.pose)),
             self.rig.sonar_range_m[1],
         )
     }
