@@ -641,12 +641,8 @@ impl FrontEnd {
             };
             // Where the local map has the wall, the robot's distance to
             // it; else how far it closed on it since the window began.
-            let along = (
-                prediction.theta.cos() * self.side_walls.window_m(),
-                prediction.theta.sin() * self.side_walls.window_m(),
-            );
             let e = self
-                .map_wall_offset(prediction, normal, along, fit.range_m)
+                .map_wall_offset(prediction, normal, fit.range_m)
                 .or_else(|| {
                     let p0 = fit.first_pose?;
                     let closed =
@@ -672,8 +668,8 @@ impl FrontEnd {
     /// the local map's laser points put the wall beside the robot than the
     /// side sonar's `range_m` from `prediction` does: the shift that puts
     /// the robot where the map's wall is `range_m` away. Only the points
-    /// beside the fitted stretch (from `back` behind the robot, a map-frame
-    /// vector, to `SIDE_MAP_AHEAD_M` ahead) within `SIDE_MAP_GATE_M` of the
+    /// beside the fitted stretch (from the fit's window behind the robot to
+    /// `SIDE_MAP_AHEAD_M` ahead of it) within `SIDE_MAP_GATE_M` of the
     /// sonar's wall count, and only if they lie on one straight surface.
     /// `None` while the map is of heading-tracked scans (placed by the
     /// same drifting odometry).
@@ -681,18 +677,13 @@ impl FrontEnd {
         &mut self,
         prediction: &Pose2,
         normal: (f64, f64),
-        back: (f64, f64),
         range_m: f64,
     ) -> Option<f64> {
         if self.bootstrap_map {
             return None;
         }
-        let back_m = back.0.hypot(back.1);
-        let dir = if back_m > 0.0 {
-            (back.0 / back_m, back.1 / back_m)
-        } else {
-            (prediction.theta.cos(), prediction.theta.sin())
-        };
+        let back_m = self.side_walls.window_m();
+        let dir = (prediction.theta.cos(), prediction.theta.sin());
         self.wall_offsets.clear();
         for &(x, y) in self.history.iter().flatten() {
             let (dx, dy) = (f64::from(x) - prediction.x, f64::from(y) - prediction.y);
