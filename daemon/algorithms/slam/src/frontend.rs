@@ -682,7 +682,7 @@ impl FrontEnd {
         if self.bootstrap_map {
             return None;
         }
-        let back_m = self.side_walls.window_m();
+        let back_m = self.p.side_wall_window_m;
         let dir = (prediction.theta.cos(), prediction.theta.sin());
         self.wall_offsets.clear();
         for &(x, y) in self.history.iter().flatten() {
@@ -697,10 +697,7 @@ impl FrontEnd {
         if n < SIDE_MAP_MIN_POINTS {
             return None;
         }
-        let median = |v: &mut [f64]| {
-            v.sort_unstable_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
+        let median = |v: &mut [f64]| *v.select_nth_unstable_by(v.len() / 2, f64::total_cmp).1;
         let m = median(&mut self.wall_offsets);
         for o in &mut self.wall_offsets {
             *o = (*o - m).abs();

@@ -102,11 +102,6 @@ impl SideWalls {
         }
     }
 
-    /// The travel the readings are fitted over, m.
-    pub fn window_m(&self) -> f64 {
-        self.window_m
-    }
-
     /// Forgets everything (an odometry reset).
     pub fn reset(&mut self) {
         *self = Self::new(self.window_m);
