@@ -15,8 +15,8 @@ pub mod trajectory;
 
 pub use consistency::{ConsistencyOptions, ScanConsistency, scan_consistency};
 pub use map::{
-    Alignment, Band, DistanceStats, ErrorBands, FarGroup, MapMetricError, MapOptions, MapReport,
-    evaluate_maps,
+    Alignment, Band, DistanceStats, ErrorBands, ErrorClass, ErrorPicture, FarGroup, MapMetricError,
+    MapOptions, MapReport, error_picture, evaluate_maps,
 };
 pub use relations::{
     Relation, RelationsError, RelationsMetricError, RelationsReport, evaluate_relations,

@@ -178,6 +178,24 @@ pub const MAX_FAR_GROUPS: usize = 5;
 /// mapped from afar is a scatter, not a line.
 pub const FAR_LINK_CELLS: i64 = 3;
 
+/// Which band a wall `d` m from the other map's walls falls in (cells of `resolution` m).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum BandOf {
+    OnWall,
+    Misplaced,
+    Far,
+}
+
+fn band_of(d: f64, resolution: f64) -> BandOf {
+    if d < ON_WALL_CELLS * resolution {
+        BandOf::OnWall
+    } else if d <= NOT_A_WALL_CELLS * resolution {
+        BandOf::Misplaced
+    } else {
+        BandOf::Far
+    }
+}
+
 impl ErrorBands {
     /// `points` (ground-truth frame) with their distances to the other map's walls.
     fn new(points: &[(f64, f64)], distances: &[f64], resolution: f64) -> Self {
@@ -186,19 +204,19 @@ impl ErrorBands {
         let mut bands = Self::default();
         let mut far = std::collections::HashMap::new();
         for (&p, &d) in points.iter().zip(distances) {
-            let band = if d < ON_WALL_CELLS * resolution {
-                &mut bands.on_wall
-            } else if d <= NOT_A_WALL_CELLS * resolution {
-                &mut bands.misplaced
-            } else {
-                let cell = (
-                    (p.0 / resolution).floor() as i64,
-                    (p.1 / resolution).floor() as i64,
-                );
-                // Two estimated cells can fall in one ground-truth cell once turned.
-                let e = far.entry(cell).or_insert((0usize, 0.0, 0.0, 0.0));
-                *e = (e.0 + 1, e.1 + p.0, e.2 + p.1, e.3 + d);
-                &mut bands.far
+            let band = match band_of(d, resolution) {
+                BandOf::OnWall => &mut bands.on_wall,
+                BandOf::Misplaced => &mut bands.misplaced,
+                BandOf::Far => {
+                    let cell = (
+                        (p.0 / resolution).floor() as i64,
+                        (p.1 / resolution).floor() as i64,
+                    );
+                    // Two estimated cells can fall in one ground-truth cell once turned.
+                    let e = far.entry(cell).or_insert((0usize, 0.0, 0.0, 0.0));
+                    *e = (e.0 + 1, e.1 + p.0, e.2 + p.1, e.3 + d);
+                    &mut bands.far
+                }
             };
             band.cells += 1;
             band.knn_share_m += share(d);
@@ -618,17 +636,7 @@ pub fn evaluate_maps(
         Alignment::default()
     };
     let est_aligned: Vec<(f64, f64)> = est_pts.iter().map(|&p| alignment.apply(p)).collect();
-    let bucket = 4.0 * truth.resolution;
-    let est_index = PointIndex::new(est_aligned.clone(), bucket);
-    let truth_index = PointIndex::new(truth_pts.clone(), bucket);
-    let to_map: Vec<f64> = truth_pts
-        .iter()
-        .map(|&(x, y)| est_index.nearest_distance(x, y))
-        .collect();
-    let to_truth: Vec<f64> = est_aligned
-        .iter()
-        .map(|&(x, y)| truth_index.nearest_distance(x, y))
-        .collect();
+    let (to_map, to_truth) = wall_distances(&truth_pts, &est_aligned, truth.resolution);
     let truth_to_map_bands = ErrorBands::new(&truth_pts, &to_map, truth.resolution);
     let map_to_truth_bands = ErrorBands::new(&est_aligned, &to_truth, truth.resolution);
     let truth_to_map = DistanceStats::from_distances(to_map);
@@ -662,6 +670,184 @@ pub fn evaluate_maps(
         pixel_error: sum2.sqrt(),
         pixel_rms: (sum2 / pixel_count.max(1) as f64).sqrt(),
         pixel_count,
+    })
+}
+
+/// Each ground-truth wall's distance to the nearest of the (aligned)
+/// estimate's walls, and each of those's to the nearest ground-truth wall, m.
+fn wall_distances(
+    truth_pts: &[(f64, f64)],
+    est_aligned: &[(f64, f64)],
+    resolution: f64,
+) -> (Vec<f64>, Vec<f64>) {
+    let bucket = 4.0 * resolution;
+    let est_index = PointIndex::new(est_aligned.to_vec(), bucket);
+    let truth_index = PointIndex::new(truth_pts.to_vec(), bucket);
+    let to_map = truth_pts
+        .iter()
+        .map(|&(x, y)| est_index.nearest_distance(x, y))
+        .collect();
+    let to_truth = est_aligned
+        .iter()
+        .map(|&(x, y)| truth_index.nearest_distance(x, y))
+        .collect();
+    (to_map, to_truth)
+}
+
+/// What one cell of an [`ErrorPicture`] shows, in the bands of the k-NN
+/// error's breakdown ([`ErrorBands`]). An estimated wall wins over a
+/// ground-truth wall in the same cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorClass {
+    /// No wall, and the estimate never saw the place.
+    Unknown,
+    /// No wall, and the estimate has it free.
+    Free,
+    /// A ground-truth wall the estimate has within [`ON_WALL_CELLS`] (drawn beside it).
+    TruthOnWall,
+    /// A ground-truth wall the estimate draws off its place (up to [`NOT_A_WALL_CELLS`] away).
+    TruthMisplaced,
+    /// A ground-truth wall the estimate lacks.
+    Missing,
+    /// An estimated wall within [`ON_WALL_CELLS`] of a ground-truth wall.
+    EstimateOnWall,
+    /// An estimated wall off its place.
+    EstimateMisplaced,
+    /// An estimated wall the building lacks (smoke mapped as an obstacle).
+    Phantom,
+}
+
+/// Where a map's error lies, cell by cell, in the ground truth's frame and
+/// cells: the picture `smokenav eval --error-image` draws.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ErrorPicture {
+    pub width: usize,
+    pub height: usize,
+    /// Ground-truth frame position of cell (0, 0)'s corner, m.
+    pub origin: (f64, f64),
+    pub resolution: f64,
+    /// Row-major, row 0 at the lowest y.
+    pub cells: Vec<ErrorClass>,
+}
+
+impl ErrorPicture {
+    pub fn get(&self, x: usize, y: usize) -> Option<ErrorClass> {
+        (x < self.width && y < self.height).then(|| self.cells[y * self.width + x])
+    }
+
+    /// How many cells show `class`.
+    pub fn count(&self, class: ErrorClass) -> usize {
+        self.cells.iter().filter(|&&c| c == class).count()
+    }
+}
+
+/// Largest picture drawn around the ground truth, in cells: an estimate
+/// whose walls reach far beyond the building (a wild phantom) is cut to
+/// the ground truth's grid and this margin instead.
+pub const PICTURE_MAX_CELLS: usize = 16_000_000;
+const PICTURE_MARGIN_CELLS: i64 = 20;
+
+/// Draws where `est`'s error lies against `truth`, `est` moved by
+/// `alignment` (the one its [`MapReport`] found) into the ground truth's
+/// frame: every wall of either map classed by its distance to the other's,
+/// as the k-NN error's bands count it, on the estimate's free and unknown space.
+pub fn error_picture(
+    truth: &OccupancyGrid,
+    est: &OccupancyGrid,
+    alignment: &Alignment,
+    occupied_threshold: i8,
+) -> Result<ErrorPicture, MapMetricError> {
+    check_geometry(truth, "ground-truth")?;
+    check_geometry(est, "estimated")?;
+    let res = truth.resolution;
+    let truth_pts = occupied(truth, occupied_threshold);
+    let est_aligned: Vec<(f64, f64)> = occupied(est, occupied_threshold)
+        .into_iter()
+        .map(|p| alignment.apply(p))
+        .collect();
+    let (to_map, to_truth) = wall_distances(&truth_pts, &est_aligned, res);
+    // Cells in the ground truth's grid, covering both maps' walls.
+    let cell = |(x, y): (f64, f64)| {
+        (
+            ((x - truth.origin[0]) / res).floor() as i64,
+            ((y - truth.origin[1]) / res).floor() as i64,
+        )
+    };
+    let m = PICTURE_MARGIN_CELLS;
+    let (w0, h0) = (truth.width as i64, truth.height as i64);
+    let mut bounds = (-m, -m, w0 + m, h0 + m);
+    for &p in &est_aligned {
+        let (cx, cy) = cell(p);
+        bounds = (
+            bounds.0.min(cx - 2),
+            bounds.1.min(cy - 2),
+            bounds.2.max(cx + 3),
+            bounds.3.max(cy + 3),
+        );
+    }
+    if ((bounds.2 - bounds.0) as f64) * ((bounds.3 - bounds.1) as f64) > PICTURE_MAX_CELLS as f64 {
+        bounds = (-m, -m, w0 + m, h0 + m);
+    }
+    let (width, height) = (
+        (bounds.2 - bounds.0) as usize,
+        (bounds.3 - bounds.1) as usize,
+    );
+    let origin = (
+        truth.origin[0] + bounds.0 as f64 * res,
+        truth.origin[1] + bounds.1 as f64 * res,
+    );
+    let mut cells = Vec::with_capacity(width * height);
+    for y in 0..height {
+        for x in 0..width {
+            let c = (
+                origin.0 + (x as f64 + 0.5) * res,
+                origin.1 + (y as f64 + 0.5) * res,
+            );
+            let (ex, ey) = alignment.inverse_apply(c);
+            let seen = est
+                .world_to_cell(ex, ey)
+                .and_then(|(i, j)| est.get(i, j))
+                .is_some_and(|v| v >= 0);
+            cells.push(if seen {
+                ErrorClass::Free
+            } else {
+                ErrorClass::Unknown
+            });
+        }
+    }
+    let mut put = |p: (f64, f64), class: ErrorClass| {
+        let (cx, cy) = cell(p);
+        let (x, y) = (cx - bounds.0, cy - bounds.1);
+        if (0..width as i64).contains(&x) && (0..height as i64).contains(&y) {
+            cells[y as usize * width + x as usize] = class;
+        }
+    };
+    for (&p, &d) in truth_pts.iter().zip(&to_map) {
+        put(
+            p,
+            match band_of(d, res) {
+                BandOf::OnWall => ErrorClass::TruthOnWall,
+                BandOf::Misplaced => ErrorClass::TruthMisplaced,
+                BandOf::Far => ErrorClass::Missing,
+            },
+        );
+    }
+    for (&p, &d) in est_aligned.iter().zip(&to_truth) {
+        put(
+            p,
+            match band_of(d, res) {
+                BandOf::OnWall => ErrorClass::EstimateOnWall,
+                BandOf::Misplaced => ErrorClass::EstimateMisplaced,
+                BandOf::Far => ErrorClass::Phantom,
+            },
+        );
+    }
+    Ok(ErrorPicture {
+        width,
+        height,
+        origin,
+        resolution: res,
+        cells,
     })
 }
 
@@ -789,6 +975,69 @@ mod tests {
                 r.pixel_error
             );
         }
+    }
+
+    #[test]
+    fn the_error_picture_shows_a_wall_where_it_is_and_where_it_should_be() {
+        let truth = room(30);
+        let m = PICTURE_MARGIN_CELLS as usize;
+        for (k, off_place, should_be) in [
+            (3, ErrorClass::EstimateMisplaced, ErrorClass::TruthMisplaced),
+            (8, ErrorClass::Phantom, ErrorClass::Missing),
+        ] {
+            let est = room(30 + k);
+            let r = evaluate_maps(&truth, &est, &MapOptions::default()).unwrap();
+            let pic = error_picture(&truth, &est, &r.alignment, DEFAULT_OCCUPIED).unwrap();
+            assert_eq!((pic.width, pic.height), (84 + 2 * m, 64 + 2 * m), "k = {k}");
+            assert_eq!(pic.resolution, RES);
+            assert!((pic.origin.0 - (-0.1 - m as f64 * RES)).abs() < 1e-9);
+            for y in 10..=40 {
+                assert_eq!(pic.get(30 + m, y + m), Some(should_be), "k = {k}, row {y}");
+                assert_eq!(
+                    pic.get(30 + k + m, y + m),
+                    Some(off_place),
+                    "k = {k}, row {y}"
+                );
+            }
+            assert_eq!(pic.count(off_place), 31, "k = {k}");
+            assert_eq!(pic.count(should_be), 31, "k = {k}");
+            // The room's walls are where they belong; inside is free, outside never seen.
+            assert_eq!(
+                pic.count(ErrorClass::EstimateOnWall),
+                count_occupied(&truth) - 31
+            );
+            assert_eq!(pic.get(1 + m, 1 + m), Some(ErrorClass::EstimateOnWall));
+            assert_eq!(pic.get(10 + m, 20 + m), Some(ErrorClass::Free));
+            assert_eq!(pic.get(0, 0), Some(ErrorClass::Unknown));
+            // Cell for cell what the report's bands count.
+            let bands = &r.map_to_truth_bands;
+            assert_eq!(
+                pic.count(ErrorClass::EstimateMisplaced) + pic.count(ErrorClass::Phantom),
+                bands.misplaced.cells + bands.far.cells
+            );
+        }
+    }
+
+    #[test]
+    fn an_error_picture_stays_around_the_building_whatever_the_estimate_holds() {
+        let truth = room(30);
+        // Walls a thousand kilometres off, compared in one frame.
+        let mut est = room(30);
+        est.origin = [1e6, 0.0, 0.0];
+        let pic = error_picture(&truth, &est, &Alignment::default(), DEFAULT_OCCUPIED).unwrap();
+        let m = PICTURE_MARGIN_CELLS as usize;
+        assert_eq!((pic.width, pic.height), (84 + 2 * m, 64 + 2 * m));
+        assert_eq!(pic.count(ErrorClass::Missing), count_occupied(&truth));
+        assert_eq!(pic.count(ErrorClass::Free), 0);
+        // A grid whose shape does not hold is an error, not a panic.
+        est.cells.pop();
+        assert!(matches!(
+            error_picture(&truth, &est, &Alignment::default(), DEFAULT_OCCUPIED),
+            Err(MapMetricError::Geometry {
+                which: "estimated",
+                ..
+            })
+        ));
     }
 
     /// A 14 × 10 m hall (280 × 200 cells) in three bays: partitions at

@@ -9,8 +9,8 @@ use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
 use smokenav_algorithms_eval::{
-    MapOptions, MapReport, RelationsReport, TrajectoryOptions, TrajectoryReport,
-    evaluate_relations, load_relations, load_trajectory,
+    ErrorClass, MapOptions, MapReport, RelationsReport, TrajectoryOptions, TrajectoryReport,
+    error_picture, evaluate_relations, load_relations, load_trajectory,
     map::{NOT_A_WALL_CELLS, ON_WALL_CELLS},
 };
 use std::fmt::Write as _;
@@ -43,6 +43,14 @@ pub struct EvalArgs {
     /// Time step of the relative pose error, s.
     #[arg(long, default_value_t = 1.0, value_name = "S")]
     pub rpe_delta: f64,
+    /// Also draw where the map's error lies, in the ground truth's frame, as
+    /// a PNG: estimated walls black where they belong, red when off their
+    /// place (up to 6 cells), magenta where the building has none (phantom);
+    /// ground-truth walls pale green beside an estimated one, light blue
+    /// where the estimate draws them off their place, blue where it lacks
+    /// them (missing); the estimate's free space white, unknown grey.
+    #[arg(long, value_name = "OUT.png", requires = "map")]
+    pub error_image: Option<PathBuf>,
 }
 
 #[derive(Serialize)]
@@ -112,6 +120,9 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
         )),
         _ => None,
     };
+    if let (Some(out), Some((t, m, report))) = (&args.error_image, &map) {
+        write_error_image(t, m, report, map_opts.occupied_threshold, out)?;
+    }
     let relations = match (&args.relations, &args.trajectory) {
         (Some(r), Some(e)) => {
             let rel = load_relations(r).context("bad relations file")?;
@@ -161,6 +172,9 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
     let mut s = String::new();
     if let Some((truth, est, m)) = &map {
         map_text(&mut s, truth, est, m, args.no_align);
+        if let Some(out) = &args.error_image {
+            let _ = writeln!(s, "  error image   {}", out.display());
+        }
     }
     if let Some((t, e, r)) = &traj {
         let _ = writeln!(
@@ -210,6 +224,51 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
         );
     }
     Ok(s)
+}
+
+/// Pixels per cell of the error image: a building's map at 5 cm is a few
+/// hundred cells across, too small to read at one pixel each.
+fn error_image_scale(width: usize) -> u32 {
+    (800 / width.max(1)).clamp(1, 4) as u32
+}
+
+/// The colour of a class in the error image (see `--error-image`).
+fn error_colour(c: ErrorClass) -> [u8; 3] {
+    match c {
+        ErrorClass::Unknown => [205, 205, 205],
+        ErrorClass::Free => [255, 255, 255],
+        ErrorClass::TruthOnWall => [180, 225, 180],
+        ErrorClass::TruthMisplaced => [140, 170, 255],
+        ErrorClass::Missing => [0, 0, 255],
+        ErrorClass::EstimateOnWall => [0, 0, 0],
+        ErrorClass::EstimateMisplaced => [230, 0, 0],
+        ErrorClass::Phantom => [255, 0, 255],
+    }
+}
+
+/// Draws `--error-image`: the maps loaded again (the report keeps no grids).
+fn write_error_image(
+    truth: &Path,
+    est: &Path,
+    report: &MapReport,
+    occupied_threshold: i8,
+    out: &Path,
+) -> anyhow::Result<()> {
+    let t = smokenav_platform_map::load_map_server(truth)
+        .with_context(|| format!("cannot read {}", truth.display()))?;
+    let e = smokenav_platform_map::load_map_server(est)
+        .with_context(|| format!("cannot read {}", est.display()))?;
+    let pic = error_picture(&t, &e, &report.alignment, occupied_threshold)
+        .context("cannot draw the error image")?;
+    let k = error_image_scale(pic.width);
+    let (w, h) = (pic.width as u32, pic.height as u32);
+    let img = image::RgbImage::from_fn(w * k, h * k, |x, y| {
+        // Image rows run top down, the picture's bottom up.
+        let (cx, cy) = ((x / k) as usize, (h - 1 - y / k) as usize);
+        image::Rgb(error_colour(pic.get(cx, cy).unwrap_or(ErrorClass::Unknown)))
+    });
+    img.save_with_format(out, image::ImageFormat::Png)
+        .with_context(|| format!("cannot write the error image {}", out.display()))
 }
 
 /// The map section of the text report.
@@ -317,7 +376,53 @@ mod tests {
             json: false,
             no_align: false,
             rpe_delta: 1.0,
+            error_image: None,
         }
+    }
+
+    #[test]
+    fn the_error_image_draws_a_phantom_wall_where_the_estimate_has_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("where.png");
+        let mut a = args(dir.path(), "phantom");
+        a.error_image = Some(out.clone());
+        let text = evaluate(&a).unwrap();
+        assert!(text.contains("error image"), "{text}");
+        let img = image::open(&out).unwrap().to_rgb8();
+        // 60 × 40 cells and 20 around them, 4 pixels a cell.
+        assert_eq!(img.dimensions(), (400, 320));
+        let at = |cx: u32, cy: u32| img.get_pixel((cx + 20) * 4 + 1, (79 - (cy + 20)) * 4 + 1).0;
+        assert_eq!(
+            at(30, 20),
+            error_colour(ErrorClass::Phantom),
+            "the extra wall"
+        );
+        assert_eq!(
+            at(0, 0),
+            error_colour(ErrorClass::EstimateOnWall),
+            "a corner"
+        );
+        assert_eq!(at(10, 10), error_colour(ErrorClass::Unknown), "never seen");
+        assert_eq!(
+            at(70, 10),
+            error_colour(ErrorClass::Unknown),
+            "beside the map"
+        );
+        // Without --map there is nothing to draw.
+        use clap::Parser as _;
+        let err = crate::Cli::try_parse_from([
+            "smokenav",
+            "eval",
+            "--trajectory",
+            "t.txt",
+            "--relations",
+            "r.relations",
+            "--error-image",
+            "x.png",
+        ])
+        .err()
+        .expect("--error-image needs --map");
+        assert!(err.to_string().contains("--map"), "{err}");
     }
 
     #[test]
