@@ -85,6 +85,9 @@ struct Output<'a> {
     trajectory: Option<TrajectorySection<'a>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     relations: Option<RelationsSection<'a>>,
+    /// Where `--error-image` was written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_image: Option<&'a PathBuf>,
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -166,6 +169,7 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
                 estimate: e,
                 report: r,
             }),
+            error_image: args.error_image.as_ref().filter(|_| map.is_some()),
         };
         return Ok(serde_json::to_string(&out)? + "\n");
     }
@@ -408,6 +412,11 @@ mod tests {
             error_colour(ErrorClass::Unknown),
             "beside the map"
         );
+        a.json = true;
+        std::fs::remove_file(&out).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&evaluate(&a).unwrap()).unwrap();
+        assert_eq!(json["error_image"], out.display().to_string());
+        assert!(out.exists(), "written again with --json");
         // Without --map there is nothing to draw.
         use clap::Parser as _;
         let err = crate::Cli::try_parse_from([
