@@ -769,15 +769,23 @@ pub fn error_picture(
     // Cells in the ground truth's grid, covering both maps' walls.
     let cell = |(x, y): (f64, f64)| {
         (
-            ((x - truth.origin[0]) / res).floor() as i64,
-            ((y - truth.origin[1]) / res).floor() as i64,
+            ((x - truth.origin[0]) / res).floor(),
+            ((y - truth.origin[1]) / res).floor(),
         )
     };
     let m = PICTURE_MARGIN_CELLS;
     let (w0, h0) = (truth.width as i64, truth.height as i64);
     let mut bounds = (-m, -m, w0 + m, h0 + m);
+    // Beyond this many cells from the ground truth a wall cannot be in a
+    // picture of at most PICTURE_MAX_CELLS (and the i64 sums stay small).
+    let reach = PICTURE_MAX_CELLS as f64;
     for &p in &est_aligned {
         let (cx, cy) = cell(p);
+        if !(cx.abs() <= reach && cy.abs() <= reach) {
+            bounds = (-m, -m, w0 + m, h0 + m);
+            break;
+        }
+        let (cx, cy) = (cx as i64, cy as i64);
         bounds = (
             bounds.0.min(cx - 2),
             bounds.1.min(cy - 2),
@@ -817,8 +825,8 @@ pub fn error_picture(
     }
     let mut put = |p: (f64, f64), class: ErrorClass| {
         let (cx, cy) = cell(p);
-        let (x, y) = (cx - bounds.0, cy - bounds.1);
-        if (0..width as i64).contains(&x) && (0..height as i64).contains(&y) {
+        let (x, y) = (cx - bounds.0 as f64, cy - bounds.1 as f64);
+        if (0.0..width as f64).contains(&x) && (0.0..height as f64).contains(&y) {
             cells[y as usize * width + x as usize] = class;
         }
     };
@@ -1021,14 +1029,17 @@ mod tests {
     #[test]
     fn an_error_picture_stays_around_the_building_whatever_the_estimate_holds() {
         let truth = room(30);
-        // Walls a thousand kilometres off, compared in one frame.
+        // Walls a thousand kilometres off, or further than any integer
+        // reaches, compared in one frame.
         let mut est = room(30);
-        est.origin = [1e6, 0.0, 0.0];
-        let pic = error_picture(&truth, &est, &Alignment::default(), DEFAULT_OCCUPIED).unwrap();
-        let m = PICTURE_MARGIN_CELLS as usize;
-        assert_eq!((pic.width, pic.height), (84 + 2 * m, 64 + 2 * m));
-        assert_eq!(pic.count(ErrorClass::Missing), count_occupied(&truth));
-        assert_eq!(pic.count(ErrorClass::Free), 0);
+        for x in [1e6, -1e300, 1e300] {
+            est.origin = [x, 0.0, 0.0];
+            let pic = error_picture(&truth, &est, &Alignment::default(), DEFAULT_OCCUPIED).unwrap();
+            let m = PICTURE_MARGIN_CELLS as usize;
+            assert_eq!((pic.width, pic.height), (84 + 2 * m, 64 + 2 * m), "{x}");
+            assert_eq!(pic.count(ErrorClass::Missing), count_occupied(&truth));
+            assert_eq!(pic.count(ErrorClass::Free), 0);
+        }
         // A grid whose shape does not hold is an error, not a panic.
         est.cells.pop();
         assert!(matches!(

@@ -231,9 +231,10 @@ pub fn evaluate(args: &EvalArgs) -> anyhow::Result<String> {
 }
 
 /// Pixels per cell of the error image: a building's map at 5 cm is a few
-/// hundred cells across, too small to read at one pixel each.
-fn error_image_scale(width: usize) -> u32 {
-    (800 / width.max(1)).clamp(1, 4) as u32
+/// hundred cells across, too small to read at one pixel each; a large
+/// one stays at one pixel a cell.
+fn error_image_scale(width: usize, height: usize) -> u32 {
+    (800 / width.max(height).max(1)).clamp(1, 4) as u32
 }
 
 /// The colour of a class in the error image (see `--error-image`).
@@ -264,7 +265,7 @@ fn write_error_image(
         .with_context(|| format!("cannot read {}", est.display()))?;
     let pic = error_picture(&t, &e, &report.alignment, occupied_threshold)
         .context("cannot draw the error image")?;
-    let k = error_image_scale(pic.width);
+    let k = error_image_scale(pic.width, pic.height);
     let (w, h) = (pic.width as u32, pic.height as u32);
     let img = image::RgbImage::from_fn(w * k, h * k, |x, y| {
         // Image rows run top down, the picture's bottom up.
