@@ -830,25 +830,24 @@ pub fn error_picture(
             cells[y as usize * width + x as usize] = class;
         }
     };
-    for (&p, &d) in truth_pts.iter().zip(&to_map) {
-        put(
-            p,
-            match band_of(d, res) {
-                BandOf::OnWall => ErrorClass::TruthOnWall,
-                BandOf::Misplaced => ErrorClass::TruthMisplaced,
-                BandOf::Far => ErrorClass::Missing,
-            },
-        );
-    }
-    for (&p, &d) in est_aligned.iter().zip(&to_truth) {
-        put(
-            p,
-            match band_of(d, res) {
-                BandOf::OnWall => ErrorClass::EstimateOnWall,
-                BandOf::Misplaced => ErrorClass::EstimateMisplaced,
-                BandOf::Far => ErrorClass::Phantom,
-            },
-        );
+    // The estimate's walls second: they win a shared cell.
+    use ErrorClass::*;
+    for (points, distances, [on_wall, misplaced, far]) in [
+        (&truth_pts, &to_map, [TruthOnWall, TruthMisplaced, Missing]),
+        (
+            &est_aligned,
+            &to_truth,
+            [EstimateOnWall, EstimateMisplaced, Phantom],
+        ),
+    ] {
+        for (&p, &d) in points.iter().zip(distances) {
+            let class = match band_of(d, res) {
+                BandOf::OnWall => on_wall,
+                BandOf::Misplaced => misplaced,
+                BandOf::Far => far,
+            };
+            put(p, class);
+        }
     }
     Ok(ErrorPicture {
         width,
