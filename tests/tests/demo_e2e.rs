@@ -137,6 +137,9 @@ fn fast_demo_compares_three_methods_against_ground_truth_and_writes_every_output
     // Four panels side by side; three stacked plots.
     let (w, h) = png_size(&out.join("maps.png"));
     assert!(w > 3 * h, "maps.png is a row of four panels: {w}×{h}");
+    // Where each map's error lies: a panel per method.
+    let (w, h) = png_size(&out.join("errors.png"));
+    assert!(w > 2 * h, "errors.png is a row of three panels: {w}×{h}");
     let (w, h) = png_size(&out.join("smoke.png"));
     assert!(w >= 1000 && h >= 700, "smoke.png {w}×{h}");
     // With a smoke-free twin the plot has a fourth panel: the laser beams the smoke changed.

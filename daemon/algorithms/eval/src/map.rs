@@ -717,6 +717,26 @@ pub enum ErrorClass {
     Phantom,
 }
 
+impl ErrorClass {
+    /// The colour `smokenav eval --error-image` and the demo's `errors.png`
+    /// draw a cell of this class in (RGB): estimated walls black on their
+    /// place, red off it, magenta phantom; true walls pale green beside an
+    /// estimated one, light blue where it is drawn off its place, blue
+    /// missing; free white, unknown grey.
+    pub fn rgb(self) -> [u8; 3] {
+        match self {
+            ErrorClass::Unknown => [205, 205, 205],
+            ErrorClass::Free => [255, 255, 255],
+            ErrorClass::TruthOnWall => [180, 225, 180],
+            ErrorClass::TruthMisplaced => [140, 170, 255],
+            ErrorClass::Missing => [0, 0, 255],
+            ErrorClass::EstimateOnWall => [0, 0, 0],
+            ErrorClass::EstimateMisplaced => [230, 0, 0],
+            ErrorClass::Phantom => [255, 0, 255],
+        }
+    }
+}
+
 /// Where a map's error lies, cell by cell, in the ground truth's frame and
 /// cells: the picture `smokenav eval --error-image` draws.
 #[derive(Debug, Clone, PartialEq)]

@@ -237,20 +237,6 @@ fn error_image_scale(width: usize, height: usize) -> u32 {
     (800 / width.max(height).max(1)).clamp(1, 4) as u32
 }
 
-/// The colour of a class in the error image (see `--error-image`).
-fn error_colour(c: ErrorClass) -> [u8; 3] {
-    match c {
-        ErrorClass::Unknown => [205, 205, 205],
-        ErrorClass::Free => [255, 255, 255],
-        ErrorClass::TruthOnWall => [180, 225, 180],
-        ErrorClass::TruthMisplaced => [140, 170, 255],
-        ErrorClass::Missing => [0, 0, 255],
-        ErrorClass::EstimateOnWall => [0, 0, 0],
-        ErrorClass::EstimateMisplaced => [230, 0, 0],
-        ErrorClass::Phantom => [255, 0, 255],
-    }
-}
-
 /// Draws `--error-image`: the maps loaded again (the report keeps no grids).
 fn write_error_image(
     truth: &Path,
@@ -270,7 +256,7 @@ fn write_error_image(
     let img = image::RgbImage::from_fn(w * k, h * k, |x, y| {
         // Image rows run top down, the picture's bottom up.
         let (cx, cy) = ((x / k) as usize, (h - 1 - y / k) as usize);
-        image::Rgb(error_colour(pic.get(cx, cy).unwrap_or(ErrorClass::Unknown)))
+        image::Rgb(pic.get(cx, cy).unwrap_or(ErrorClass::Unknown).rgb())
     });
     img.save_with_format(out, image::ImageFormat::Png)
         .with_context(|| format!("cannot write the error image {}", out.display()))
@@ -397,22 +383,10 @@ mod tests {
         // 60 × 40 cells and 20 around them, 4 pixels a cell.
         assert_eq!(img.dimensions(), (400, 320));
         let at = |cx: u32, cy: u32| img.get_pixel((cx + 20) * 4 + 1, (79 - (cy + 20)) * 4 + 1).0;
-        assert_eq!(
-            at(30, 20),
-            error_colour(ErrorClass::Phantom),
-            "the extra wall"
-        );
-        assert_eq!(
-            at(0, 0),
-            error_colour(ErrorClass::EstimateOnWall),
-            "a corner"
-        );
-        assert_eq!(at(10, 10), error_colour(ErrorClass::Unknown), "never seen");
-        assert_eq!(
-            at(70, 10),
-            error_colour(ErrorClass::Unknown),
-            "beside the map"
-        );
+        assert_eq!(at(30, 20), ErrorClass::Phantom.rgb(), "the extra wall");
+        assert_eq!(at(0, 0), ErrorClass::EstimateOnWall.rgb(), "a corner");
+        assert_eq!(at(10, 10), ErrorClass::Unknown.rgb(), "never seen");
+        assert_eq!(at(70, 10), ErrorClass::Unknown.rgb(), "beside the map");
         a.json = true;
         std::fs::remove_file(&out).unwrap();
         let json: serde_json::Value = serde_json::from_str(&evaluate(&a).unwrap()).unwrap();

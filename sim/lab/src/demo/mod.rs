@@ -617,7 +617,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             print!("\n{}", crate::map3d::table(r));
         }
         println!(
-            "\nwrote {} (maps.png, smoke.png, maps/, trajectories/, recording.mcap, comparison.json) in {:.0} s",
+            "\nwrote {} (maps.png, errors.png, smoke.png, maps/, trajectories/, recording.mcap, comparison.json) in {:.0} s",
             args.out.display(),
             started.elapsed().as_secs_f64()
         );

@@ -1,12 +1,13 @@
-//! The demo's two pictures: the maps side by side with the ground truth, and
-//! smoke level vs laser spread vs sonar usage over time.
+//! The demo's pictures: the maps side by side with the ground truth, where
+//! their error lies, and smoke level vs laser spread vs sonar usage over time.
 
 use super::Comparison;
 use super::compare::{MethodResult, PhantomPlace, SeriesPoint};
 use super::draw::{BLACK, Canvas, Color, GREY, LIGHT, WHITE, line_height, text_width};
 use anyhow::Context;
 use image::Rgb;
-use smokenav_algorithms_eval::Alignment;
+use smokenav_algorithms_eval::map::DEFAULT_OCCUPIED;
+use smokenav_algorithms_eval::{Alignment, ErrorClass, ErrorPicture, error_picture};
 use smokenav_platform_map::OccupancyGrid;
 use smokenav_shared_types::FusionMethod;
 use std::path::Path;
@@ -230,20 +231,26 @@ fn draw_region_edge(c: &mut Canvas, view: &View, ox: i64, oy: i64, region: &Occu
     }
 }
 
-pub fn maps_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
-    let t = &cmp.truth_map;
+/// The truth map and half a metre around it, at most 560 × 440 pixels.
+fn truth_view(t: &OccupancyGrid) -> View {
     let margin = 0.5;
     let (wx0, wy0) = (t.origin[0] - margin, t.origin[1] - margin);
     let ww = t.width as f64 * t.resolution + 2.0 * margin;
     let wh = t.height as f64 * t.resolution + 2.0 * margin;
     let px_per_m = (560.0 / ww).min(440.0 / wh).max(5.0);
-    let view = View {
+    View {
         x0: wx0,
         y1: wy0 + wh,
         px_per_m,
         w: (ww * px_per_m).ceil() as u32,
         h: (wh * px_per_m).ceil() as u32,
-    };
+    }
+}
+
+pub fn maps_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
+    let t = &cmp.truth_map;
+    let view = truth_view(t);
+    let px_per_m = view.px_per_m;
     let scale = 2;
     let gap = 16i64;
     let head = 3 * i64::from(line_height(scale)) + 8;
@@ -372,6 +379,112 @@ pub fn maps_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
         GREY,
         scale,
     );
+    c.img
+        .save(path)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn render_errors(view: &View, pic: &ErrorPicture) -> image::RgbImage {
+    let mut img = image::RgbImage::new(view.w, view.h);
+    for py in 0..view.h {
+        for px in 0..view.w {
+            let (wx, wy) = view.world(px, py);
+            let cx = ((wx - pic.origin.0) / pic.resolution).floor();
+            let cy = ((wy - pic.origin.1) / pic.resolution).floor();
+            let class = if cx >= 0.0 && cy >= 0.0 {
+                pic.get(cx as usize, cy as usize)
+            } else {
+                None
+            };
+            img.put_pixel(px, py, Rgb(class.unwrap_or(ErrorClass::Unknown).rgb()));
+        }
+    }
+    img
+}
+
+/// Where each method's map error lies, side by side in the truth's frame
+/// (the picture `smokenav eval --error-image` draws), with the k-NN
+/// error's split: walls on their place, misplaced, missing, phantom.
+pub fn errors_png(cmp: &Comparison, path: &Path) -> anyhow::Result<()> {
+    let t = &cmp.truth_map;
+    let view = truth_view(t);
+    let (w, h) = (i64::from(view.w), i64::from(view.h));
+    let scale = 2;
+    let l = i64::from(line_height(scale));
+    let gap = 16i64;
+    let head = 4 * l + 8;
+    let foot = 2 * l + 16;
+    let panels = cmp.results.len().max(1) as i64;
+    let mut c = Canvas::new(
+        (gap + panels * (w + gap)) as u32,
+        (head + h + foot) as u32,
+        WHITE,
+    );
+    let mut x = gap;
+    for r in &cmp.results {
+        let scored = match (&r.map, &r.map_report) {
+            (Some(m), Ok(report)) => error_picture(t, m, &report.alignment, DEFAULT_OCCUPIED)
+                .ok()
+                .map(|pic| (pic, report)),
+            _ => None,
+        };
+        c.text(x, 8, title(r.method), BLACK, scale);
+        match &scored {
+            Some((pic, report)) => {
+                c.paste(&render_errors(&view, pic), x, head);
+                let (to_map, to_truth) = (&report.truth_to_map_bands, &report.map_to_truth_bands);
+                c.text(
+                    x,
+                    8 + l,
+                    &format!("map error {:.3} m:", report.knn_error_m),
+                    BLACK,
+                    scale,
+                );
+                c.text(
+                    x,
+                    8 + 2 * l,
+                    &format!(
+                        "walls {:.3}, misplaced {:.3},",
+                        to_map.on_wall.knn_share_m + to_truth.on_wall.knn_share_m,
+                        to_map.misplaced.knn_share_m + to_truth.misplaced.knn_share_m
+                    ),
+                    GREY,
+                    scale,
+                );
+                c.text(
+                    x,
+                    8 + 3 * l,
+                    &format!(
+                        "missing {:.3}, phantom {:.3} m",
+                        to_map.far.knn_share_m, to_truth.far.knn_share_m
+                    ),
+                    GREY,
+                    scale,
+                );
+            }
+            None => {
+                c.fill_rect(x, head, w, h, LIGHT);
+                c.text(x, 8 + l, "not scored", GREY, scale);
+            }
+        }
+        c.rect(x - 1, head - 1, w + 2, h + 2, GREY);
+        x += w + gap;
+    }
+    // Legend.
+    let y = head + h + 12;
+    let mut lx = gap;
+    for (class, label) in [
+        (ErrorClass::EstimateOnWall, "wall on its place"),
+        (ErrorClass::EstimateMisplaced, "misplaced"),
+        (ErrorClass::Phantom, "phantom"),
+        (ErrorClass::TruthMisplaced, "true wall drawn off it"),
+        (ErrorClass::Missing, "missing"),
+    ] {
+        c.fill_rect(lx, y, 14, 14, Rgb(class.rgb()));
+        lx += 20;
+        c.text(lx, y, label, BLACK, scale);
+        lx += i64::from(text_width(label, scale)) + 24;
+    }
     c.img
         .save(path)
         .with_context(|| format!("cannot write {}", path.display()))

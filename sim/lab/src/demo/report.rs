@@ -335,9 +335,10 @@ pub fn write_files(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `maps.png` and `smoke.png` of one comparison into `dir`.
+/// `maps.png`, `errors.png` and `smoke.png` of one comparison into `dir`.
 pub fn write_pictures(c: &Comparison, dir: &Path) -> anyhow::Result<()> {
     super::pictures::maps_png(c, &dir.join("maps.png"))?;
+    super::pictures::errors_png(c, &dir.join("errors.png"))?;
     if c.results.iter().any(|r| r.confidence_map.is_some()) {
         super::pictures::fuzzy_png(c, &dir.join("fuzzy.png"))?;
     }
