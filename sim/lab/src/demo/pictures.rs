@@ -231,7 +231,8 @@ fn draw_region_edge(c: &mut Canvas, view: &View, ox: i64, oy: i64, region: &Occu
     }
 }
 
-/// The truth map and half a metre around it, at most 560 × 440 pixels.
+/// The truth map and half a metre around it, in about 560 × 440 pixels
+/// (never under 5 pixels a metre).
 fn truth_view(t: &OccupancyGrid) -> View {
     let margin = 0.5;
     let (wx0, wy0) = (t.origin[0] - margin, t.origin[1] - margin);
