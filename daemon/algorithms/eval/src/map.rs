@@ -759,6 +759,20 @@ impl ErrorPicture {
     pub fn count(&self, class: ErrorClass) -> usize {
         self.cells.iter().filter(|&&c| c == class).count()
     }
+
+    /// What the picture shows at `(x, y)` in the ground truth's frame, m
+    /// (unknown outside it).
+    pub fn at(&self, x: f64, y: f64) -> ErrorClass {
+        self.index(x, y)
+            .map_or(ErrorClass::Unknown, |i| self.cells[i])
+    }
+
+    fn index(&self, x: f64, y: f64) -> Option<usize> {
+        let cx = ((x - self.origin.0) / self.resolution).floor();
+        let cy = ((y - self.origin.1) / self.resolution).floor();
+        ((0.0..self.width as f64).contains(&cx) && (0.0..self.height as f64).contains(&cy))
+            .then(|| cy as usize * self.width + cx as usize)
+    }
 }
 
 /// Largest picture drawn around the ground truth, in cells: an estimate
@@ -794,15 +808,15 @@ pub fn error_picture(
         )
     };
     let m = PICTURE_MARGIN_CELLS;
-    let (w0, h0) = (truth.width as i64, truth.height as i64);
-    let mut bounds = (-m, -m, w0 + m, h0 + m);
+    let around = (-m, -m, truth.width as i64 + m, truth.height as i64 + m);
+    let mut bounds = around;
     // Beyond this many cells from the ground truth a wall cannot be in a
     // picture of at most PICTURE_MAX_CELLS (and the i64 sums stay small).
     let reach = PICTURE_MAX_CELLS as f64;
     for &p in &est_aligned {
         let (cx, cy) = cell(p);
         if !(cx.abs() <= reach && cy.abs() <= reach) {
-            bounds = (-m, -m, w0 + m, h0 + m);
+            bounds = around;
             break;
         }
         let (cx, cy) = (cx as i64, cy as i64);
@@ -814,7 +828,7 @@ pub fn error_picture(
         );
     }
     if ((bounds.2 - bounds.0) as f64) * ((bounds.3 - bounds.1) as f64) > PICTURE_MAX_CELLS as f64 {
-        bounds = (-m, -m, w0 + m, h0 + m);
+        bounds = around;
     }
     let (width, height) = (
         (bounds.2 - bounds.0) as usize,
@@ -843,12 +857,12 @@ pub fn error_picture(
             });
         }
     }
-    let mut put = |p: (f64, f64), class: ErrorClass| {
-        let (cx, cy) = cell(p);
-        let (x, y) = (cx - bounds.0 as f64, cy - bounds.1 as f64);
-        if (0.0..width as f64).contains(&x) && (0.0..height as f64).contains(&y) {
-            cells[y as usize * width + x as usize] = class;
-        }
+    let mut picture = ErrorPicture {
+        width,
+        height,
+        origin,
+        resolution: res,
+        cells,
     };
     // The estimate's walls second: they win a shared cell.
     use ErrorClass::*;
@@ -866,16 +880,12 @@ pub fn error_picture(
                 BandOf::Misplaced => misplaced,
                 BandOf::Far => far,
             };
-            put(p, class);
+            if let Some(i) = picture.index(p.0, p.1) {
+                picture.cells[i] = class;
+            }
         }
     }
-    Ok(ErrorPicture {
-        width,
-        height,
-        origin,
-        resolution: res,
-        cells,
-    })
+    Ok(picture)
 }
 
 #[cfg(test)]

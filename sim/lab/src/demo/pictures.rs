@@ -390,14 +390,7 @@ fn render_errors(view: &View, pic: &ErrorPicture) -> image::RgbImage {
     for py in 0..view.h {
         for px in 0..view.w {
             let (wx, wy) = view.world(px, py);
-            let cx = ((wx - pic.origin.0) / pic.resolution).floor();
-            let cy = ((wy - pic.origin.1) / pic.resolution).floor();
-            let class = if cx >= 0.0 && cy >= 0.0 {
-                pic.get(cx as usize, cy as usize)
-            } else {
-                None
-            };
-            img.put_pixel(px, py, Rgb(class.unwrap_or(ErrorClass::Unknown).rgb()));
+            img.put_pixel(px, py, Rgb(pic.at(wx, wy).rgb()));
         }
     }
     img
