@@ -13,6 +13,7 @@ use smokenav_algorithms_eval::{
     error_picture, evaluate_relations, load_relations, load_trajectory,
     map::{NOT_A_WALL_CELLS, ON_WALL_CELLS},
 };
+use smokenav_platform_map::OccupancyGrid;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -249,7 +250,20 @@ fn write_error_image(
         .with_context(|| format!("cannot read {}", truth.display()))?;
     let e = smokenav_platform_map::load_map_server(est)
         .with_context(|| format!("cannot read {}", est.display()))?;
-    let pic = error_picture(&t, &e, &report.alignment, occupied_threshold)
+    error_image_png(&t, &e, report, occupied_threshold, out)
+}
+
+/// Writes where `est`'s error against `truth` lies (`report`'s alignment)
+/// as a PNG, in the truth's frame (`smokenav eval --error-image`,
+/// `smokenav slam`'s `errors.png`).
+pub(crate) fn error_image_png(
+    truth: &OccupancyGrid,
+    est: &OccupancyGrid,
+    report: &MapReport,
+    occupied_threshold: i8,
+    out: &Path,
+) -> anyhow::Result<()> {
+    let pic = error_picture(truth, est, &report.alignment, occupied_threshold)
         .context("cannot draw the error image")?;
     let k = error_image_scale(pic.width, pic.height);
     let (w, h) = (pic.width as u32, pic.height as u32);

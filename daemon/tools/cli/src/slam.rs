@@ -61,7 +61,8 @@ pub struct SlamArgs {
     /// Number of particles (overrides the configuration).
     #[arg(long)]
     particles: Option<usize>,
-    /// Output folder: trajectory.txt, map.pgm/map.yaml/map.png, stats.txt.
+    /// Output folder: trajectory.txt, map.pgm/map.yaml/map.png, stats.txt; given a
+    /// truth (`--truth-map`, or `--reference`'s scans), errors.png: where the map's error lies.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Trajectory file layout: `plain` (trajectory.txt, `timestamp x y theta`) or
@@ -935,7 +936,19 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
     if let Some(vote) = slam.backend().as_any().downcast_ref::<VoteSlam>() {
         vote_report(vote, truth.as_ref(), map.as_ref(), &args.out, &mut report)?;
     } else if let (Some(t), Some(m)) = (&truth, &map) {
-        let _ = writeln!(report, "map error          {}", map_error(t, m));
+        // Scored once: the text and the picture of where the error lies share the alignment.
+        let opts = smokenav_algorithms_eval::MapOptions::default();
+        let scored = smokenav_algorithms_eval::evaluate_maps(t, m, &opts);
+        let _ = writeln!(report, "map error          {}", map_error_text(&scored));
+        if let Ok(r) = &scored {
+            let path = args.out.join("errors.png");
+            crate::eval::error_image_png(t, m, r, opts.occupied_threshold, &path)?;
+            let _ = writeln!(
+                report,
+                "error image        {} (where the map's walls lie against the truth's)",
+                path.display()
+            );
+        }
     }
     write(&args.out.join("stats.txt"), &report)?;
     print!("{report}");
@@ -1076,11 +1089,17 @@ impl ReferenceMap {
 }
 
 fn map_error(truth: &OccupancyGrid, map: &OccupancyGrid) -> String {
-    match smokenav_algorithms_eval::evaluate_maps(
+    map_error_text(&smokenav_algorithms_eval::evaluate_maps(
         truth,
         map,
         &smokenav_algorithms_eval::MapOptions::default(),
-    ) {
+    ))
+}
+
+fn map_error_text(
+    scored: &Result<smokenav_algorithms_eval::MapReport, smokenav_algorithms_eval::MapMetricError>,
+) -> String {
+    match scored {
         Ok(r) => format!(
             "k-NN {:.3} m, pixel RMS {:.3}; of the k-NN, walls missing {:.4} m, phantom {:.4} m (`smokenav eval` says where)",
             r.knn_error_m,

@@ -494,6 +494,22 @@ fn a_reference_on_its_own_clock_is_interpolated_not_refused() {
         .find(|l| l.starts_with("map error"))
         .unwrap_or_else(|| panic!("no map error line:\n{report}"));
     assert!(map.contains("k-NN"), "{map}");
+    // … and where the error lies is drawn beside the map: the run's own walls
+    // lie on the walls its reference implies (black), with none of them far
+    // off (phantom, magenta). A run without a truth draws no picture.
+    let image = dir.path().join("second/errors.png");
+    assert!(report.contains("errors.png"), "{report}");
+    let png = image::open(&image).unwrap().to_rgb8();
+    let count =
+        |c: smokenav_algorithms_eval::ErrorClass| png.pixels().filter(|p| p.0 == c.rgb()).count();
+    use smokenav_algorithms_eval::ErrorClass::{EstimateOnWall, Phantom};
+    assert!(
+        count(EstimateOnWall) > 20 * count(Phantom).max(1),
+        "on a wall {}, phantom {}",
+        count(EstimateOnWall),
+        count(Phantom)
+    );
+    assert!(!dir.path().join("first/errors.png").exists());
 }
 
 /// A robot that starts every run from its dock: the same log localised on
