@@ -941,13 +941,17 @@ pub fn run(args: SlamArgs) -> anyhow::Result<()> {
         let scored = smokenav_algorithms_eval::evaluate_maps(t, m, &opts);
         let _ = writeln!(report, "map error          {}", map_error_text(&scored));
         if let Ok(r) = &scored {
+            // A picture that cannot be drawn is reported, not fatal: the run's
+            // map, trajectory and stats are what it is for.
             let path = args.out.join("errors.png");
-            crate::eval::error_image_png(t, m, r, opts.occupied_threshold, &path)?;
-            let _ = writeln!(
-                report,
-                "error image        {} (where the map's walls lie against the truth's)",
-                path.display()
-            );
+            let line = match crate::eval::error_image_png(t, m, r, opts.occupied_threshold, &path) {
+                Ok(()) => format!(
+                    "{} (where the map's walls lie against the truth's)",
+                    path.display()
+                ),
+                Err(e) => format!("not drawn: {e:#}"),
+            };
+            let _ = writeln!(report, "error image        {line}");
         }
     }
     write(&args.out.join("stats.txt"), &report)?;
