@@ -8,10 +8,13 @@
 //!   `./demo` runs).
 //! - `smokenav-lab map3d`: laser + 3D sonar-cone occupancy fusion per rule
 //!   on a scenario with out-of-plane obstacles; writes an OctoMap `.bt`.
+//! - `smokenav-lab drift`: a corrected real log with seeded odometry drift,
+//!   and its poses as the reference, for scoring SLAM on large loops.
 
 use clap::{Parser, Subcommand};
 
 mod demo;
+mod drift;
 mod map3d;
 mod sim;
 
@@ -38,6 +41,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// 2D/3D occupancy fusion compared per rule (LOP, LIOP, IOP, Bayes) on a scenario with out-of-plane obstacles.
     Map3d(map3d::Map3dArgs),
+    /// A corrected CARMEN log with seeded odometry drift, and its own poses as the reference to score SLAM against.
+    Drift(drift::DriftArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -46,6 +51,7 @@ fn main() -> std::process::ExitCode {
         Command::Sim(args) => sim::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Map3d(args) => map3d::run(args),
+        Command::Drift(args) => drift::run(args),
     };
     match done {
         Ok(()) => std::process::ExitCode::SUCCESS,

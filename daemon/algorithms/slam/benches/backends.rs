@@ -211,7 +211,8 @@ fn main() {
                 .collect();
             let out = std::env::temp_dir().join(format!("csail-drifted-{}.log", p.seed));
             let file = std::io::BufWriter::new(std::fs::File::create(&out).unwrap());
-            let r = drift::drift_log(text.stdout.as_slice(), file, &p, Some(&stamps)).unwrap();
+            let r =
+                drift::drift_log(text.stdout.as_slice(), file, &p, Some(&stamps), None).unwrap();
             let odom: Vec<EvalPose> = {
                 let mut scans = LogScans::new(BufReader::new(std::fs::File::open(&out).unwrap()));
                 let mut v = Vec::new();

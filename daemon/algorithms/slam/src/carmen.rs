@@ -20,6 +20,22 @@ use crate::scan::{Beam, BeamKind, RangeScan};
 use smokenav_shared_types::Pose2;
 use std::io::BufRead;
 
+/// A CARMEN log's text from `input`: logs are often shipped gzip-compressed
+/// (Radish's, the corrected CSAIL log), so a gzip stream is decompressed on
+/// the fly, told by its magic bytes rather than by a file name.
+pub fn text<R: BufRead + 'static>(mut input: R) -> std::io::Result<Box<dyn BufRead>> {
+    const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
+    let head = input.fill_buf()?;
+    Ok(if head.starts_with(&GZIP_MAGIC) {
+        // Multi-member: `cat a.gz b.gz` and block-wise compressors write several.
+        Box::new(std::io::BufReader::new(
+            flate2::bufread::MultiGzDecoder::new(input),
+        ))
+    } else {
+        Box::new(input)
+    })
+}
+
 /// Longest line accepted, bytes (a 1081-beam ROBOTLASER1 with remissions is ~15 kB).
 pub const MAX_LINE_BYTES: usize = 256 * 1024;
 /// Most readings accepted in one laser record.

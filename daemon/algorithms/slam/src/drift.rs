@@ -15,8 +15,10 @@
 //! metres, as a miscalibrated wheel base does. Same seed, same output.
 //! Optionally the stamps are replaced (`stamps`): the corrected CSAIL log
 //! keeps only six digits of its timestamps, its reference poses file has them.
+//! A stamp that does not come after the one before is moved a second after
+//! it, and a line that cannot be read is left out; the report counts both.
 
-use crate::carmen::{CarmenReader, LaserRecord, LaserRecordKind, LineError, Record};
+use crate::carmen::{CarmenError, CarmenReader, LaserRecord, LaserRecordKind, LineError, Record};
 use smokenav_shared_types::{Pose2, Rng};
 use std::io::{BufRead, Write};
 
@@ -68,34 +70,72 @@ pub enum DriftError {
     Write(#[from] std::io::Error),
 }
 
+/// A record stamped at or before the one before it is restamped this much
+/// after it: the corrected logs hold a scan per metre or so, and a robot
+/// covers that in about a second.
+pub const RESTAMP_STEP_NS: u64 = 1_000_000_000;
+
 /// What [`drift_log`] wrote.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct DriftReport {
     pub laser_records: usize,
     /// Distance travelled along the input's poses, m.
     pub path_m: f64,
     /// Distance between the last input pose and the last drifted one, m.
     pub end_offset_m: f64,
+    /// Lines that could not be read and were left out (the corrected Radish
+    /// logs end with `ODOM` records stamped before zero), and the first of them.
+    pub skipped_lines: usize,
+    pub first_skipped: Option<LineError>,
+    /// Records whose stamp did not come after the one before (CSAIL's keep
+    /// six digits of a Unix time; Intel's goes back once), restamped
+    /// [`RESTAMP_STEP_NS`] after it so that every scan pairs with one
+    /// reference pose; and the first such record's index.
+    pub restamped: usize,
+    pub first_restamped: Option<usize>,
 }
 
 /// Writes `input`'s laser records to `out` with drifted odometry (see the
 /// module). Records other than laser records are left out (they carry no
-/// motion the scans use); a bad line stops with its line number.
+/// motion the scans use); a bad line stops with its line number. With
+/// `reference`, the input's own robot poses are written there as
+/// `timestamp x y theta` lines, one per record at its output stamp: the
+/// trajectory the drifted log is scored against (`smokenav slam
+/// --reference`).
 pub fn drift_log<R: BufRead, W: Write>(
     input: R,
     mut out: W,
     p: &DriftParams,
     stamps: Option<&[u64]>,
+    mut reference: Option<&mut dyn Write>,
 ) -> Result<DriftReport, DriftError> {
+    if let Some(r) = reference.as_deref_mut() {
+        writeln!(r, "# timestamp x y theta")?;
+    }
     let mut reader = CarmenReader::new(input);
     let mut rng = Rng::new(p.seed, 0);
     let mut report = DriftReport::default();
     let mut last: Option<(Pose2, Pose2)> = None;
+    let mut last_stamp: Option<u64> = None;
     while let Some(record) = reader.next() {
         let mut l = match record {
             Ok(Record::Laser(l)) => l,
             Ok(Record::Odom(_)) => continue,
-            Err(e) => return Err(DriftError::Line(e)),
+            // The input cannot be read on: nothing after it would be either.
+            Err(
+                e @ LineError {
+                    error: CarmenError::Io(_),
+                    ..
+                },
+            ) => return Err(DriftError::Line(e)),
+            // A line that says nothing usable is left out, as the SLAM's
+            // reader leaves it out; the next record's motion is taken from
+            // the last one read.
+            Err(e) => {
+                report.skipped_lines += 1;
+                report.first_skipped.get_or_insert(e);
+                continue;
+            }
         };
         let index = report.laser_records;
         if let Some(stamps) = stamps {
@@ -105,7 +145,25 @@ pub fn drift_log<R: BufRead, W: Write>(
                 given: stamps.len(),
             })?;
         }
+        if let Some(prev) = last_stamp
+            && l.ipc_timestamp_ns <= prev
+        {
+            l.ipc_timestamp_ns = prev + RESTAMP_STEP_NS;
+            report.restamped += 1;
+            report.first_restamped.get_or_insert(index);
+        }
+        last_stamp = Some(l.ipc_timestamp_ns);
         let truth = l.robot_pose;
+        if let Some(r) = reference.as_deref_mut() {
+            writeln!(
+                r,
+                "{} {:.6} {:.6} {:.6}",
+                crate::carmen::format_stamp(l.ipc_timestamp_ns),
+                truth.x,
+                truth.y,
+                truth.theta
+            )?;
+        }
         let mount = truth.between(&l.laser_pose);
         let drifted = match last {
             None => truth,
@@ -131,6 +189,9 @@ pub fn drift_log<R: BufRead, W: Write>(
         report.laser_records += 1;
     }
     out.flush()?;
+    if let Some(r) = reference {
+        r.flush()?;
+    }
     Ok(report)
 }
 
@@ -199,7 +260,7 @@ mod tests {
 
     fn drifted(p: &DriftParams) -> (String, DriftReport) {
         let mut out = Vec::new();
-        let r = drift_log(square_log().as_bytes(), &mut out, p, None).unwrap();
+        let r = drift_log(square_log().as_bytes(), &mut out, p, None, None).unwrap();
         (String::from_utf8(out).unwrap(), r)
     }
 
@@ -251,6 +312,7 @@ mod tests {
             &mut out,
             &DriftParams::default(),
             Some(&stamps),
+            None,
         )
         .unwrap();
         let mut reader = CarmenReader::new(out.as_slice());
@@ -263,15 +325,95 @@ mod tests {
             Vec::new(),
             &DriftParams::default(),
             Some(&stamps[..10]),
+            None,
         )
         .unwrap_err();
         assert!(err.to_string().starts_with("line 11: "), "{err}");
     }
 
     #[test]
-    fn a_bad_line_is_reported_with_its_number() {
-        let log = square_log().replacen("FLASER 5 1 2 3 4 5", "FLASER 5 1 2 x 4 5", 1);
-        let err = drift_log(log.as_bytes(), Vec::new(), &DriftParams::default(), None).unwrap_err();
-        assert!(err.to_string().starts_with("line 1: "), "{err}");
+    fn a_bad_line_is_left_out_and_reported_with_its_number() {
+        // A bad scan and, as the corrected Radish logs end, an ODOM record stamped before zero.
+        let log = square_log().replacen("FLASER 5 1 2 3 4 5", "FLASER 5 1 2 x 4 5", 1)
+            + "ODOM 0 0 0 0 0 0 -14.4854 host -14.4854\n";
+        let mut out = Vec::new();
+        let r = drift_log(
+            log.as_bytes(),
+            &mut out,
+            &DriftParams::default(),
+            None,
+            None,
+        )
+        .unwrap();
+        assert_eq!(r.laser_records, 119);
+        assert_eq!(r.skipped_lines, 2);
+        let first = r.first_skipped.expect("the first bad line");
+        assert_eq!(first.line, 1);
+        assert!(first.to_string().contains("FLASER"), "{first}");
+        assert_eq!(
+            CarmenReader::new(out.as_slice())
+                .filter(|r| r.is_ok())
+                .count(),
+            119
+        );
+    }
+
+    #[test]
+    fn stamps_that_do_not_increase_are_restamped_a_second_on_and_the_reference_follows() {
+        // Records 2 s apart, except 10..20 all stamped 10's 20.5 s (a coarse
+        // clock) and record 30 back at 1.5 s.
+        let log: String = square_log()
+            .lines()
+            .enumerate()
+            .map(|(k, line)| {
+                let stamp = match k {
+                    10..20 => "20.5".to_string(),
+                    30 => "1.5".to_string(),
+                    _ => format!("{}.5", 2 * k),
+                };
+                let mut f: Vec<&str> = line.split(' ').collect();
+                let n = f.len();
+                f[n - 3] = &stamp;
+                f[n - 1] = &stamp;
+                f.join(" ") + "\n"
+            })
+            .collect();
+        let (mut out, mut reference) = (Vec::new(), Vec::new());
+        let r = drift_log(
+            log.as_bytes(),
+            &mut out,
+            &DriftParams::default(),
+            None,
+            Some(&mut reference),
+        )
+        .unwrap();
+        // 11..19 follow 10 a second apart; 20 keeps its own 40.5 s; 30
+        // follows 29 (58.5 s) by a second, and 31 keeps its 62.5 s.
+        let stamps: Vec<u64> = CarmenReader::new(out.as_slice())
+            .filter_map(|r| match r {
+                Ok(Record::Laser(l)) => Some(l.ipc_timestamp_ns),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(stamps.len(), 120);
+        assert!(stamps.windows(2).all(|w| w[0] < w[1]), "{stamps:?}");
+        assert_eq!(stamps[10], 20_500_000_000);
+        assert_eq!(stamps[19], 29_500_000_000);
+        assert_eq!(stamps[20], 40_500_000_000);
+        assert_eq!(stamps[30], 59_500_000_000);
+        assert_eq!(stamps[31], 62_500_000_000);
+        assert_eq!(r.restamped, 10, "{r:?}");
+        assert_eq!(r.first_restamped, Some(11));
+        // The reference carries the same stamps, one line per record, and the input's poses.
+        let text = String::from_utf8(reference).unwrap();
+        let lines: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+        assert_eq!(lines.len(), 120);
+        assert!(lines[19].starts_with("29.500000 "), "{}", lines[19]);
+        let first: Vec<f64> = lines[0]
+            .split(' ')
+            .skip(1)
+            .map(|v| v.parse().unwrap())
+            .collect();
+        assert_eq!(first, vec![0.5, 0.0, 0.0]);
     }
 }

@@ -32,7 +32,7 @@ use smokenav_platform_recording::bag::{Bag, RoleMap};
 use smokenav_shared_types::{AnyMessage, FusedScan, Pose2};
 use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::io::{BufRead, BufReader, IsTerminal};
+use std::io::{BufReader, IsTerminal};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -296,20 +296,6 @@ fn progress_bar(len: u64) -> indicatif::ProgressBar {
     bar
 }
 
-/// A CARMEN log's text: logs are often shipped gzip-compressed (Radish's,
-/// the corrected CSAIL log), so a gzip stream is decompressed on the fly,
-/// told by its magic bytes rather than by the file's name.
-fn carmen_text<R: BufRead + 'static>(mut input: R) -> std::io::Result<Box<dyn BufRead>> {
-    const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
-    let head = input.fill_buf()?;
-    Ok(if head.starts_with(&GZIP_MAGIC) {
-        // Multi-member: `cat a.gz b.gz` and block-wise compressors write several.
-        Box::new(BufReader::new(flate2::bufread::MultiGzDecoder::new(input)))
-    } else {
-        Box::new(input)
-    })
-}
-
 /// A CARMEN log: each scan with the odometry the logger attached.
 fn run_carmen(
     args: &SlamArgs,
@@ -320,7 +306,7 @@ fn run_carmen(
     mut reference_map: Option<&mut ReferenceMap>,
 ) -> anyhow::Result<String> {
     let bar = progress_bar(file.metadata().map(|m| m.len()).unwrap_or(0));
-    let input = carmen_text(BufReader::new(bar.wrap_read(file)))
+    let input = smokenav_algorithms_slam::carmen::text(BufReader::new(bar.wrap_read(file)))
         .with_context(|| format!("cannot read {}", log.display()))?;
     let mut scans = LogScans::new(input);
     while let Some((scan, odom)) = scans.next_scan() {
