@@ -137,15 +137,7 @@ fn main() {
         .filter(|(name, _)| only.is_empty() || only.contains(name))
         .collect();
     logs.sort();
-    let undrifted = DriftParams {
-        scale: 0.0,
-        turn_scale: 0.0,
-        heading_bias: 0.0,
-        sigma_t: 0.0,
-        sigma_r: 0.0,
-        sigma_r_per_m: 0.0,
-        ..DriftParams::default()
-    };
+    let undrifted = DriftParams::none();
     for backend in backends {
         let name = backend.as_str();
         let (mut runs, mut reached, mut sum) = (0usize, 0usize, 0.0);

@@ -66,6 +66,8 @@ pub struct LaserRecord {
     /// The smallest step the stamp as written can show, ns (1 000 for
     /// `1134864629.895182`; 10¹³ for GMapping's `1.13486e+09`).
     pub stamp_resolution_ns: u64,
+    /// Significant digits the stamp is written with ([`significant_digits`]).
+    pub stamp_digits: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -229,6 +231,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
             let robot_pose = f.pose(1 + n + 3, "odometry pose")?;
             let ipc_timestamp_ns = f.stamp(1 + n + 6)?;
             let stamp_resolution_ns = stamp_resolution_ns(f.text(1 + n + 6)?);
+            let stamp_digits = significant_digits(f.text(1 + n + 6)?);
             let fov = std::f64::consts::PI;
             let angular_resolution = match n {
                 0 | 1 => fov,
@@ -245,6 +248,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
                 robot_pose,
                 ipc_timestamp_ns,
                 stamp_resolution_ns,
+                stamp_digits,
             })))
         }
         "ROBOTLASER1" => {
@@ -262,6 +266,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
             let robot_pose = f.pose(base + 3, "robot pose")?;
             let ipc_timestamp_ns = f.stamp(base + 11)?;
             let stamp_resolution_ns = stamp_resolution_ns(f.text(base + 11)?);
+            let stamp_digits = significant_digits(f.text(base + 11)?);
             Ok(Some(Record::Laser(LaserRecord {
                 kind: LaserRecordKind::RobotLaser1,
                 start_angle,
@@ -272,6 +277,7 @@ pub fn parse_line(line: &str) -> Result<Option<Record>, CarmenError> {
                 robot_pose,
                 ipc_timestamp_ns,
                 stamp_resolution_ns,
+                stamp_digits,
             })))
         }
         _ => {
@@ -435,6 +441,31 @@ pub fn stamp_resolution_ns(text: &str) -> u64 {
     10u64.pow(power as u32)
 }
 
+/// The significant digits of a number written as `text` (the mantissa's
+/// digits after any leading zeros): `32.9068` → 6, `940` → 3,
+/// `1.13486e+09` → 6, `0.000246` → 3.
+pub fn significant_digits(text: &str) -> u32 {
+    let t = text.trim();
+    let mantissa = t.split_once(['e', 'E']).map_or(t, |(m, _)| m);
+    let digits = mantissa.bytes().filter(u8::is_ascii_digit);
+    digits.skip_while(|&d| d == b'0').count() as u32
+}
+
+/// The step a stamp of `stamp_ns` shows when written with `digits`
+/// significant digits, ns: what `%g` (C's shortest form) leaves of a stamp
+/// whose trailing zeros it dropped. `940` written beside `32.9068` by
+/// `%g`'s six digits is 940.000 s, a millisecond step, not a second. At
+/// least 1.
+pub fn resolution_at_digits_ns(stamp_ns: u64, digits: u32) -> u64 {
+    if stamp_ns == 0 || digits == 0 {
+        return 1;
+    }
+    // Digits of the whole seconds (0 for a stamp under 1 s, by its first non-zero decimal).
+    let magnitude = (stamp_ns as f64 / 1e9).log10().floor() as i32;
+    let power = (magnitude - digits as i32 + 1 + 9).clamp(0, 18);
+    10u64.pow(power as u32)
+}
+
 /// Parses a decimal timestamp in seconds (`1134864629.895182`, or `1.13486e+09`)
 /// into nanoseconds without going through floating point when it is plain decimal.
 pub fn parse_stamp_ns(text: &str) -> Option<u64> {
@@ -576,6 +607,21 @@ mod tests {
 
     #[test]
     fn a_stamps_resolution_is_what_its_text_can_show() {
+        assert_eq!(significant_digits("32.9068"), 6);
+        assert_eq!(significant_digits("940"), 3);
+        assert_eq!(significant_digits("1.13486e+09"), 6);
+        assert_eq!(significant_digits("0.000246"), 3);
+        assert_eq!(significant_digits("1134864629.895182"), 16);
+        assert_eq!(significant_digits("x"), 0);
+        assert_eq!(resolution_at_digits_ns(940_000_000_000, 6), 1_000_000);
+        assert_eq!(resolution_at_digits_ns(1_438_980_000_000, 6), 10_000_000);
+        assert_eq!(resolution_at_digits_ns(250_000_000, 6), 1_000);
+        assert_eq!(
+            resolution_at_digits_ns(1_134_860_000_000_000_000, 6),
+            10u64.pow(13)
+        );
+        assert_eq!(resolution_at_digits_ns(0, 6), 1);
+        assert_eq!(resolution_at_digits_ns(u64::MAX, 1), 10u64.pow(18));
         assert_eq!(stamp_resolution_ns("1134864629.895182"), 1_000);
         assert_eq!(stamp_resolution_ns("0.5"), 100_000_000);
         assert_eq!(stamp_resolution_ns("12"), 1_000_000_000);

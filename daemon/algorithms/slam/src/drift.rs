@@ -54,6 +54,22 @@ impl Default for DriftParams {
     }
 }
 
+impl DriftParams {
+    /// No drift at all: the log's own poses become the odometry (what is
+    /// left of a run's error against them is not drift).
+    pub fn none() -> Self {
+        Self {
+            scale: 0.0,
+            turn_scale: 0.0,
+            heading_bias: 0.0,
+            sigma_t: 0.0,
+            sigma_r: 0.0,
+            sigma_r_per_m: 0.0,
+            ..Self::default()
+        }
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum DriftError {
     #[error("line {}: {}", .0.line, .0.error)]
@@ -290,16 +306,7 @@ mod tests {
 
     #[test]
     fn without_drift_the_poses_are_kept() {
-        let zero = DriftParams {
-            scale: 0.0,
-            turn_scale: 0.0,
-            heading_bias: 0.0,
-            sigma_t: 0.0,
-            sigma_r: 0.0,
-            sigma_r_per_m: 0.0,
-            ..DriftParams::default()
-        };
-        let (_, r) = drifted(&zero);
+        let (_, r) = drifted(&DriftParams::none());
         assert!(r.end_offset_m < 1e-6, "{r:?}");
     }
 

@@ -222,6 +222,8 @@ pub struct LogScans<R> {
     pub odom_records: usize,
     pub laser_records: usize,
     mount: LaserMount,
+    /// Most significant digits a laser stamp was written with so far.
+    stamp_digits: u32,
 }
 
 /// Farthest a record's laser pose may sit from its odometry pose plus the
@@ -252,6 +254,7 @@ impl<R: BufRead> LogScans<R> {
             odom_records: 0,
             laser_records: 0,
             mount: LaserMount::default(),
+            stamp_digits: 0,
         }
     }
 
@@ -308,7 +311,20 @@ impl<R: BufRead> LogScans<R> {
             match self.reader.next()? {
                 Ok(Record::Laser(l)) => {
                     self.laser_records += 1;
-                    self.gate.note_stamp_resolution(l.stamp_resolution_ns);
+                    // A stamp with fewer significant digits than the log
+                    // wrote before had trailing zeros dropped (`%g`): its
+                    // step is the one those digits give, not what it shows.
+                    let resolution = if l.stamp_digits < self.stamp_digits {
+                        l.stamp_resolution_ns
+                            .min(crate::carmen::resolution_at_digits_ns(
+                                l.ipc_timestamp_ns,
+                                self.stamp_digits,
+                            ))
+                    } else {
+                        l.stamp_resolution_ns
+                    };
+                    self.stamp_digits = self.stamp_digits.max(l.stamp_digits);
+                    self.gate.note_stamp_resolution(resolution);
                     match self.gate.check(l.ipc_timestamp_ns, l.robot_pose) {
                         Ok(odom) => {
                             l.fill_range_scan(&mut self.scan);
@@ -438,6 +454,42 @@ mod tests {
         // Only ever coarser.
         coarse.note_stamp_resolution(1_000);
         assert_eq!(coarse.stamp_resolution_ns(), 10_000 * S);
+    }
+
+    /// The stamp resolution a log read whole reports, its lines' stamps given.
+    fn log_resolution_ns(stamps: &[&str]) -> u64 {
+        let log: String = stamps
+            .iter()
+            .enumerate()
+            .map(|(i, t)| format!("FLASER 3 1 2 3 {i} 0 0 {i} 0 0 {t} host {t}\n"))
+            .collect();
+        let mut scans = LogScans::new(log.as_bytes());
+        while scans.next_scan().is_some() {}
+        scans.stamp_resolution_ns()
+    }
+
+    /// Intel's corrected log writes its stamps with `%g`'s six significant
+    /// digits, trailing zeros dropped: `940` is 940.000 s beside `32.9068`,
+    /// and was read as a log stamped to whole seconds (`smokenav slam`
+    /// said "written to 1 s only").
+    #[test]
+    fn stamps_whose_trailing_zeros_were_dropped_keep_the_logs_digits() {
+        let ms = 1_000_000;
+        assert_eq!(log_resolution_ns(&["32.9068", "33.1", "940", "941.5"]), ms);
+        // Past 1000 s six digits leave hundredths.
+        assert_eq!(
+            log_resolution_ns(&["32.9068", "940", "1438.98", "1440"]),
+            10 * ms
+        );
+        // A log written in whole seconds throughout is one.
+        assert_eq!(log_resolution_ns(&["940", "941", "1500"]), S);
+        // GMapping's CSAIL output: every stamp the same six digits of a Unix time.
+        assert_eq!(
+            log_resolution_ns(&["1.13486e+09", "1.13486e+09", "1.13487e+09"]),
+            10_000 * S
+        );
+        // Fixed decimals stay what they show.
+        assert_eq!(log_resolution_ns(&["1.000000", "2.000000"]), 1_000);
     }
 
     #[test]
