@@ -82,7 +82,7 @@ pub enum DriftError {
         index: usize,
         given: usize,
     },
-    #[error("writing the drifted log: {0}")]
+    #[error("writing the drifted log or its reference: {0}")]
     Write(#[from] std::io::Error),
 }
 
@@ -104,7 +104,7 @@ pub struct DriftReport {
     pub skipped_lines: usize,
     pub first_skipped: Option<LineError>,
     /// Records whose stamp did not come after the one before (CSAIL's keep
-    /// six digits of a Unix time; Intel's goes back once), restamped
+    /// six digits of a Unix time; four of Intel's go back), restamped
     /// [`RESTAMP_STEP_NS`] after it so that every scan pairs with one
     /// reference pose; and the first such record's index.
     pub restamped: usize,
@@ -113,7 +113,9 @@ pub struct DriftReport {
 
 /// Writes `input`'s laser records to `out` with drifted odometry (see the
 /// module). Records other than laser records are left out (they carry no
-/// motion the scans use); a bad line stops with its line number. With
+/// motion the scans use), and so are lines that cannot be read (counted in
+/// the report, the first kept); an input that cannot be read on stops with
+/// its line number. With
 /// `reference`, the input's own robot poses are written there as
 /// `timestamp x y theta` lines, one per record at its output stamp: the
 /// trajectory the drifted log is scored against (`smokenav slam
