@@ -67,31 +67,12 @@ pub fn run(args: DriftArgs) -> anyhow::Result<()> {
         sigma_r: args.sigma_r,
         sigma_r_per_m: args.sigma_r_per_m,
     };
-    for (name, v) in [
-        ("--scale", p.scale),
-        ("--turn-scale", p.turn_scale),
-        ("--heading-bias", p.heading_bias),
-        ("--sigma-t", p.sigma_t),
-        ("--sigma-r", p.sigma_r),
-        ("--sigma-r-per-m", p.sigma_r_per_m),
-    ] {
-        anyhow::ensure!(v.is_finite(), "{name} must be a finite number, not {v}");
-    }
-    for (name, v) in [
-        ("--sigma-t", p.sigma_t),
-        ("--sigma-r", p.sigma_r),
-        ("--sigma-r-per-m", p.sigma_r_per_m),
-    ] {
-        anyhow::ensure!(
-            v >= 0.0,
-            "{name} is a standard deviation: not below 0 ({v})"
-        );
-    }
-    anyhow::ensure!(
-        p.scale > -1.0,
-        "--scale {} would reverse or stop every step (it must be above -1)",
-        p.scale
-    );
+    // Before any file is touched; the library's message names the field,
+    // the operator typed the flag.
+    p.validate().map_err(|e| {
+        let flag = format!("--{}", e.field().replace('_', "-"));
+        anyhow::anyhow!(e.to_string().replacen(e.field(), &flag, 1))
+    })?;
     let input = std::fs::File::open(&args.log)
         .with_context(|| format!("cannot open {}", args.log.display()))?;
     let input = smokenav_algorithms_slam::carmen::text(BufReader::new(input))

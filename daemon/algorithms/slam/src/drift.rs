@@ -68,10 +68,57 @@ impl DriftParams {
             ..Self::default()
         }
     }
+
+    /// Refuses parameters that cannot describe odometry: a value that is
+    /// not finite, a negative σ, a scale that reverses or stops every step.
+    pub fn validate(&self) -> Result<(), InvalidDrift> {
+        let fields = [
+            ("scale", self.scale),
+            ("turn_scale", self.turn_scale),
+            ("heading_bias", self.heading_bias),
+            ("sigma_t", self.sigma_t),
+            ("sigma_r", self.sigma_r),
+            ("sigma_r_per_m", self.sigma_r_per_m),
+        ];
+        if let Some(&(field, value)) = fields.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(InvalidDrift::NotFinite { field, value });
+        }
+        if let Some(&(field, value)) = fields[3..].iter().find(|(_, v)| *v < 0.0) {
+            return Err(InvalidDrift::NegativeSigma { field, value });
+        }
+        if self.scale <= -1.0 {
+            return Err(InvalidDrift::ReversingScale { value: self.scale });
+        }
+        Ok(())
+    }
+}
+
+/// Drift parameters [`DriftParams::validate`] refuses; each message starts
+/// with the field's name ([`InvalidDrift::field`]).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum InvalidDrift {
+    #[error("{field} must be a finite number, not {value}")]
+    NotFinite { field: &'static str, value: f64 },
+    #[error("{field} is a standard deviation: not below 0 ({value})")]
+    NegativeSigma { field: &'static str, value: f64 },
+    #[error("scale {value} would reverse or stop every step (it must be above -1)")]
+    ReversingScale { value: f64 },
+}
+
+impl InvalidDrift {
+    /// The [`DriftParams`] field refused.
+    pub fn field(&self) -> &'static str {
+        match self {
+            Self::NotFinite { field, .. } | Self::NegativeSigma { field, .. } => field,
+            Self::ReversingScale { .. } => "scale",
+        }
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
 pub enum DriftError {
+    #[error("drift parameters: {0}")]
+    Params(#[from] InvalidDrift),
     #[error("line {}: {}", .0.line, .0.error)]
     Line(LineError),
     #[error(
@@ -115,7 +162,8 @@ pub struct DriftReport {
 /// module). Records other than laser records are left out (they carry no
 /// motion the scans use), and so are lines that cannot be read (counted in
 /// the report, the first kept); an input that cannot be read on stops with
-/// its line number. With
+/// its line number, and parameters [`DriftParams::validate`] refuses stop
+/// before anything is written. With
 /// `reference`, the input's own robot poses are written there as
 /// `timestamp x y theta` lines, one per record at its output stamp: the
 /// trajectory the drifted log is scored against (`smokenav slam
@@ -127,6 +175,7 @@ pub fn drift_log<R: BufRead, W: Write>(
     stamps: Option<&[u64]>,
     mut reference: Option<&mut dyn Write>,
 ) -> Result<DriftReport, DriftError> {
+    p.validate()?;
     if let Some(r) = reference.as_deref_mut() {
         writeln!(r, "# timestamp x y theta")?;
     }
@@ -310,6 +359,41 @@ mod tests {
     fn without_drift_the_poses_are_kept() {
         let (_, r) = drifted(&DriftParams::none());
         assert!(r.end_offset_m < 1e-6, "{r:?}");
+    }
+
+    #[test]
+    fn parameters_that_cannot_describe_odometry_are_refused_by_name() {
+        let bad = |p: DriftParams| {
+            let mut out = Vec::new();
+            let e = drift_log(square_log().as_bytes(), &mut out, &p, None, None).unwrap_err();
+            assert!(out.is_empty(), "{e}");
+            match e {
+                DriftError::Params(e) => e,
+                other => panic!("{other}"),
+            }
+        };
+        let d = DriftParams::default();
+        let e = bad(DriftParams { sigma_r: -0.1, ..d });
+        assert_eq!(e.field(), "sigma_r");
+        assert!(
+            e.to_string().starts_with("sigma_r is a standard deviation"),
+            "{e}"
+        );
+        let e = bad(DriftParams {
+            heading_bias: f64::NAN,
+            ..d
+        });
+        assert_eq!(e.field(), "heading_bias");
+        let e = bad(DriftParams { scale: -1.0, ..d });
+        assert!(e.to_string().starts_with("scale -1 would reverse"), "{e}");
+        // Negative scales and biases above -1 are drift, not errors.
+        let ok = DriftParams {
+            scale: -0.5,
+            turn_scale: -0.1,
+            heading_bias: -0.01,
+            ..d
+        };
+        assert!(drift_log(square_log().as_bytes(), Vec::new(), &ok, None, None).is_ok());
     }
 
     #[test]
